@@ -1,0 +1,125 @@
+// Every parameter of the engine, in one struct. Defaults are the paper's (Table "parameter settings")
+// where it gives one, otherwise the published code's, otherwise ours (marked "ours").
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace sglc {
+
+// Semantic roles: which raw label ids are landmark classes (graph nodes) and which are background.
+struct LabelConfig {
+  struct NodeClass {
+    std::string name;
+    std::vector<std::uint32_t> ids;
+  };
+  // Graph node classes, in order. Descriptor sizes follow their count (3 classes -> D=120, D'=231).
+  std::vector<NodeClass> node_classes{{"vehicle", {10, 18, 20}}, {"trunk", {71}}, {"pole", {80}}};
+  std::vector<std::uint32_t> road{40};
+  std::vector<std::uint32_t> building{50};
+  std::vector<std::uint32_t> fence{51};
+  std::vector<std::uint32_t> vegetation{70};
+  // Ids that are never landmarks nor background, even if listed above (moving objects).
+  std::vector<std::uint32_t> moving{252, 253, 254, 255, 256, 257, 258, 259};
+};
+
+struct ClusterConfig {
+  // Range-adaptive ("curved") voxels: azimuth x range x elevation. Not tied to any sensor's beam layout.
+  double azimuth_deg = 2.0;
+  double range_m = 1.0;
+  double elevation_deg = 2.0;
+  int min_points = 10;        // clusters with fewer points are dropped
+  double max_range_m = 80.0;  // node-class points beyond this are ignored
+};
+
+struct GraphConfig {
+  double d_max = 60.0;  // edge if node centres are closer than this (m)
+  int max_nodes = 200;  // ours: the largest instances are kept if a scan has more
+};
+
+struct DescriptorConfig {
+  double d_i = 2.0;    // distance bin width of node and edge histograms (m); bins = d_max / d_i
+  int k_eigen = 30;    // eigenvectors of the adjacency matrix used in the node descriptor
+  int rings = 24;      // background ring key
+  double ring_min_m = 5.0;
+  double ring_max_m = 50.0;
+  int sectors = 360;
+};
+
+struct MatchConfig {
+  double d_b = 2.0;              // max difference of each box dimension (m)
+  double min_cosine = 0.5;       // node descriptor similarity floor
+  double d_l = 20.0;             // neighbourhood radius for local triangles (m)
+  double triangle_tol = 0.5;     // side-length tolerance for "same triangle" (m)
+  int t_m = 2;                   // triangles that must agree for a match to survive
+  int prune_min_matches = 15;    // prune only when at least this many matches (reference behaviour)
+};
+
+struct RansacConfig {
+  double inlier_threshold = 1.0;     // node-centre residual (m)
+  int max_iterations = 2000;         // hypotheses; all triples are tried when there are fewer
+  std::uint64_t seed = 0x5eed5ca1ULL;  // fixed: results never change run to run
+  double min_triangle_height = 0.5;  // samples flatter than this (m) are degenerate and skipped
+  int min_inliers = 3;
+};
+
+struct VerifyConfig {
+  double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
+  double t_b = 0.5;               // background agreement threshold
+  double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
+  double bev_cell_m = 1.0;        // background agreement grid cell (m)
+  double bev_radius_m = 50.0;     // background agreement grid half-size (m)
+};
+
+struct FingerprintConfig {
+  double instance_voxel_m = 0.25;  // downsampling of instance points kept for fine ICP
+  double background_cell_m = 0.5; // BEV cell of the stored labelled background cloud
+  double background_max_range_m = 50.0;
+  double plane_voxel_m = 1.0;      // background plane features
+  int plane_min_points = 8;
+  double plane_max_thickness_m = 0.08;  // sqrt of the smallest eigenvalue of the voxel's covariance
+  double plane_max_range_m = 60.0;
+};
+
+struct FineConfig {
+  bool enabled = true;
+  int max_iterations = 30;
+  double max_corr_start_m = 1.5;  // correspondence gate, shrinking to max_corr_end_m
+  double max_corr_end_m = 0.5;
+  double huber_m = 0.2;
+  double converged_m = 1e-4;  // stop when the update moves less than this
+};
+
+struct RefineConfig {
+  bool enabled = true;
+  int max_iterations = 15;
+  double max_corr_m = 1.0;         // plane centroid association radius
+  double min_normal_cosine = 0.9;  // normals must agree this well
+  double cauchy_m = 0.1;           // robust kernel scale of plane residuals
+  double instance_weight = 1.0;    // weight of instance point residuals kept as anchor
+  double converged_m = 1e-5;
+};
+
+struct Config {
+  LabelConfig labels;
+  ClusterConfig cluster;
+  GraphConfig graph;
+  DescriptorConfig descriptor;
+  MatchConfig match;
+  RansacConfig ransac;
+  VerifyConfig verify;
+  FingerprintConfig fingerprint;
+  FineConfig fine;
+  RefineConfig refine;
+};
+
+// Throws InputError when a value is out of its valid range (names the field).
+void validateConfig(const Config& config);
+
+// Reads a YAML file whose sections mirror the struct (cluster:, graph:, ...). Keys not given keep their
+// defaults; unknown keys are an error so that typos do not pass silently.
+Config loadConfig(const std::string& path);
+Config parseConfig(const std::string& yaml_text);
+
+}  // namespace sglc

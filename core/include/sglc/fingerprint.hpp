@@ -1,0 +1,52 @@
+// Everything later stages need about one scan, computed once: the semantic graph and its descriptors,
+// downsampled instance points, a labelled BEV background cloud and background plane features.
+// A fingerprint serialises to versioned bytes and back exactly, so a stored scan is never re-clustered
+// and can itself serve as a query.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "sglc/background.hpp"
+#include "sglc/descriptors.hpp"
+#include "sglc/graph.hpp"
+#include "sglc/registration.hpp"
+
+namespace sglc {
+
+struct Fingerprint {
+  // Parameters the stored data depends on (kept so that a loaded fingerprint is self-describing).
+  DescriptorLayout layout;
+  float d_max = 60.0f;
+  float d_i = 2.0f;
+  float background_cell = 0.5f;
+  float plane_voxel = 1.0f;
+
+  std::vector<Node> nodes;
+  std::vector<std::uint32_t> instance_offsets;  // node i owns instance_points[offsets[i] .. offsets[i+1])
+  Points instance_points;                       // sensor frame, on a 1 cm grid
+  std::vector<BevCell> background;
+  std::vector<Plane> planes;                    // centroid on a 1 cm grid, normal on a 1/32767 grid
+  std::vector<float> descriptor;                // scan descriptor (layout.scanDim())
+  std::uint32_t num_points = 0;                 // points in the source scan
+
+  // Derived on construction and on load (not serialised): node descriptors and the plane lookup.
+  Eigen::MatrixXf node_descriptors;
+  PlaneIndex plane_index;
+
+  InstanceView instance(int node) const {
+    return {instance_points.data() + instance_offsets[node],
+            static_cast<int>(instance_offsets[node + 1] - instance_offsets[node])};
+  }
+  // Recomputes the derived members from the stored ones.
+  void finalize();
+};
+
+inline constexpr std::uint32_t kFingerprintVersion = 1;
+
+std::vector<std::uint8_t> serialize(const Fingerprint& fp);
+// Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob.
+Fingerprint deserialize(std::span<const std::uint8_t> bytes);
+
+}  // namespace sglc

@@ -1,0 +1,28 @@
+// Plain file readers and writers for the KITTI / SemanticKITTI formats. Every failure throws InputError
+// with the file name and what is wrong.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "sglc/types.hpp"
+
+namespace sglc {
+
+// KITTI velodyne .bin: float32 little-endian x, y, z, reflectance per point.
+Points readKittiBin(const std::string& path, std::vector<float>* intensities = nullptr);
+// SemanticKITTI .label: uint32 per point.
+std::vector<std::uint32_t> readLabels(const std::string& path);
+// Both, checked against each other and for finite coordinates.
+LabelledScan readScan(const std::string& bin_path, const std::string& label_path);
+
+// KITTI poses file: one row-major 3x4 matrix per line (12 numbers).
+std::vector<Mat4d> readPoses(const std::string& path);
+// The "Tr:" line of a KITTI calib.txt (velodyne -> cam0), as a 4x4 matrix.
+Mat4d readCalibTr(const std::string& path);
+
+void writeKittiBin(const std::string& path, const Points& points, const std::vector<float>& intensities);
+void writeLabels(const std::string& path, const std::vector<std::uint32_t>& labels);
+void writePoses(const std::string& path, const std::vector<Mat4d>& poses);
+
+}  // namespace sglc

@@ -1,0 +1,33 @@
+// Maps raw label ids to the roles the engine uses (node class, background class, ignored).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "sglc/config.hpp"
+
+namespace sglc {
+
+// Background classes, numbered by priority in the background agreement grid: a cell holding several
+// classes keeps the highest (fence > building > vegetation > road).
+enum class Background : std::uint8_t { kNone = 0, kRoad = 1, kVegetation = 2, kBuilding = 3, kFence = 4 };
+
+class LabelMap {
+ public:
+  explicit LabelMap(const LabelConfig& config);
+
+  // Index into config.node_classes, or -1. Moving classes are never node classes.
+  int nodeClass(std::uint32_t label) const { return role_[label & 0xFFFFu] >= 0 ? role_[label & 0xFFFFu] : -1; }
+  Background background(std::uint32_t label) const {
+    const int r = role_[label & 0xFFFFu];
+    return r <= -2 ? static_cast<Background>(-r - 1) : Background::kNone;
+  }
+  int numNodeClasses() const { return num_node_classes_; }
+
+ private:
+  // >= 0: node class index; -1: ignored; <= -2: background class (-role - 1).
+  std::vector<std::int8_t> role_;
+  int num_node_classes_ = 0;
+};
+
+}  // namespace sglc

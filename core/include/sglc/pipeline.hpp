@@ -1,0 +1,49 @@
+// The SGLC pipeline: scan -> fingerprint; (query, candidate) -> coarse pose and loop decision -> fine
+// (instance ICP) -> refine (background point-to-plane). Thread-safe: every method is const and the
+// object holds no mutable state, so one Pipeline serves many threads.
+#pragma once
+
+#include "sglc/config.hpp"
+#include "sglc/fingerprint.hpp"
+#include "sglc/labels.hpp"
+
+namespace sglc {
+
+struct LoopResult {
+  bool is_loop = false;
+  // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support.
+  double score = 0.0;
+  int matches = 0;           // node matches after pruning
+  int inliers = 0;           // RANSAC inliers
+  double graph_similarity = 0.0;       // S_graph = exp(-mean inlier residual)
+  double background_similarity = 0.0; // BEV agreement at the coarse pose
+  // Maps candidate points into the query frame: p_query = T * p_candidate.
+  Mat4d T = Mat4d::Identity();
+  bool refined = false;
+  double fitness = 0.0;  // after refinement: share of candidate planes with a consistent query plane
+  double rmse = 0.0;     // after refinement: point-to-plane RMSE (m)
+  const char* reason = "";  // why it is not a loop (empty for loops)
+  std::vector<Match> inlier_pairs;  // node matches consistent with T (query node, candidate node)
+};
+
+class Pipeline {
+ public:
+  explicit Pipeline(Config config = {});
+
+  const Config& config() const { return config_; }
+
+  // Throws InputError on an invalid scan.
+  Fingerprint fingerprint(const LabelledScan& scan) const;
+  // Coarse pose and the loop decision.
+  LoopResult verify(const Fingerprint& query, const Fingerprint& candidate) const;
+  // Fine and refine stages on a verified result (no-op for non-loops).
+  void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result) const;
+  // verify + refine.
+  LoopResult match(const Fingerprint& query, const Fingerprint& candidate) const;
+
+ private:
+  Config config_;
+  LabelMap labels_;
+};
+
+}  // namespace sglc

@@ -1,0 +1,82 @@
+// Rigid registration: closed-form fit, deterministic RANSAC over node matches, instance ICP, and the
+// point-to-plane refinement on background planes.
+#pragma once
+
+#include <vector>
+
+#include "sglc/background.hpp"
+#include "sglc/config.hpp"
+#include "sglc/matching.hpp"
+#include "sglc/types.hpp"
+#include "sglc/voxel_map.hpp"
+
+namespace sglc {
+
+// Least-squares rigid transform T with dst ~= T * src (Kabsch/Umeyama, reflection-safe). Needs >= 3 points.
+Mat4d fitRigid(const std::vector<Vec3d>& src, const std::vector<Vec3d>& dst);
+
+struct RansacResult {
+  bool found = false;
+  Mat4d T = Mat4d::Identity();  // maps candidate points into the query frame
+  std::vector<int> inliers;     // indices into the match list, ascending
+  double mean_residual = 0.0;   // over inliers (m), after refitting on them
+};
+
+// query[i] ~ T * candidate[i]. Every triple is tried when there are at most max_iterations of them, otherwise
+// a seeded sample. Degenerate (near-collinear) samples are skipped.
+RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3d>& candidate,
+                         const RansacConfig& config);
+
+// Instance points of one node, a view into a fingerprint's storage.
+struct InstanceView {
+  const Vec3f* points = nullptr;
+  int size = 0;
+};
+
+struct IcpResult {
+  Mat4d T = Mat4d::Identity();
+  int iterations = 0;
+  int correspondences = 0;
+  double rmse = 0.0;       // over the final correspondences (m)
+  double fitness = 0.0;    // share of candidate instance points with a correspondence
+  std::vector<std::pair<Vec3f, Vec3f>> pairs;  // final (query point, candidate point) correspondences
+};
+
+// Point-to-point ICP restricted to matched instances: a candidate point of instance j only pairs with the
+// nearest point of the query instance matched to j. Huber-weighted, correspondence gate shrinking.
+IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>& instances, const Mat4d& T0,
+                       const FineConfig& config);
+
+struct RefineResult {
+  Mat4d T = Mat4d::Identity();
+  int iterations = 0;
+  int correspondences = 0;  // plane pairs at the final pose
+  double rmse = 0.0;        // point-to-plane, over correspondences (m)
+  double fitness = 0.0;     // share of candidate planes with a consistent query plane
+};
+
+// Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.
+class PlaneIndex {
+ public:
+  PlaneIndex() = default;
+  PlaneIndex(const std::vector<Plane>& planes, double voxel);
+  // Nearest plane centroid to p within max_dist whose normal agrees with n (|cos| >= min_cos); -1 if none.
+  // `planes` must be the vector the index was built from.
+  int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
+              double min_cos) const;
+
+ private:
+  VoxelMap map_;
+  std::vector<int> next_;  // planes sharing a voxel (rare: a centroid snapped across a face)
+  double voxel_ = 1.0;
+};
+
+// Point-to-plane alignment of the candidate's plane centroids onto the query's planes (re-associated each
+// round, Cauchy-weighted), with the instance correspondences of the fine stage as an anchor so that
+// directions the planes leave free (a straight corridor) stay where the instances put them.
+RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
+                          const std::vector<Plane>& candidate,
+                          const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,
+                          const RefineConfig& config);
+
+}  // namespace sglc

@@ -1,0 +1,197 @@
+#include "sglc/config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <functional>
+#include <map>
+#include <variant>
+#include <fstream>
+#include <sstream>
+
+#include "sglc/types.hpp"
+
+namespace sglc {
+namespace {
+
+using FieldRef = std::variant<double*, int*, bool*, std::uint64_t*, std::vector<std::uint32_t>*>;
+
+// Every scalar parameter, by "section.key". The YAML reader and the validator both use this table, so a
+// new field only has to be added here to become configurable.
+std::map<std::string, FieldRef> fields(Config& c) {
+  return {
+      {"labels.road", &c.labels.road},
+      {"labels.building", &c.labels.building},
+      {"labels.fence", &c.labels.fence},
+      {"labels.vegetation", &c.labels.vegetation},
+      {"labels.moving", &c.labels.moving},
+      {"cluster.azimuth_deg", &c.cluster.azimuth_deg},
+      {"cluster.range_m", &c.cluster.range_m},
+      {"cluster.elevation_deg", &c.cluster.elevation_deg},
+      {"cluster.min_points", &c.cluster.min_points},
+      {"cluster.max_range_m", &c.cluster.max_range_m},
+      {"graph.d_max", &c.graph.d_max},
+      {"graph.max_nodes", &c.graph.max_nodes},
+      {"descriptor.d_i", &c.descriptor.d_i},
+      {"descriptor.k_eigen", &c.descriptor.k_eigen},
+      {"descriptor.rings", &c.descriptor.rings},
+      {"descriptor.ring_min_m", &c.descriptor.ring_min_m},
+      {"descriptor.ring_max_m", &c.descriptor.ring_max_m},
+      {"descriptor.sectors", &c.descriptor.sectors},
+      {"match.d_b", &c.match.d_b},
+      {"match.min_cosine", &c.match.min_cosine},
+      {"match.d_l", &c.match.d_l},
+      {"match.triangle_tol", &c.match.triangle_tol},
+      {"match.t_m", &c.match.t_m},
+      {"match.prune_min_matches", &c.match.prune_min_matches},
+      {"ransac.inlier_threshold", &c.ransac.inlier_threshold},
+      {"ransac.max_iterations", &c.ransac.max_iterations},
+      {"ransac.seed", &c.ransac.seed},
+      {"ransac.min_triangle_height", &c.ransac.min_triangle_height},
+      {"ransac.min_inliers", &c.ransac.min_inliers},
+      {"verify.t_g", &c.verify.t_g},
+      {"verify.t_b", &c.verify.t_b},
+      {"verify.max_translation", &c.verify.max_translation},
+      {"verify.bev_cell_m", &c.verify.bev_cell_m},
+      {"verify.bev_radius_m", &c.verify.bev_radius_m},
+      {"fingerprint.instance_voxel_m", &c.fingerprint.instance_voxel_m},
+      {"fingerprint.background_cell_m", &c.fingerprint.background_cell_m},
+      {"fingerprint.background_max_range_m", &c.fingerprint.background_max_range_m},
+      {"fingerprint.plane_voxel_m", &c.fingerprint.plane_voxel_m},
+      {"fingerprint.plane_min_points", &c.fingerprint.plane_min_points},
+      {"fingerprint.plane_max_thickness_m", &c.fingerprint.plane_max_thickness_m},
+      {"fingerprint.plane_max_range_m", &c.fingerprint.plane_max_range_m},
+      {"fine.enabled", &c.fine.enabled},
+      {"fine.max_iterations", &c.fine.max_iterations},
+      {"fine.max_corr_start_m", &c.fine.max_corr_start_m},
+      {"fine.max_corr_end_m", &c.fine.max_corr_end_m},
+      {"fine.huber_m", &c.fine.huber_m},
+      {"fine.converged_m", &c.fine.converged_m},
+      {"refine.enabled", &c.refine.enabled},
+      {"refine.max_iterations", &c.refine.max_iterations},
+      {"refine.max_corr_m", &c.refine.max_corr_m},
+      {"refine.min_normal_cosine", &c.refine.min_normal_cosine},
+      {"refine.cauchy_m", &c.refine.cauchy_m},
+      {"refine.instance_weight", &c.refine.instance_weight},
+      {"refine.converged_m", &c.refine.converged_m},
+  };
+}
+
+void require(bool ok, const std::string& field, const std::string& rule) {
+  if (!ok) throw InputError("config: " + field + " must be " + rule);
+}
+
+}  // namespace
+
+void validateConfig(const Config& config) {
+  Config copy = config;
+  for (const auto& [name, ref] : fields(copy)) {
+    if (auto d = std::get_if<double*>(&ref)) require(std::isfinite(**d), name, "finite");
+  }
+  const auto& c = config;
+  require(!c.labels.node_classes.empty() && c.labels.node_classes.size() <= 16, "labels.node_classes",
+          "1 to 16 classes");
+  require(c.cluster.azimuth_deg > 0 && c.cluster.azimuth_deg <= 90, "cluster.azimuth_deg", "in (0, 90]");
+  require(c.cluster.range_m > 0, "cluster.range_m", "> 0");
+  require(c.cluster.elevation_deg > 0 && c.cluster.elevation_deg <= 90, "cluster.elevation_deg", "in (0, 90]");
+  require(c.cluster.min_points >= 1, "cluster.min_points", ">= 1");
+  require(c.cluster.max_range_m > 0 && c.cluster.max_range_m < 1000, "cluster.max_range_m", "in (0, 1000)");
+  require(c.graph.d_max > 0 && c.graph.d_max < 1000, "graph.d_max", "in (0, 1000)");
+  require(c.graph.max_nodes >= 3 && c.graph.max_nodes <= 2000, "graph.max_nodes", "in [3, 2000]");
+  require(c.descriptor.d_i > 0 && c.graph.d_max / c.descriptor.d_i <= 1000, "descriptor.d_i",
+          "> 0 with d_max / d_i <= 1000");
+  require(c.descriptor.k_eigen >= 1 && c.descriptor.k_eigen <= 1000, "descriptor.k_eigen", "in [1, 1000]");
+  require(c.descriptor.rings >= 1 && c.descriptor.rings <= 1000, "descriptor.rings", "in [1, 1000]");
+  require(c.descriptor.ring_min_m >= 0 && c.descriptor.ring_max_m > c.descriptor.ring_min_m,
+          "descriptor.ring_min_m/ring_max_m", "0 <= min < max");
+  require(c.descriptor.sectors >= 1 && c.descriptor.sectors <= 3600, "descriptor.sectors", "in [1, 3600]");
+  require(c.match.d_b >= 0, "match.d_b", ">= 0");
+  require(c.match.min_cosine >= -1 && c.match.min_cosine <= 1, "match.min_cosine", "in [-1, 1]");
+  require(c.match.d_l > 0, "match.d_l", "> 0");
+  require(c.match.triangle_tol >= 0, "match.triangle_tol", ">= 0");
+  require(c.match.t_m >= 0, "match.t_m", ">= 0");
+  require(c.match.prune_min_matches >= 0, "match.prune_min_matches", ">= 0");
+  require(c.ransac.inlier_threshold > 0, "ransac.inlier_threshold", "> 0");
+  require(c.ransac.max_iterations >= 1 && c.ransac.max_iterations <= 1000000, "ransac.max_iterations",
+          "in [1, 1e6]");
+  require(c.ransac.min_triangle_height >= 0, "ransac.min_triangle_height", ">= 0");
+  require(c.ransac.min_inliers >= 3, "ransac.min_inliers", ">= 3");
+  require(c.verify.t_g >= 0 && c.verify.t_g <= 1, "verify.t_g", "in [0, 1]");
+  require(c.verify.t_b >= 0 && c.verify.t_b <= 1, "verify.t_b", "in [0, 1]");
+  require(c.verify.bev_cell_m > 0 && c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000, "verify.bev_cell_m",
+          "> 0 with bev_radius_m / bev_cell_m <= 2000");
+  require(c.verify.bev_radius_m > 0, "verify.bev_radius_m", "> 0");
+  const auto& f = c.fingerprint;
+  require(f.instance_voxel_m >= 0.01, "fingerprint.instance_voxel_m", ">= 0.01");
+  require(f.background_cell_m >= 0.05 && f.background_max_range_m / f.background_cell_m < 32000,
+          "fingerprint.background_cell_m", ">= 0.05 with background_max_range_m / background_cell_m < 32000");
+  require(f.background_max_range_m > 0 && f.background_max_range_m <= 320, "fingerprint.background_max_range_m",
+          "in (0, 320]");
+  require(f.plane_voxel_m > 0.05, "fingerprint.plane_voxel_m", "> 0.05");
+  require(f.plane_min_points >= 3, "fingerprint.plane_min_points", ">= 3");
+  require(f.plane_max_thickness_m > 0, "fingerprint.plane_max_thickness_m", "> 0");
+  require(f.plane_max_range_m > 0 && f.plane_max_range_m <= 320, "fingerprint.plane_max_range_m", "in (0, 320]");
+  require(c.cluster.max_range_m <= 320, "cluster.max_range_m", "<= 320 (fingerprints store centimetres in 16 bits)");
+  require(c.fine.max_iterations >= 0, "fine.max_iterations", ">= 0");
+  require(c.fine.max_corr_start_m > 0 && c.fine.max_corr_end_m > 0 &&
+              c.fine.max_corr_end_m <= c.fine.max_corr_start_m,
+          "fine.max_corr_start_m/max_corr_end_m", "> 0 with end <= start");
+  require(c.fine.huber_m > 0, "fine.huber_m", "> 0");
+  require(c.refine.max_iterations >= 0, "refine.max_iterations", ">= 0");
+  require(c.refine.max_corr_m > 0, "refine.max_corr_m", "> 0");
+  require(c.refine.min_normal_cosine >= 0 && c.refine.min_normal_cosine <= 1, "refine.min_normal_cosine",
+          "in [0, 1]");
+  require(c.refine.cauchy_m > 0, "refine.cauchy_m", "> 0");
+  require(c.refine.instance_weight >= 0, "refine.instance_weight", ">= 0");
+}
+
+Config parseConfig(const std::string& yaml_text) {
+  Config config;
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::Exception& e) {
+    throw InputError(std::string("config: not valid YAML: ") + e.what());
+  }
+  if (root.IsNull()) return config;
+  if (!root.IsMap()) throw InputError("config: the top level must be a mapping of sections");
+  auto table = fields(config);
+  for (const auto& section : root) {
+    const auto section_name = section.first.as<std::string>();
+    if (!section.second.IsMap()) throw InputError("config: section '" + section_name + "' must be a mapping");
+    for (const auto& item : section.second) {
+      const auto key = section_name + "." + item.first.as<std::string>();
+      try {
+        if (key == "labels.node_classes") {
+          config.labels.node_classes.clear();
+          for (const auto& cls : item.second)
+            config.labels.node_classes.push_back(
+                {cls["name"].as<std::string>(), cls["ids"].as<std::vector<std::uint32_t>>()});
+          continue;
+        }
+        auto it = table.find(key);
+        if (it == table.end()) throw InputError("config: unknown parameter '" + key + "'");
+        std::visit(
+            [&](auto* field) { *field = item.second.as<std::remove_pointer_t<decltype(field)>>(); }, it->second);
+      } catch (const YAML::Exception& e) {
+        throw InputError("config: bad value for '" + key + "': " + e.what());
+      }
+    }
+  }
+  validateConfig(config);
+  return config;
+}
+
+Config loadConfig(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open config file");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  try {
+    return parseConfig(ss.str());
+  } catch (const InputError& e) {
+    throw InputError(path + ": " + e.what());
+  }
+}
+
+}  // namespace sglc

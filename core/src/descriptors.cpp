@@ -1,0 +1,92 @@
+#include "sglc/descriptors.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+
+namespace sglc {
+namespace {
+
+template <typename V>
+void l2normalise(V&& v) {
+  const auto n = v.norm();
+  if (n > 0) v /= n;
+}
+
+}  // namespace
+
+DescriptorLayout descriptorLayout(int num_classes, const GraphConfig& graph, const DescriptorConfig& config) {
+  DescriptorLayout layout;
+  layout.num_classes = num_classes;
+  layout.bins = static_cast<int>(std::ceil(graph.d_max / config.d_i - 1e-9));
+  layout.k_eigen = config.k_eigen;
+  layout.rings = config.rings;
+  return layout;
+}
+
+int edgeType(int a, int b, int num_classes) {
+  if (a > b) std::swap(a, b);
+  // Row-major index into the upper triangle (a <= b).
+  return a * num_classes - a * (a - 1) / 2 + (b - a);
+}
+
+Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const DescriptorLayout& layout, double d_max,
+                                double d_i) {
+  const int n = static_cast<int>(nodes.size());
+  const int local = layout.num_classes * layout.bins;
+  Eigen::MatrixXf f = Eigen::MatrixXf::Zero(n, layout.nodeDim());
+  if (n == 0) return f;
+  const float inv_bin = static_cast<float>(1.0 / d_i);
+  const float dmax = static_cast<float>(d_max);
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j) {
+      const float d = (nodes[i].center - nodes[j].center).norm();
+      if (d >= dmax) continue;
+      const int bin = std::min(static_cast<int>(d * inv_bin), layout.bins - 1);
+      f(i, nodes[j].cls * layout.bins + bin) += 1.0f;  // neighbour's class (the reference used its own)
+      f(j, nodes[i].cls * layout.bins + bin) += 1.0f;
+    }
+  for (int i = 0; i < n; ++i) l2normalise(f.row(i).head(local));
+
+  // Spectral part: eigenvectors of the k largest eigenvalues of A, row i, absolute values, L1-normalised.
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(adjacency(nodes, d_max));
+  const Eigen::MatrixXd& Q = eig.eigenvectors();  // eigenvalues ascending
+  const int k = std::min(layout.k_eigen, n);
+  for (int i = 0; i < n; ++i) {
+    double sum = 0;
+    for (int c = 0; c < k; ++c) sum += std::abs(Q(i, n - 1 - c));
+    if (sum <= 0) continue;
+    for (int c = 0; c < k; ++c) f(i, local + c) = static_cast<float>(std::abs(Q(i, n - 1 - c)) / sum);
+  }
+  return f;
+}
+
+std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& ring_key,
+                                  const DescriptorLayout& layout, double d_max, double d_i) {
+  const int C = layout.num_classes;
+  Eigen::VectorXf counts = Eigen::VectorXf::Zero(C);
+  Eigen::VectorXf edges = Eigen::VectorXf::Zero(layout.edgeTypes() * layout.bins);
+  const float inv_bin = static_cast<float>(1.0 / d_i);
+  const float dmax = static_cast<float>(d_max);
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    counts[nodes[i].cls] += 1.0f;
+    for (std::size_t j = i + 1; j < nodes.size(); ++j) {
+      const float d = (nodes[i].center - nodes[j].center).norm();
+      if (d >= dmax) continue;
+      const int bin = std::min(static_cast<int>(d * inv_bin), layout.bins - 1);
+      edges[edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins + bin] += 1.0f;
+    }
+  }
+  l2normalise(counts);
+  l2normalise(edges);
+  Eigen::VectorXf fg(C + edges.size());
+  fg << counts, edges;
+  l2normalise(fg);
+  Eigen::VectorXf bg = Eigen::Map<const Eigen::VectorXf>(ring_key.data(), static_cast<Eigen::Index>(ring_key.size()));
+  l2normalise(bg);  // zero stays zero: no NaN for scans without road or building
+  Eigen::VectorXf all(fg.size() + bg.size());
+  all << fg, bg;
+  l2normalise(all);
+  return std::vector<float>(all.data(), all.data() + all.size());
+}
+
+}  // namespace sglc

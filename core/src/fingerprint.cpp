@@ -1,0 +1,187 @@
+#include "sglc/fingerprint.hpp"
+
+#include <zlib.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+
+namespace sglc {
+namespace {
+
+constexpr std::uint32_t kMagic = 0x50464753;  // "SGFP" little-endian
+constexpr std::size_t kHeaderBytes = 16;      // magic, version, payload length, crc32
+
+class Writer {
+ public:
+  template <typename T>
+  void put(T v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    const auto* b = reinterpret_cast<const std::uint8_t*>(&v);
+    out_.insert(out_.end(), b, b + sizeof(T));  // the engine targets little-endian hosts only
+  }
+  void cm(float v) { put(static_cast<std::int16_t>(std::lround(v * 100.0f))); }
+  std::vector<std::uint8_t>& bytes() { return out_; }
+
+ private:
+  std::vector<std::uint8_t> out_;
+};
+
+class Reader {
+ public:
+  Reader(const std::uint8_t* data, std::size_t size) : p_(data), end_(data + size) {}
+  template <typename T>
+  T get() {
+    need(sizeof(T));
+    T v;
+    std::memcpy(&v, p_, sizeof(T));
+    p_ += sizeof(T);
+    return v;
+  }
+  float cm() { return static_cast<float>(get<std::int16_t>()) / 100.0f; }
+  float f32() {
+    const float v = get<float>();
+    if (!std::isfinite(v)) throw InputError("fingerprint: non-finite value");
+    return v;
+  }
+  void need(std::size_t bytes) const {
+    if (static_cast<std::size_t>(end_ - p_) < bytes) throw InputError("fingerprint: truncated payload");
+  }
+  // Guards a count read from the blob before allocating for it.
+  std::uint32_t count(std::size_t bytes_each) {
+    const auto n = get<std::uint32_t>();
+    need(static_cast<std::size_t>(n) * bytes_each);
+    return n;
+  }
+  bool done() const { return p_ == end_; }
+
+ private:
+  const std::uint8_t* p_;
+  const std::uint8_t* end_;
+};
+
+}  // namespace
+
+void Fingerprint::finalize() {
+  node_descriptors = nodeDescriptors(nodes, layout, d_max, d_i);
+  plane_index = PlaneIndex(planes, plane_voxel);
+}
+
+std::vector<std::uint8_t> serialize(const Fingerprint& fp) {
+  Writer w;
+  for (std::size_t i = 0; i < kHeaderBytes; ++i) w.put<std::uint8_t>(0);
+  w.put<std::uint8_t>(static_cast<std::uint8_t>(fp.layout.num_classes));
+  w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.bins));
+  w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.k_eigen));
+  w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.rings));
+  w.put(fp.d_max);
+  w.put(fp.d_i);
+  w.put(fp.background_cell);
+  w.put(fp.plane_voxel);
+  w.put(fp.num_points);
+  w.put(static_cast<std::uint32_t>(fp.nodes.size()));
+  for (std::size_t i = 0; i < fp.nodes.size(); ++i) {
+    const Node& n = fp.nodes[i];
+    for (int k = 0; k < 3; ++k) w.put(n.center[k]);
+    for (int k = 0; k < 3; ++k) w.put(n.size[k]);
+    w.put(n.cls);
+    w.put(fp.instance_offsets[i + 1] - fp.instance_offsets[i]);
+  }
+  for (const auto& p : fp.instance_points)
+    for (int k = 0; k < 3; ++k) w.cm(p[k]);
+  w.put(static_cast<std::uint32_t>(fp.background.size()));
+  for (const auto& c : fp.background) {
+    w.put(c.ix);
+    w.put(c.iy);
+    w.put(c.cls);
+  }
+  w.put(static_cast<std::uint32_t>(fp.planes.size()));
+  for (const auto& p : fp.planes) {
+    for (int k = 0; k < 3; ++k) w.cm(p.centroid[k]);
+    for (int k = 0; k < 3; ++k) w.put(static_cast<std::int16_t>(std::lround(p.normal[k] * 32767.0f)));
+    w.put(p.cls);
+  }
+  w.put(static_cast<std::uint32_t>(fp.descriptor.size()));
+  for (float v : fp.descriptor) w.put(v);
+
+  auto& out = w.bytes();
+  const auto payload = static_cast<std::uint32_t>(out.size() - kHeaderBytes);
+  const auto crc = static_cast<std::uint32_t>(crc32(0L, out.data() + kHeaderBytes, payload));
+  const std::uint32_t header[4] = {kMagic, kFingerprintVersion, payload, crc};
+  std::memcpy(out.data(), header, sizeof(header));
+  return std::move(out);
+}
+
+Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
+  if (bytes.size() < kHeaderBytes)
+    throw InputError("fingerprint: " + std::to_string(bytes.size()) + " bytes is shorter than its header");
+  std::uint32_t header[4];
+  std::memcpy(header, bytes.data(), sizeof(header));
+  if (header[0] != kMagic) throw InputError("fingerprint: not a fingerprint (bad magic)");
+  if (header[1] > kFingerprintVersion || header[1] == 0)
+    throw InputError("fingerprint: format version " + std::to_string(header[1]) + " is not supported (this build reads " +
+                     std::to_string(kFingerprintVersion) + ")");
+  if (header[2] != bytes.size() - kHeaderBytes)
+    throw InputError("fingerprint: payload is " + std::to_string(bytes.size() - kHeaderBytes) + " bytes, header says " +
+                     std::to_string(header[2]));
+  if (static_cast<std::uint32_t>(crc32(0L, bytes.data() + kHeaderBytes, header[2])) != header[3])
+    throw InputError("fingerprint: checksum mismatch (corrupted data)");
+
+  Reader r(bytes.data() + kHeaderBytes, header[2]);
+  Fingerprint fp;
+  fp.layout.num_classes = r.get<std::uint8_t>();
+  fp.layout.bins = r.get<std::uint16_t>();
+  fp.layout.k_eigen = r.get<std::uint16_t>();
+  fp.layout.rings = r.get<std::uint16_t>();
+  if (fp.layout.num_classes < 1 || fp.layout.num_classes > 16 || fp.layout.bins < 1 || fp.layout.k_eigen < 1 ||
+      fp.layout.rings < 1)
+    throw InputError("fingerprint: invalid descriptor layout");
+  fp.d_max = r.f32();
+  fp.d_i = r.f32();
+  fp.background_cell = r.f32();
+  fp.plane_voxel = r.f32();
+  if (!(fp.d_max > 0 && fp.d_i > 0 && fp.background_cell > 0 && fp.plane_voxel > 0))
+    throw InputError("fingerprint: invalid geometry parameters");
+  fp.num_points = r.get<std::uint32_t>();
+  const auto n_nodes = r.count(29);
+  fp.nodes.resize(n_nodes);
+  fp.instance_offsets.assign(1, 0);
+  for (auto& n : fp.nodes) {
+    for (int k = 0; k < 3; ++k) n.center[k] = r.f32();
+    for (int k = 0; k < 3; ++k) n.size[k] = r.f32();
+    n.cls = r.get<std::uint8_t>();
+    if (n.cls >= fp.layout.num_classes) throw InputError("fingerprint: node class out of range");
+    const auto count = r.get<std::uint32_t>();
+    if (count > (1u << 24)) throw InputError("fingerprint: implausible instance size");
+    fp.instance_offsets.push_back(fp.instance_offsets.back() + count);
+  }
+  r.need(static_cast<std::size_t>(fp.instance_offsets.back()) * 6);
+  fp.instance_points.resize(fp.instance_offsets.back());
+  for (auto& p : fp.instance_points)
+    for (int k = 0; k < 3; ++k) p[k] = r.cm();
+  fp.background.resize(r.count(5));
+  for (auto& c : fp.background) {
+    c.ix = r.get<std::int16_t>();
+    c.iy = r.get<std::int16_t>();
+    c.cls = r.get<std::uint8_t>();
+    if (c.cls < 1 || c.cls > 4) throw InputError("fingerprint: background class out of range");
+  }
+  fp.planes.resize(r.count(13));
+  for (auto& p : fp.planes) {
+    for (int k = 0; k < 3; ++k) p.centroid[k] = r.cm();
+    for (int k = 0; k < 3; ++k) p.normal[k] = static_cast<float>(r.get<std::int16_t>()) / 32767.0f;
+    p.cls = r.get<std::uint8_t>();
+    if (p.cls < 1 || p.cls > 4) throw InputError("fingerprint: plane class out of range");
+  }
+  const auto dim = r.count(4);
+  if (static_cast<int>(dim) != fp.layout.scanDim())
+    throw InputError("fingerprint: descriptor has " + std::to_string(dim) + " values, layout needs " +
+                     std::to_string(fp.layout.scanDim()));
+  fp.descriptor.resize(dim);
+  for (auto& v : fp.descriptor) v = r.f32();
+  if (!r.done()) throw InputError("fingerprint: trailing bytes after the payload");
+  fp.finalize();
+  return fp;
+}
+
+}  // namespace sglc

@@ -1,0 +1,154 @@
+#include "sglc/io.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+
+namespace sglc {
+namespace {
+
+std::vector<char> readAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  const std::streamsize size = in.tellg();
+  in.seekg(0);
+  std::vector<char> data(static_cast<std::size_t>(size));
+  if (size > 0 && !in.read(data.data(), size)) throw InputError(path + ": read failed");
+  return data;
+}
+
+void writeAll(const std::string& path, const void* data, std::size_t bytes) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) throw InputError(path + ": cannot create (" + std::strerror(errno) + ")");
+  out.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
+  if (!out) throw InputError(path + ": write failed");
+}
+
+}  // namespace
+
+void validateScan(const LabelledScan& scan) {
+  if (scan.points.size() != scan.labels.size())
+    throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
+                     std::to_string(scan.labels.size()) + " labels");
+  for (std::size_t i = 0; i < scan.points.size(); ++i)
+    if (!scan.points[i].allFinite())
+      throw InputError("point " + std::to_string(i) + " has a non-finite coordinate");
+}
+
+Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
+  const auto data = readAll(path);
+  if (data.size() % 16 != 0)
+    throw InputError(path + ": size " + std::to_string(data.size()) +
+                     " bytes is not a multiple of 16 (4 float32 per point); truncated file?");
+  const std::size_t n = data.size() / 16;
+  Points points(n);
+  if (intensities) intensities->resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    float v[4];
+    std::memcpy(v, data.data() + i * 16, 16);
+    if (!std::isfinite(v[0]) || !std::isfinite(v[1]) || !std::isfinite(v[2]))
+      throw InputError(path + ": point " + std::to_string(i) + " has a non-finite coordinate");
+    points[i] = Vec3f(v[0], v[1], v[2]);
+    if (intensities) (*intensities)[i] = v[3];
+  }
+  return points;
+}
+
+std::vector<std::uint32_t> readLabels(const std::string& path) {
+  const auto data = readAll(path);
+  if (data.size() % 4 != 0)
+    throw InputError(path + ": size " + std::to_string(data.size()) +
+                     " bytes is not a multiple of 4 (uint32 per point); truncated file?");
+  std::vector<std::uint32_t> labels(data.size() / 4);
+  if (!labels.empty()) std::memcpy(labels.data(), data.data(), data.size());
+  return labels;
+}
+
+LabelledScan readScan(const std::string& bin_path, const std::string& label_path) {
+  LabelledScan scan;
+  scan.points = readKittiBin(bin_path);
+  scan.labels = readLabels(label_path);
+  if (scan.points.size() != scan.labels.size())
+    throw InputError(label_path + ": " + std::to_string(scan.labels.size()) + " labels for " +
+                     std::to_string(scan.points.size()) + " points in " + bin_path);
+  return scan;
+}
+
+namespace {
+Mat4d parseRow12(std::istringstream& ss, const std::string& where) {
+  Mat4d T = Mat4d::Identity();
+  for (int k = 0; k < 12; ++k) {
+    double v;
+    if (!(ss >> v)) throw InputError(where + ": expected 12 numbers (row-major 3x4)");
+    if (!std::isfinite(v)) throw InputError(where + ": non-finite value");
+    T(k / 4, k % 4) = v;
+  }
+  std::string extra;
+  if (ss >> extra) throw InputError(where + ": more than 12 numbers");
+  return T;
+}
+}  // namespace
+
+std::vector<Mat4d> readPoses(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::vector<Mat4d> poses;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+    std::istringstream ss(line);
+    poses.push_back(parseRow12(ss, path + ":" + std::to_string(line_no)));
+  }
+  return poses;
+}
+
+Mat4d readCalibTr(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.rfind("Tr:", 0) == 0) {
+      std::istringstream ss(line.substr(3));
+      return parseRow12(ss, path + ":" + std::to_string(line_no));
+    }
+  }
+  throw InputError(path + ": no 'Tr:' line (velodyne -> camera calibration)");
+}
+
+void writeKittiBin(const std::string& path, const Points& points, const std::vector<float>& intensities) {
+  if (!intensities.empty() && intensities.size() != points.size())
+    throw InputError(path + ": " + std::to_string(intensities.size()) + " intensities for " +
+                     std::to_string(points.size()) + " points");
+  std::vector<float> data(points.size() * 4);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    data[i * 4 + 0] = points[i].x();
+    data[i * 4 + 1] = points[i].y();
+    data[i * 4 + 2] = points[i].z();
+    data[i * 4 + 3] = intensities.empty() ? 0.0f : intensities[i];
+  }
+  writeAll(path, data.data(), data.size() * sizeof(float));
+}
+
+void writeLabels(const std::string& path, const std::vector<std::uint32_t>& labels) {
+  writeAll(path, labels.data(), labels.size() * sizeof(std::uint32_t));
+}
+
+void writePoses(const std::string& path, const std::vector<Mat4d>& poses) {
+  std::ofstream out(path, std::ios::trunc);
+  if (!out) throw InputError(path + ": cannot create (" + std::strerror(errno) + ")");
+  char buf[64];
+  for (const auto& T : poses) {
+    for (int k = 0; k < 12; ++k) {
+      std::snprintf(buf, sizeof(buf), "%.9e", T(k / 4, k % 4));
+      out << buf << (k == 11 ? '\n' : ' ');
+    }
+  }
+  if (!out) throw InputError(path + ": write failed");
+}
+
+}  // namespace sglc

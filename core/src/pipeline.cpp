@@ -1,0 +1,167 @@
+#include "sglc/pipeline.hpp"
+
+#include <cmath>
+#include <numbers>
+
+#include "fast_math.hpp"
+#include "sglc/voxel_map.hpp"
+
+namespace sglc {
+namespace {
+
+// Voxel-averaged points of one instance, snapped to the stored 1 cm grid (order: first point per voxel).
+void downsampleInstance(const Points& points, const Cluster& cluster, double voxel, Points& out) {
+  const float inv = static_cast<float>(1.0 / voxel);
+  VoxelMap map(cluster.points.size());
+  std::vector<Vec3d> sums;
+  std::vector<int> counts;
+  for (auto i : cluster.points) {
+    const Vec3f& p = points[i];
+    bool inserted = false;
+    const int idx = map.findOrInsert(packCell(static_cast<int>(std::floor(p.x() * inv)),
+                                              static_cast<int>(std::floor(p.y() * inv)),
+                                              static_cast<int>(std::floor(p.z() * inv))),
+                                     static_cast<int>(sums.size()), &inserted);
+    if (inserted) {
+      sums.push_back(Vec3d::Zero());
+      counts.push_back(0);
+    }
+    sums[idx] += p.cast<double>();
+    ++counts[idx];
+  }
+  for (std::size_t k = 0; k < sums.size(); ++k) {
+    const Vec3d m = sums[k] / counts[k];
+    out.emplace_back(detail::snapCm(static_cast<float>(m.x())), detail::snapCm(static_cast<float>(m.y())),
+                     detail::snapCm(static_cast<float>(m.z())));
+  }
+}
+
+bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
+  return a.layout.num_classes == b.layout.num_classes && a.layout.bins == b.layout.bins &&
+         a.layout.k_eigen == b.layout.k_eigen && a.layout.rings == b.layout.rings && a.d_max == b.d_max &&
+         a.d_i == b.d_i && a.background_cell == b.background_cell && a.plane_voxel == b.plane_voxel;
+}
+
+double rotationAngleDeg(const Mat3d& R) {
+  return std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+}
+
+}  // namespace
+
+Pipeline::Pipeline(Config config) : config_(std::move(config)), labels_((validateConfig(config_), config_.labels)) {}
+
+Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
+  validateScan(scan);
+  const auto& c = config_;
+  const std::size_t n = scan.points.size();
+  std::vector<std::int8_t> node_class(n);
+  std::vector<Background> background(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    node_class[i] = static_cast<std::int8_t>(labels_.nodeClass(scan.labels[i]));
+    background[i] = labels_.background(scan.labels[i]);
+  }
+
+  Fingerprint fp;
+  fp.layout = descriptorLayout(labels_.numNodeClasses(), c.graph, c.descriptor);
+  fp.d_max = static_cast<float>(c.graph.d_max);
+  fp.d_i = static_cast<float>(c.descriptor.d_i);
+  fp.background_cell = static_cast<float>(c.fingerprint.background_cell_m);
+  fp.plane_voxel = static_cast<float>(c.fingerprint.plane_voxel_m);
+  fp.num_points = static_cast<std::uint32_t>(n);
+
+  const auto clusters = clusterInstances(scan.points, node_class, c.cluster);
+  std::vector<int> kept;
+  fp.nodes = buildNodes(scan.points, clusters, c.graph, &kept);
+  fp.instance_offsets.assign(1, 0);
+  for (int k : kept) {
+    downsampleInstance(scan.points, clusters[k], c.fingerprint.instance_voxel_m, fp.instance_points);
+    fp.instance_offsets.push_back(static_cast<std::uint32_t>(fp.instance_points.size()));
+  }
+  fp.background = bevCells(scan.points, background, c.fingerprint.background_cell_m,
+                           c.fingerprint.background_max_range_m);
+  fp.planes = extractPlanes(scan.points, background, c.fingerprint);
+  fp.descriptor = scanDescriptor(fp.nodes, ringKey(scan.points, background, c.descriptor), fp.layout, fp.d_max,
+                                 fp.d_i);
+  fp.finalize();
+  return fp;
+}
+
+LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candidate) const {
+  if (!sameGeometry(query, candidate))
+    throw InputError("fingerprints were built with different descriptor or voxel parameters");
+  const auto& c = config_;
+  LoopResult r;
+  auto matches = matchNodes(query.nodes, query.node_descriptors, candidate.nodes, candidate.node_descriptors, c.match);
+  matches = pruneMatches(query.nodes, candidate.nodes, matches, c.match);
+  r.matches = static_cast<int>(matches.size());
+  if (r.matches < 3) {
+    r.reason = "fewer than 3 node matches";
+    return r;
+  }
+  std::vector<Vec3d> q, t;
+  for (const auto& [i, j] : matches) {
+    q.push_back(query.nodes[i].center.cast<double>());
+    t.push_back(candidate.nodes[j].center.cast<double>());
+  }
+  const auto ransac = ransacRigid(q, t, c.ransac);
+  if (!ransac.found) {
+    r.reason = "no pose agrees with enough node matches";
+    return r;
+  }
+  r.T = ransac.T;
+  r.inliers = static_cast<int>(ransac.inliers.size());
+  r.graph_similarity = std::exp(-ransac.mean_residual);
+  r.background_similarity = bevAgreement(query.background, candidate.background, query.background_cell, r.T,
+                                         c.verify.bev_cell_m, c.verify.bev_radius_m);
+  r.score = r.graph_similarity * r.background_similarity * (1.0 - std::exp(-r.inliers / 3.0));
+  const double translation = r.T.topRightCorner<3, 1>().norm();
+  if (r.graph_similarity < c.verify.t_g) r.reason = "graph similarity below t_g";
+  else if (r.background_similarity < c.verify.t_b) r.reason = "background similarity below t_b";
+  else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)
+    r.reason = "translation exceeds verify.max_translation";
+  else r.is_loop = true;
+  if (r.is_loop) {
+    // Keep the inlier node pairs for the fine stage.
+    r.inlier_pairs.reserve(ransac.inliers.size());
+    for (int k : ransac.inliers) r.inlier_pairs.push_back(matches[k]);
+  }
+  return r;
+}
+
+void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const {
+  if (!r.is_loop || r.refined) return;
+  const auto& c = config_;
+  Mat4d T = r.T;
+  std::vector<std::pair<Vec3f, Vec3f>> anchor;
+  if (c.fine.enabled) {
+    std::vector<std::pair<InstanceView, InstanceView>> instances;
+    for (const auto& [i, j] : r.inlier_pairs) instances.emplace_back(query.instance(i), candidate.instance(j));
+    auto icp = icpInstances(instances, T, c.fine);
+    // Guard: the fine stage only polishes; a large jump means it locked onto something else.
+    const Mat4d d = r.T.inverse() * icp.T;
+    if (icp.correspondences >= 3 && d.topRightCorner<3, 1>().norm() < 2.0 &&
+        rotationAngleDeg(d.topLeftCorner<3, 3>()) < 10.0) {
+      T = icp.T;
+      anchor = std::move(icp.pairs);
+    }
+  }
+  if (c.refine.enabled) {
+    auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
+    const Mat4d d = T.inverse() * ref.T;
+    if (ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0) {
+      T = ref.T;
+    }
+    r.fitness = ref.fitness;
+    r.rmse = ref.rmse;
+  }
+  r.T = T;
+  r.refined = true;
+}
+
+LoopResult Pipeline::match(const Fingerprint& query, const Fingerprint& candidate) const {
+  LoopResult r = verify(query, candidate);
+  refine(query, candidate, r);
+  return r;
+}
+
+}  // namespace sglc

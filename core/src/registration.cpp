@@ -1,0 +1,345 @@
+#include "sglc/registration.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace sglc {
+namespace {
+
+// Weighted closed-form rigid fit: dst ~= R * src + t (Kabsch with the reflection fix).
+template <typename GetSrc, typename GetDst, typename GetW>
+Mat4d weightedFit(std::size_t n, GetSrc src, GetDst dst, GetW weight) {
+  double wsum = 0;
+  Vec3d cs = Vec3d::Zero(), cd = Vec3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) {
+    const double w = weight(i);
+    wsum += w;
+    cs += w * src(i);
+    cd += w * dst(i);
+  }
+  Mat4d T = Mat4d::Identity();
+  if (wsum <= 0) return T;
+  cs /= wsum;
+  cd /= wsum;
+  Mat3d H = Mat3d::Zero();
+  for (std::size_t i = 0; i < n; ++i) H += weight(i) * (src(i) - cs) * (dst(i) - cd).transpose();
+  const Eigen::JacobiSVD<Mat3d> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Mat3d D = Mat3d::Identity();
+  if ((svd.matrixV() * svd.matrixU().transpose()).determinant() < 0) D(2, 2) = -1;
+  const Mat3d R = svd.matrixV() * D * svd.matrixU().transpose();
+  T.topLeftCorner<3, 3>() = R;
+  T.topRightCorner<3, 1>() = cd - R * cs;
+  return T;
+}
+
+// Twice the triangle's area over its longest side: its smallest height.
+double triangleHeight(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  const double longest = std::max({(a - b).norm(), (b - c).norm(), (c - a).norm()});
+  if (longest <= 0) return 0;
+  return (b - a).cross(c - a).norm() / longest;
+}
+
+// splitmix64: a tiny, portable, seeded generator (std distributions differ between standard libraries).
+struct SplitMix {
+  std::uint64_t state;
+  std::uint64_t next() {
+    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  }
+  int below(int n) { return static_cast<int>(next() % static_cast<std::uint64_t>(n)); }
+};
+
+Mat4d expSE3(const Eigen::Matrix<double, 6, 1>& d) {
+  Mat4d T = Mat4d::Identity();
+  const Vec3d w = d.head<3>();
+  const double angle = w.norm();
+  if (angle > 0) T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle, w / angle).toRotationMatrix();
+  T.topRightCorner<3, 1>() = d.tail<3>();
+  return T;
+}
+
+}  // namespace
+
+Mat4d fitRigid(const std::vector<Vec3d>& src, const std::vector<Vec3d>& dst) {
+  return weightedFit(
+      src.size(), [&](std::size_t i) { return src[i]; }, [&](std::size_t i) { return dst[i]; },
+      [](std::size_t) { return 1.0; });
+}
+
+RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3d>& candidate,
+                         const RansacConfig& config) {
+  RansacResult best;
+  const int n = static_cast<int>(query.size());
+  if (n < 3 || static_cast<int>(candidate.size()) != n) return best;
+  const double thr = config.inlier_threshold;
+
+  auto countInliers = [&](const Mat4d& T, std::vector<int>* inliers, double* residual_sum) {
+    const Mat3d R = T.topLeftCorner<3, 3>();
+    const Vec3d t = T.topRightCorner<3, 1>();
+    int count = 0;
+    double sum = 0;
+    for (int k = 0; k < n; ++k) {
+      const double r = (R * candidate[k] + t - query[k]).norm();
+      if (r < thr) {
+        ++count;
+        sum += r;
+        if (inliers) inliers->push_back(k);
+      }
+    }
+    if (residual_sum) *residual_sum = sum;
+    return count;
+  };
+
+  int best_count = 0;
+  double best_sum = std::numeric_limits<double>::max();
+  Mat4d best_T = Mat4d::Identity();
+  auto tryTriple = [&](int a, int b, int c) {
+    // Rigid motions keep distances: reject samples whose side lengths disagree, and flat samples.
+    const int idx[3] = {a, b, c};
+    for (int s = 0; s < 3; ++s) {
+      const int u = idx[s], v = idx[(s + 1) % 3];
+      if (std::abs((query[u] - query[v]).norm() - (candidate[u] - candidate[v]).norm()) > 2 * thr) return;
+    }
+    if (triangleHeight(candidate[a], candidate[b], candidate[c]) < config.min_triangle_height ||
+        triangleHeight(query[a], query[b], query[c]) < config.min_triangle_height)
+      return;
+    const Mat4d T = weightedFit(
+        3, [&](std::size_t i) { return candidate[idx[i]]; }, [&](std::size_t i) { return query[idx[i]]; },
+        [](std::size_t) { return 1.0; });
+    double sum = 0;
+    const int count = countInliers(T, nullptr, &sum);
+    if (count > best_count || (count == best_count && sum < best_sum)) {
+      best_count = count;
+      best_sum = sum;
+      best_T = T;
+    }
+  };
+
+  const double triples = static_cast<double>(n) * (n - 1) * (n - 2) / 6.0;
+  if (triples <= config.max_iterations) {
+    for (int a = 0; a < n; ++a)
+      for (int b = a + 1; b < n; ++b)
+        for (int c = b + 1; c < n; ++c) tryTriple(a, b, c);
+  } else {
+    SplitMix rng{config.seed};
+    for (int it = 0; it < config.max_iterations; ++it) {
+      const int a = rng.below(n);
+      int b = rng.below(n - 1);
+      if (b >= a) ++b;
+      int c = rng.below(n - 2);
+      if (c >= std::min(a, b)) ++c;
+      if (c >= std::max(a, b)) ++c;
+      tryTriple(a, b, c);
+    }
+  }
+  if (best_count < std::max(3, config.min_inliers)) return best;
+
+  // Refit on the inliers until the set stops changing.
+  std::vector<int> inliers;
+  countInliers(best_T, &inliers, nullptr);
+  for (int round = 0; round < 5; ++round) {
+    const Mat4d T = weightedFit(
+        inliers.size(), [&](std::size_t i) { return candidate[inliers[i]]; },
+        [&](std::size_t i) { return query[inliers[i]]; }, [](std::size_t) { return 1.0; });
+    std::vector<int> next;
+    countInliers(T, &next, nullptr);
+    if (static_cast<int>(next.size()) < static_cast<int>(inliers.size())) break;
+    best_T = T;
+    if (next == inliers) break;
+    inliers = std::move(next);
+  }
+  best.found = true;
+  best.T = best_T;
+  best.inliers.clear();
+  double sum = 0;
+  countInliers(best_T, &best.inliers, &sum);
+  if (static_cast<int>(best.inliers.size()) < std::max(3, config.min_inliers)) return RansacResult{};
+  best.mean_residual = sum / static_cast<double>(best.inliers.size());
+  return best;
+}
+
+IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>& instances, const Mat4d& T0,
+                       const FineConfig& config) {
+  IcpResult result;
+  result.T = T0;
+  struct Corr {
+    Vec3d q, p;
+    double w;
+  };
+  std::vector<Corr> corr;
+  std::size_t total = 0;
+  for (const auto& [q, c] : instances) total += static_cast<std::size_t>(c.size);
+  auto associate = [&](const Mat4d& T, double gate) {
+    corr.clear();
+    const Eigen::Matrix3f R = T.topLeftCorner<3, 3>().cast<float>();
+    const Vec3f t = T.topRightCorner<3, 1>().cast<float>();
+    const float gate2 = static_cast<float>(gate * gate);
+    for (const auto& [qv, cv] : instances) {
+      for (int k = 0; k < cv.size; ++k) {
+        const Vec3f x = R * cv.points[k] + t;
+        float best = gate2;
+        int arg = -1;
+        for (int m = 0; m < qv.size; ++m) {
+          const float d2 = (qv.points[m] - x).squaredNorm();
+          if (d2 < best) {
+            best = d2;
+            arg = m;
+          }
+        }
+        if (arg < 0) continue;
+        const double r = std::sqrt(best);
+        const double w = r <= config.huber_m ? 1.0 : config.huber_m / r;
+        corr.push_back({qv.points[arg].cast<double>(), cv.points[k].cast<double>(), w});
+      }
+    }
+  };
+  const int iters = config.max_iterations;
+  for (int it = 0; it < iters; ++it) {
+    const double frac = iters > 1 ? std::min(1.0, 3.0 * it / (iters - 1)) : 1.0;
+    const double gate = config.max_corr_start_m + frac * (config.max_corr_end_m - config.max_corr_start_m);
+    associate(result.T, gate);
+    if (corr.size() < 3) break;
+    const Mat4d T = weightedFit(
+        corr.size(), [&](std::size_t i) { return corr[i].p; }, [&](std::size_t i) { return corr[i].q; },
+        [&](std::size_t i) { return corr[i].w; });
+    const double moved = (T.topRightCorner<3, 1>() - result.T.topRightCorner<3, 1>()).norm() +
+                         (T.topLeftCorner<3, 3>() - result.T.topLeftCorner<3, 3>()).norm() * 10.0;
+    result.T = T;
+    result.iterations = it + 1;
+    if (moved < config.converged_m && gate <= config.max_corr_end_m + 1e-9) break;
+  }
+  associate(result.T, config.max_corr_end_m);
+  result.correspondences = static_cast<int>(corr.size());
+  double sq = 0;
+  const Mat3d R = result.T.topLeftCorner<3, 3>();
+  const Vec3d t = result.T.topRightCorner<3, 1>();
+  result.pairs.reserve(corr.size());
+  for (const auto& c : corr) {
+    sq += (R * c.p + t - c.q).squaredNorm();
+    result.pairs.emplace_back(c.q.cast<float>(), c.p.cast<float>());
+  }
+  result.rmse = corr.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(corr.size()));
+  result.fitness = total ? static_cast<double>(corr.size()) / static_cast<double>(total) : 0.0;
+  return result;
+}
+
+PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double voxel) : map_(planes.size() + 1), voxel_(voxel) {
+  const double inv = 1.0 / voxel;
+  next_.assign(planes.size(), -1);
+  for (int i = static_cast<int>(planes.size()) - 1; i >= 0; --i) {
+    const Vec3f& c = planes[i].centroid;
+    bool inserted = false;
+    int& head = map_.findOrInsert(packCell(static_cast<int>(std::floor(c.x() * inv)),
+                                           static_cast<int>(std::floor(c.y() * inv)),
+                                           static_cast<int>(std::floor(c.z() * inv))),
+                                  i, &inserted);
+    if (!inserted) {
+      next_[i] = head;
+      head = i;
+    }
+  }
+}
+
+int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
+                        double min_cos) const {
+  const double inv = 1.0 / voxel_;
+  const int reach = std::max(1, static_cast<int>(std::ceil(max_dist * inv)));
+  const int cx = static_cast<int>(std::floor(p.x() * inv)), cy = static_cast<int>(std::floor(p.y() * inv)),
+            cz = static_cast<int>(std::floor(p.z() * inv));
+  float best = static_cast<float>(max_dist * max_dist);
+  int arg = -1;
+  const float mc = static_cast<float>(min_cos);
+  for (int dx = -reach; dx <= reach; ++dx)
+    for (int dy = -reach; dy <= reach; ++dy)
+      for (int dz = -reach; dz <= reach; ++dz)
+        for (int i = map_.find(packCell(cx + dx, cy + dy, cz + dz)); i >= 0; i = next_[i]) {
+          const float d2 = (planes[i].centroid - p).squaredNorm();
+          if (d2 < best && std::abs(planes[i].normal.dot(n)) >= mc) {
+            best = d2;
+            arg = i;
+          }
+        }
+  return arg;
+}
+
+RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
+                          const std::vector<Plane>& candidate,
+                          const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,
+                          const RefineConfig& config) {
+  RefineResult result;
+  result.T = T0;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  std::vector<int> assoc(candidate.size(), -1);
+  auto associate = [&](const Mat4d& T) {
+    const Eigen::Matrix3f R = T.topLeftCorner<3, 3>().cast<float>();
+    const Vec3f t = T.topRightCorner<3, 1>().cast<float>();
+    int count = 0;
+    for (std::size_t k = 0; k < candidate.size(); ++k) {
+      assoc[k] = query_index.nearest(query, R * candidate[k].centroid + t, R * candidate[k].normal,
+                                     config.max_corr_m, config.min_normal_cosine);
+      count += assoc[k] >= 0;
+    }
+    return count;
+  };
+  const double s2 = config.cauchy_m * config.cauchy_m;
+  for (int it = 0; it < config.max_iterations; ++it) {
+    if (associate(result.T) < 6) break;
+    const Mat3d R = result.T.topLeftCorner<3, 3>();
+    const Vec3d t = result.T.topRightCorner<3, 1>();
+    Mat6 H = Mat6::Zero();
+    Vec6 g = Vec6::Zero();
+    for (std::size_t k = 0; k < candidate.size(); ++k) {
+      if (assoc[k] < 0) continue;
+      const Plane& q = query[assoc[k]];
+      const Vec3d x = R * candidate[k].centroid.cast<double>() + t;
+      const Vec3d nq = q.normal.cast<double>();
+      const double r = nq.dot(x - q.centroid.cast<double>());
+      const double w = 1.0 / (1.0 + r * r / s2);
+      Vec6 J;
+      J << x.cross(nq), nq;
+      H += w * J * J.transpose();
+      g += w * J * r;
+    }
+    const double wa = config.instance_weight;
+    if (wa > 0) {
+      for (const auto& [qp, cp] : anchor_pairs) {
+        const Vec3d x = R * cp.cast<double>() + t;
+        const Vec3d r = x - qp.cast<double>();
+        Eigen::Matrix<double, 3, 6> J;
+        // d(R x + t)/d(omega, v) for a left perturbation: [-[x]_x | I].
+        J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;
+        J.rightCols<3>().setIdentity();
+        H += wa * J.transpose() * J;
+        g += wa * J.transpose() * r;
+      }
+    }
+    H.diagonal().array() += 1e-9 * (1.0 + H.trace());
+    const Vec6 delta = -H.ldlt().solve(g);
+    if (!delta.allFinite()) break;
+    result.T = expSE3(delta) * result.T;
+    result.iterations = it + 1;
+    if (delta.tail<3>().norm() + delta.head<3>().norm() * 10.0 < config.converged_m) break;
+  }
+  result.correspondences = associate(result.T);
+  double sq = 0;
+  const Mat3d R = result.T.topLeftCorner<3, 3>();
+  const Vec3d t = result.T.topRightCorner<3, 1>();
+  for (std::size_t k = 0; k < candidate.size(); ++k) {
+    if (assoc[k] < 0) continue;
+    const Plane& q = query[assoc[k]];
+    const double r = q.normal.cast<double>().dot(R * candidate[k].centroid.cast<double>() + t -
+                                                  q.centroid.cast<double>());
+    sq += r * r;
+  }
+  result.rmse = result.correspondences ? std::sqrt(sq / result.correspondences) : 0.0;
+  result.fitness = candidate.empty() ? 0.0 : static_cast<double>(result.correspondences) / candidate.size();
+  return result;
+}
+
+}  // namespace sglc
