@@ -45,23 +45,26 @@ std::vector<float> ringKey(const Points& points, const std::vector<Background>& 
 
 std::vector<BevCell> bevCells(const Points& points, const std::vector<Background>& point_bg, double cell,
                               double max_range) {
+  // A dense grid over the disc: cheaper than hashing ~100k points, and the scan comes out sorted.
   const float inv = static_cast<float>(1.0 / cell);
   const float r2 = static_cast<float>(max_range * max_range);
-  VoxelMap map(4096);
-  std::vector<BevCell> cells;
+  const int half = static_cast<int>(std::ceil(max_range / cell)) + 1;
+  const int side = 2 * half;
+  std::vector<std::uint8_t> grid(static_cast<std::size_t>(side) * side, 0);
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (point_bg[i] == Background::kNone) continue;
     const Vec3f& p = points[i];
     if (p.x() * p.x() + p.y() * p.y() > r2) continue;
-    const int ix = static_cast<int>(std::floor(p.x() * inv)), iy = static_cast<int>(std::floor(p.y() * inv));
-    bool inserted = false;
-    const int idx = map.findOrInsert(packCell(ix, iy, 0), static_cast<int>(cells.size()), &inserted);
-    const auto cls = static_cast<std::uint8_t>(point_bg[i]);
-    if (inserted) cells.push_back({static_cast<std::int16_t>(ix), static_cast<std::int16_t>(iy), cls});
-    else cells[idx].cls = std::max(cells[idx].cls, cls);
+    const int ix = detail::floorInt(p.x() * inv) + half, iy = detail::floorInt(p.y() * inv) + half;
+    auto& v = grid[static_cast<std::size_t>(iy) * side + ix];
+    v = std::max(v, static_cast<std::uint8_t>(point_bg[i]));
   }
-  std::sort(cells.begin(), cells.end(),
-            [](const BevCell& a, const BevCell& b) { return a.iy != b.iy ? a.iy < b.iy : a.ix < b.ix; });
+  std::vector<BevCell> cells;
+  for (int iy = 0; iy < side; ++iy)
+    for (int ix = 0; ix < side; ++ix) {
+      const auto v = grid[static_cast<std::size_t>(iy) * side + ix];
+      if (v) cells.push_back({static_cast<std::int16_t>(ix - half), static_cast<std::int16_t>(iy - half), v});
+    }
   return cells;
 }
 
@@ -69,48 +72,62 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
                                  const FingerprintConfig& config) {
   struct Acc {
     int n = 0;
-    Vec3d origin = Vec3d::Zero();  // first point: sums are taken relative to it for precision
-    Vec3d sum = Vec3d::Zero();
-    Mat3d outer = Mat3d::Zero();
+    Vec3f corner = Vec3f::Zero();  // sums are taken relative to the voxel corner, so floats suffice
+    float s[3] = {0, 0, 0};
+    float ss[6] = {0, 0, 0, 0, 0, 0};  // xx, xy, xz, yy, yz, zz
     int votes[5] = {0, 0, 0, 0, 0};
   };
-  const double inv = 1.0 / config.plane_voxel_m;
+  const float voxel = static_cast<float>(config.plane_voxel_m);
+  const float inv = 1.0f / voxel;
   const float r2 = static_cast<float>(config.plane_max_range_m * config.plane_max_range_m);
   VoxelMap map(4096);
   std::vector<Acc> acc;
+  std::uint64_t last_key = ~0ull;
+  int last = -1;
   for (std::size_t i = 0; i < points.size(); ++i) {
     const Background b = point_bg[i];
     if (b != Background::kRoad && b != Background::kBuilding && b != Background::kFence) continue;
     const Vec3f& p = points[i];
     if (p.squaredNorm() > r2) continue;
-    const Vec3d q = p.cast<double>();
-    bool inserted = false;
-    const int idx = map.findOrInsert(packCell(static_cast<int>(std::floor(q.x() * inv)),
-                                              static_cast<int>(std::floor(q.y() * inv)),
-                                              static_cast<int>(std::floor(q.z() * inv))),
-                                     static_cast<int>(acc.size()), &inserted);
-    if (inserted) {
-      acc.emplace_back();
-      acc.back().origin = q;
+    const int cx = detail::floorInt(p.x() * inv), cy = detail::floorInt(p.y() * inv),
+              cz = detail::floorInt(p.z() * inv);
+    const std::uint64_t key = packCell(cx, cy, cz);
+    if (key != last_key) {  // consecutive points of a scan line often share a voxel
+      bool inserted = false;
+      last = map.findOrInsert(key, static_cast<int>(acc.size()), &inserted);
+      if (inserted) {
+        acc.emplace_back();
+        acc.back().corner = Vec3f(cx * voxel, cy * voxel, cz * voxel);
+      }
+      last_key = key;
     }
-    Acc& a = acc[idx];
-    const Vec3d d = q - a.origin;
+    Acc& a = acc[last];
+    const float x = p.x() - a.corner.x(), y = p.y() - a.corner.y(), z = p.z() - a.corner.z();
     ++a.n;
-    a.sum += d;
-    a.outer += d * d.transpose();
+    a.s[0] += x;
+    a.s[1] += y;
+    a.s[2] += z;
+    a.ss[0] += x * x;
+    a.ss[1] += x * y;
+    a.ss[2] += x * z;
+    a.ss[3] += y * y;
+    a.ss[4] += y * z;
+    a.ss[5] += z * z;
     ++a.votes[static_cast<int>(b)];
   }
   const double max_var = config.plane_max_thickness_m * config.plane_max_thickness_m;
   std::vector<Plane> planes;
   for (const Acc& a : acc) {
     if (a.n < config.plane_min_points) continue;
-    const Vec3d mean = a.sum / a.n;
-    const Mat3d cov = a.outer / a.n - mean * mean.transpose();
+    const Vec3d mean = Vec3d(a.s[0], a.s[1], a.s[2]) / a.n;
+    Mat3d cov;
+    cov << a.ss[0], a.ss[1], a.ss[2], a.ss[1], a.ss[3], a.ss[4], a.ss[2], a.ss[4], a.ss[5];
+    cov = cov / a.n - mean * mean.transpose();
     Eigen::SelfAdjointEigenSolver<Mat3d> eig;
     eig.computeDirect(cov);
     if (eig.eigenvalues()[0] > max_var || eig.eigenvalues()[1] < 4.0 * max_var) continue;  // thin and 2-D
     Vec3d normal = eig.eigenvectors().col(0).normalized();
-    const Vec3d centroid = a.origin + mean;
+    const Vec3d centroid = a.corner.cast<double>() + mean;
     if (normal.dot(centroid) > 0) normal = -normal;  // face the sensor
     Plane plane;
     for (int k = 0; k < 3; ++k) {
@@ -132,7 +149,7 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
   const double inv = 1.0 / grid_cell;
   std::vector<std::uint8_t> q(static_cast<std::size_t>(g) * g, 0), c(q.size(), 0);
   auto put = [&](std::vector<std::uint8_t>& grid, double x, double y, std::uint8_t cls) {
-    const int gx = static_cast<int>(std::floor((x + radius) * inv)), gy = static_cast<int>(std::floor((y + radius) * inv));
+    const int gx = detail::floorInt((x + radius) * inv), gy = detail::floorInt((y + radius) * inv);
     if (gx < 0 || gy < 0 || gx >= g || gy >= g) return;
     auto& v = grid[static_cast<std::size_t>(gy) * g + gx];
     v = std::max(v, cls);

@@ -43,6 +43,8 @@ std::vector<Cluster> clusterInstances(const Points& points, const std::vector<st
   std::vector<Voxel> voxels;
   VoxelMap map(1024);
   std::vector<int> point_voxel(points.size(), -1);
+  std::uint64_t last_key = ~0ull;
+  int last_id = -1;
   for (std::size_t i = 0; i < points.size(); ++i) {
     const int cls = point_class[i];
     if (cls < 0) continue;
@@ -55,10 +57,14 @@ std::vector<Cluster> clusterInstances(const Points& points, const std::vector<st
     v.r = static_cast<int>(rho * inv_range);
     v.el = static_cast<int>((detail::fastAtan2(p.z(), rho) + kPi / 2) / el_step);
     v.cls = cls;
-    bool inserted = false;
-    int& id = map.findOrInsert(packCell(v.az, v.r, v.el + cls * 32768), static_cast<int>(voxels.size()), &inserted);
-    if (inserted) voxels.push_back(v);
-    point_voxel[i] = id;
+    const std::uint64_t key = packCell(v.az, v.r, v.el + cls * 32768);
+    if (key != last_key) {  // consecutive points of a scan line often share a voxel
+      bool inserted = false;
+      last_id = map.findOrInsert(key, static_cast<int>(voxels.size()), &inserted);
+      if (inserted) voxels.push_back(v);
+      last_key = key;
+    }
+    point_voxel[i] = last_id;
   }
 
   // Union occupied voxels with their 26 neighbours (each pair visited from one side only).

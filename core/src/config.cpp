@@ -182,6 +182,43 @@ Config parseConfig(const std::string& yaml_text) {
   return config;
 }
 
+std::string dumpConfig(const Config& config) {
+  Config copy = config;
+  YAML::Emitter out;
+  out << YAML::BeginMap;
+  std::string section;
+  out << YAML::Key << "labels" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "node_classes" << YAML::Value << YAML::BeginSeq;
+  for (const auto& cls : config.labels.node_classes)
+    out << YAML::Flow << YAML::BeginMap << YAML::Key << "name" << YAML::Value << cls.name << YAML::Key << "ids"
+        << YAML::Value << YAML::Flow << cls.ids << YAML::EndMap;
+  out << YAML::EndSeq;
+  section = "labels";
+  auto table = fields(copy);
+  std::vector<std::pair<std::string, FieldRef>> ordered;  // labels first, then sections alphabetically
+  for (const auto& entry : table)
+    if (entry.first.rfind("labels.", 0) == 0) ordered.push_back(entry);
+  for (const auto& entry : table)
+    if (entry.first.rfind("labels.", 0) != 0) ordered.push_back(entry);
+  for (const auto& [name, ref] : ordered) {
+    const auto dot = name.find('.');
+    const auto sec = name.substr(0, dot);
+    if (sec != section) {
+      out << YAML::EndMap << YAML::Key << sec << YAML::Value << YAML::BeginMap;
+      section = sec;
+    }
+    out << YAML::Key << name.substr(dot + 1) << YAML::Value;
+    std::visit(
+        [&](auto* field) {
+          if constexpr (std::is_same_v<decltype(field), std::vector<std::uint32_t>*>) out << YAML::Flow << *field;
+          else out << *field;
+        },
+        ref);
+  }
+  out << YAML::EndMap << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
 Config loadConfig(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw InputError(path + ": cannot open config file");

@@ -21,6 +21,12 @@ inline float fastAtan2(float y, float x) {
   return y < 0 ? -r : r;
 }
 
+// floor() to int for values well inside the int range; compiles to a few integer ops without SSE4.1.
+inline int floorInt(float v) {
+  const int i = static_cast<int>(v);
+  return i - (v < static_cast<float>(i));
+}
+
 // Snaps a coordinate to the 1 cm grid that fingerprints store exactly.
 inline float snapCm(float v) { return static_cast<float>(std::lround(v * 100.0f)) / 100.0f; }
 

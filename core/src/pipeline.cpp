@@ -18,9 +18,9 @@ void downsampleInstance(const Points& points, const Cluster& cluster, double vox
   for (auto i : cluster.points) {
     const Vec3f& p = points[i];
     bool inserted = false;
-    const int idx = map.findOrInsert(packCell(static_cast<int>(std::floor(p.x() * inv)),
-                                              static_cast<int>(std::floor(p.y() * inv)),
-                                              static_cast<int>(std::floor(p.z() * inv))),
+    const int idx = map.findOrInsert(packCell(detail::floorInt(p.x() * inv),
+                                              detail::floorInt(p.y() * inv),
+                                              detail::floorInt(p.z() * inv)),
                                      static_cast<int>(sums.size()), &inserted);
     if (inserted) {
       sums.push_back(Vec3d::Zero());
@@ -51,14 +51,29 @@ double rotationAngleDeg(const Mat3d& R) {
 Pipeline::Pipeline(Config config) : config_(std::move(config)), labels_((validateConfig(config_), config_.labels)) {}
 
 Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
-  validateScan(scan);
   const auto& c = config_;
   const std::size_t n = scan.points.size();
-  std::vector<std::int8_t> node_class(n);
-  std::vector<Background> background(n);
+  if (scan.labels.size() != n)
+    throw InputError("scan has " + std::to_string(n) + " points but " + std::to_string(scan.labels.size()) + " labels");
+  // One pass splits the scan by role into compact arrays, so every later stage streams over just its points.
+  Points node_points, bg_points;
+  std::vector<std::int8_t> node_class;
+  std::vector<Background> background;
+  node_points.reserve(n / 4);
+  node_class.reserve(n / 4);
+  bg_points.reserve(n);
+  background.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    node_class[i] = static_cast<std::int8_t>(labels_.nodeClass(scan.labels[i]));
-    background[i] = labels_.background(scan.labels[i]);
+    const Vec3f& p = scan.points[i];
+    if (!p.allFinite()) throw InputError("point " + std::to_string(i) + " has a non-finite coordinate");
+    const int role = labels_.role(scan.labels[i]);
+    if (role >= 0) {
+      node_points.push_back(p);
+      node_class.push_back(static_cast<std::int8_t>(role));
+    } else if (role <= -2) {
+      bg_points.push_back(p);
+      background.push_back(static_cast<Background>(-role - 1));
+    }
   }
 
   Fingerprint fp;
@@ -69,18 +84,18 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
   fp.plane_voxel = static_cast<float>(c.fingerprint.plane_voxel_m);
   fp.num_points = static_cast<std::uint32_t>(n);
 
-  const auto clusters = clusterInstances(scan.points, node_class, c.cluster);
+  const auto clusters = clusterInstances(node_points, node_class, c.cluster);
   std::vector<int> kept;
-  fp.nodes = buildNodes(scan.points, clusters, c.graph, &kept);
+  fp.nodes = buildNodes(node_points, clusters, c.graph, &kept);
   fp.instance_offsets.assign(1, 0);
   for (int k : kept) {
-    downsampleInstance(scan.points, clusters[k], c.fingerprint.instance_voxel_m, fp.instance_points);
+    downsampleInstance(node_points, clusters[k], c.fingerprint.instance_voxel_m, fp.instance_points);
     fp.instance_offsets.push_back(static_cast<std::uint32_t>(fp.instance_points.size()));
   }
-  fp.background = bevCells(scan.points, background, c.fingerprint.background_cell_m,
+  fp.background = bevCells(bg_points, background, c.fingerprint.background_cell_m,
                            c.fingerprint.background_max_range_m);
-  fp.planes = extractPlanes(scan.points, background, c.fingerprint);
-  fp.descriptor = scanDescriptor(fp.nodes, ringKey(scan.points, background, c.descriptor), fp.layout, fp.d_max,
+  fp.planes = extractPlanes(bg_points, background, c.fingerprint);
+  fp.descriptor = scanDescriptor(fp.nodes, ringKey(bg_points, background, c.descriptor), fp.layout, fp.d_max,
                                  fp.d_i);
   fp.finalize();
   return fp;
@@ -142,6 +157,8 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
     if (icp.correspondences >= 3 && d.topRightCorner<3, 1>().norm() < 2.0 &&
         rotationAngleDeg(d.topLeftCorner<3, 3>()) < 10.0) {
       T = icp.T;
+      r.fitness = icp.fitness;
+      r.rmse = icp.rmse;
       anchor = std::move(icp.pairs);
     }
   }

@@ -54,6 +54,25 @@ struct SplitMix {
   int below(int n) { return static_cast<int>(next() % static_cast<std::uint64_t>(n)); }
 };
 
+// Orthonormal frame of a triangle: x along a->b, z normal to the triangle (caller ensures it is not flat).
+Mat3d triad(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+  Mat3d F;
+  const Vec3d x = (b - a).normalized();
+  const Vec3d z = x.cross(c - a).normalized();
+  F << x, z.cross(x), z;
+  return F;
+}
+
+// Rigid motion taking triangle (a, b, c) onto (qa, qb, qc): frames aligned, centroids matched. A cheap
+// hypothesis for RANSAC (the winner is refitted by least squares on its inliers).
+Mat4d triadPose(const Vec3d& a, const Vec3d& b, const Vec3d& c, const Vec3d& qa, const Vec3d& qb, const Vec3d& qc) {
+  const Mat3d R = triad(qa, qb, qc) * triad(a, b, c).transpose();
+  Mat4d T = Mat4d::Identity();
+  T.topLeftCorner<3, 3>() = R;
+  T.topRightCorner<3, 1>() = (qa + qb + qc) / 3.0 - R * (a + b + c) / 3.0;
+  return T;
+}
+
 Mat4d expSE3(const Eigen::Matrix<double, 6, 1>& d) {
   Mat4d T = Mat4d::Identity();
   const Vec3d w = d.head<3>();
@@ -108,9 +127,7 @@ RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3
     if (triangleHeight(candidate[a], candidate[b], candidate[c]) < config.min_triangle_height ||
         triangleHeight(query[a], query[b], query[c]) < config.min_triangle_height)
       return;
-    const Mat4d T = weightedFit(
-        3, [&](std::size_t i) { return candidate[idx[i]]; }, [&](std::size_t i) { return query[idx[i]]; },
-        [](std::size_t) { return 1.0; });
+    const Mat4d T = triadPose(candidate[a], candidate[b], candidate[c], query[a], query[b], query[c]);
     double sum = 0;
     const int count = countInliers(T, nullptr, &sum);
     if (count > best_count || (count == best_count && sum < best_sum)) {
@@ -174,27 +191,52 @@ IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>&
   std::vector<Corr> corr;
   std::size_t total = 0;
   for (const auto& [q, c] : instances) total += static_cast<std::size_t>(c.size);
+  // Query instance points sorted by x: a nearest-neighbour search only scans the x-window of the gate.
+  std::vector<std::vector<Vec3f>> sorted(instances.size());
+  for (std::size_t k = 0; k < instances.size(); ++k) {
+    const InstanceView& qv = instances[k].first;
+    sorted[k].assign(qv.points, qv.points + qv.size);
+    std::sort(sorted[k].begin(), sorted[k].end(), [](const Vec3f& u, const Vec3f& v) {
+      return u.x() != v.x() ? u.x() < v.x() : (u.y() != v.y() ? u.y() < v.y() : u.z() < v.z());
+    });
+  }
   auto associate = [&](const Mat4d& T, double gate) {
     corr.clear();
     const Eigen::Matrix3f R = T.topLeftCorner<3, 3>().cast<float>();
     const Vec3f t = T.topRightCorner<3, 1>().cast<float>();
     const float gate2 = static_cast<float>(gate * gate);
-    for (const auto& [qv, cv] : instances) {
-      for (int k = 0; k < cv.size; ++k) {
-        const Vec3f x = R * cv.points[k] + t;
+    for (std::size_t k = 0; k < instances.size(); ++k) {
+      const InstanceView& cv = instances[k].second;
+      const std::vector<Vec3f>& qs = sorted[k];
+      for (int i = 0; i < cv.size; ++i) {
+        const Vec3f x = R * cv.points[i] + t;
         float best = gate2;
-        int arg = -1;
-        for (int m = 0; m < qv.size; ++m) {
-          const float d2 = (qv.points[m] - x).squaredNorm();
+        const Vec3f* arg = nullptr;
+        // Scan outwards from x.x() in both directions, stopping once |dx| alone exceeds the best distance.
+        const auto mid = std::lower_bound(qs.begin(), qs.end(), x.x(), [](const Vec3f& u, float v) { return u.x() < v; });
+        for (auto it = mid; it != qs.end(); ++it) {
+          const float dx = it->x() - x.x();
+          if (dx * dx >= best) break;
+          const float d2 = (*it - x).squaredNorm();
           if (d2 < best) {
             best = d2;
-            arg = m;
+            arg = &*it;
           }
         }
-        if (arg < 0) continue;
+        for (auto it = mid; it != qs.begin();) {
+          --it;
+          const float dx = x.x() - it->x();
+          if (dx * dx >= best) break;
+          const float d2 = (*it - x).squaredNorm();
+          if (d2 < best) {
+            best = d2;
+            arg = &*it;
+          }
+        }
+        if (!arg) continue;
         const double r = std::sqrt(best);
         const double w = r <= config.huber_m ? 1.0 : config.huber_m / r;
-        corr.push_back({qv.points[arg].cast<double>(), cv.points[k].cast<double>(), w});
+        corr.push_back({arg->cast<double>(), cv.points[i].cast<double>(), w});
       }
     }
   };

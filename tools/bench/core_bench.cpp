@@ -1,1 +1,105 @@
-int main(){}
+// Per-stage speed of the engine on real KITTI scans (single thread). Run with
+//   build/bin/sglc-bench-core --benchmark_repetitions=10 --benchmark_report_aggregates_only=true
+// and read the medians. Data: ../shared/data/semantickitti_scans (or $SGLC_DATA/semantickitti_scans).
+#include <benchmark/benchmark.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <iostream>
+#include <map>
+
+#include "sglc/io.hpp"
+#include "sglc/pipeline.hpp"
+
+namespace {
+
+std::string dataDir() {
+  const char* env = std::getenv("SGLC_DATA");
+  return std::string(env ? env : "../shared/data") + "/semantickitti_scans/sequences/00";
+}
+
+struct Fixture {
+  sglc::Pipeline pipeline;
+  std::map<std::string, sglc::LabelledScan> scans;
+  std::map<std::string, sglc::Fingerprint> fps;
+  bool ok = false;
+  Fixture() {
+    const auto dir = dataDir();
+    if (!std::filesystem::exists(dir)) return;
+    for (const char* f : {"000052", "004501", "000088", "000850"}) {
+      scans[f] = sglc::readScan(dir + "/velodyne/" + f + ".bin", dir + "/labels/" + f + ".label");
+      fps[f] = pipeline.fingerprint(scans[f]);
+    }
+    ok = true;
+  }
+};
+
+Fixture& fixture() {
+  static Fixture f;
+  return f;
+}
+
+bool ready(benchmark::State& state) {
+  if (fixture().ok) return true;
+  state.SkipWithError(("real scans not found under " + dataDir()).c_str());
+  return false;
+}
+
+void BM_Fingerprint(benchmark::State& state) {
+  if (!ready(state)) return;
+  const auto& scan = fixture().scans.at("000052");
+  for (auto _ : state) benchmark::DoNotOptimize(fixture().pipeline.fingerprint(scan));
+  state.counters["points"] = static_cast<double>(scan.points.size());
+}
+
+void BM_VerifyLoop(benchmark::State& state) {
+  if (!ready(state)) return;
+  auto& f = fixture();
+  for (auto _ : state) benchmark::DoNotOptimize(f.pipeline.verify(f.fps.at("000052"), f.fps.at("004501")));
+}
+
+// A hard negative: same street 30 m away, so many nodes match and RANSAC runs in full.
+void BM_VerifyNegative(benchmark::State& state) {
+  if (!ready(state)) return;
+  auto& f = fixture();
+  for (auto _ : state) benchmark::DoNotOptimize(f.pipeline.verify(f.fps.at("000052"), f.fps.at("000088")));
+}
+
+void BM_Refine(benchmark::State& state) {
+  if (!ready(state)) return;
+  auto& f = fixture();
+  const auto verified = f.pipeline.verify(f.fps.at("000052"), f.fps.at("004501"));
+  for (auto _ : state) {
+    auto r = verified;
+    f.pipeline.refine(f.fps.at("000052"), f.fps.at("004501"), r);
+    benchmark::DoNotOptimize(r);
+  }
+}
+
+void BM_Serialize(benchmark::State& state) {
+  if (!ready(state)) return;
+  const auto& fp = fixture().fps.at("000052");
+  std::size_t bytes = 0;
+  for (auto _ : state) {
+    const auto blob = sglc::serialize(fp);
+    bytes = blob.size();
+    benchmark::DoNotOptimize(blob);
+  }
+  state.counters["bytes"] = static_cast<double>(bytes);
+}
+
+void BM_Deserialize(benchmark::State& state) {
+  if (!ready(state)) return;
+  const auto blob = sglc::serialize(fixture().fps.at("000052"));
+  for (auto _ : state) benchmark::DoNotOptimize(sglc::deserialize(blob));
+}
+
+}  // namespace
+
+BENCHMARK(BM_Fingerprint)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_VerifyLoop)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_VerifyNegative)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Refine)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Serialize)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Deserialize)->Unit(benchmark::kMillisecond);
+BENCHMARK_MAIN();

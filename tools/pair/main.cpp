@@ -19,11 +19,13 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 int main(int argc, char** argv) {
   CLI::App app{"Checks whether two labelled LiDAR scans close a loop and estimates T_a_b (maps B into A)."};
   std::string scan_a, labels_a, scan_b, labels_b, config_path;
-  app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)")->required();
-  app.add_option("--labels-a", labels_a, "SemanticKITTI .label of scan A")->required();
-  app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)")->required();
-  app.add_option("--labels-b", labels_b, "SemanticKITTI .label of scan B")->required();
-  app.add_option("--config", config_path, "YAML file overriding engine parameters");
+  bool dump = false;
+  app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
+  app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)");
+  app.add_option("--labels-a", labels_a, "SemanticKITTI .label of scan A");
+  app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)");
+  app.add_option("--labels-b", labels_b, "SemanticKITTI .label of scan B");
+  app.add_option("--config", config_path, "YAML file overriding engine parameters (see --dump-config)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -31,6 +33,12 @@ int main(int argc, char** argv) {
   }
   try {
     const sglc::Pipeline pipeline(config_path.empty() ? sglc::Config{} : sglc::loadConfig(config_path));
+    if (dump) {
+      std::cout << sglc::dumpConfig(pipeline.config());
+      return 0;
+    }
+    if (scan_a.empty() || labels_a.empty() || scan_b.empty() || labels_b.empty())
+      throw sglc::InputError("--scan-a, --labels-a, --scan-b and --labels-b are required");
     const auto a = sglc::readScan(scan_a, labels_a);
     const auto b = sglc::readScan(scan_b, labels_b);
     auto t0 = std::chrono::steady_clock::now();
@@ -58,8 +66,12 @@ int main(int argc, char** argv) {
     out["background_similarity"] = result.background_similarity;
     out["fitness"] = result.fitness;
     out["rmse"] = result.rmse;
-    if (!result.is_loop) out["reason"] = result.reason;
-    out["timings_ms"] = {{"fingerprint_a", t_fa}, {"fingerprint_b", t_fb}, {"verify", t_verify}, {"refine", t_refine}};
+    if (!result.is_loop) out["reason"] = std::string(result.reason);
+    auto& timings = out["timings_ms"];
+    timings["fingerprint_a"] = t_fa;
+    timings["fingerprint_b"] = t_fb;
+    timings["verify"] = t_verify;
+    timings["refine"] = t_refine;
     std::cout << out.dump() << std::endl;
     return 0;
   } catch (const std::exception& e) {

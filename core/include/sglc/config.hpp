@@ -121,5 +121,7 @@ void validateConfig(const Config& config);
 // defaults; unknown keys are an error so that typos do not pass silently.
 Config loadConfig(const std::string& path);
 Config parseConfig(const std::string& yaml_text);
+// The whole configuration as YAML that parseConfig reads back to the same values.
+std::string dumpConfig(const Config& config);
 
 }  // namespace sglc

@@ -22,6 +22,9 @@ class LabelMap {
     const int r = role_[label & 0xFFFFu];
     return r <= -2 ? static_cast<Background>(-r - 1) : Background::kNone;
   }
+  // Raw role code, for hot loops that need both answers: >= 0 node class, -1 ignored, <= -2 background
+  // (Background value = -code - 1).
+  int role(std::uint32_t label) const { return role_[label & 0xFFFFu]; }
   int numNodeClasses() const { return num_node_classes_; }
 
  private:

@@ -20,8 +20,10 @@ struct LoopResult {
   // Maps candidate points into the query frame: p_query = T * p_candidate.
   Mat4d T = Mat4d::Identity();
   bool refined = false;
-  double fitness = 0.0;  // after refinement: share of candidate planes with a consistent query plane
-  double rmse = 0.0;     // after refinement: point-to-plane RMSE (m)
+  // After refinement: share of the candidate's plane features with a consistent query plane, and their
+  // point-to-plane RMSE (m). With the plane stage disabled: the instance ICP's share of matched points and RMSE.
+  double fitness = 0.0;
+  double rmse = 0.0;
   const char* reason = "";  // why it is not a loop (empty for loops)
   std::vector<Match> inlier_pairs;  // node matches consistent with T (query node, candidate node)
 };
