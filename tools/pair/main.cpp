@@ -28,8 +28,11 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path, "YAML file overriding engine parameters (see --dump-config)");
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
+  } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "sglc-pair: error: " << e.what() << " (see --help)" << std::endl;
+    return 2;
   }
   try {
     const sglc::Pipeline pipeline(config_path.empty() ? sglc::Config{} : sglc::loadConfig(config_path));
