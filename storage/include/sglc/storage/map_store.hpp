@@ -1,0 +1,185 @@
+// The persistent map database: SQLite is the source of truth (maps, robots, sessions, scans with their
+// fingerprints), FAISS is the in-memory descriptor index, rebuilt from SQLite on open or loaded from a
+// snapshot that matches it.
+//
+// Concurrency: any number of threads may call the const methods while one thread at a time writes (writers
+// are serialised internally). A reader never sees a half-written scan, and the index and the database agree
+// at every moment a reader can observe: a scan becomes visible to search() and to fetches in the same step.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "sglc/fingerprint.hpp"
+#include "sglc/types.hpp"
+
+namespace sglc::storage {
+
+// Every storage failure. `code` says what kind, so a service can map it to a status.
+class StorageError : public std::runtime_error {
+ public:
+  enum class Code {
+    kInvalidArgument,  // bad input (empty name, wrong descriptor length, ...)
+    kNotFound,         // unknown map, robot, session or scan
+    kAlreadyExists,    // duplicate (session, sequence number), map name taken
+    kCorrupt,          // not a map database, or damaged
+    kNewerSchema,      // written by a newer version of this software
+    kReadOnly,         // the file or its directory cannot be written
+    kFull,             // disk full
+    kBusy,             // locked by another process for longer than the busy timeout
+    kIo,               // any other I/O failure
+  };
+  StorageError(Code code, const std::string& message) : std::runtime_error(message), code_(code) {}
+  Code code() const { return code_; }
+
+ private:
+  Code code_;
+};
+
+struct IndexOptions {
+  enum class Type { kExact, kIvf };
+  Type type = Type::kExact;  // exact (flat L2) or approximate (IVF-flat) search
+  int ivf_nlist = 0;         // IVF cells; 0 = about 4 * sqrt(scans)
+  int ivf_nprobe = 48;       // cells visited per search
+  int ivf_min_scans = 20000; // below this many scans an IVF map is searched exactly (training needs data)
+};
+
+struct StoreOptions {
+  std::string path;  // SQLite file; created (with its directory) if missing
+  enum class Sync { kOff, kNormal, kFull };
+  Sync sync = Sync::kFull;  // SQLite synchronous mode: kFull survives power loss, kNormal only process crashes
+  int busy_timeout_ms = 5000;
+  double cache_mb = 256;    // fingerprints kept in memory (least recently used evicted)
+  bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
+  double max_db_mb = 0;        // quota: writes beyond it fail with kFull (0: unlimited)
+  IndexOptions index;
+};
+
+struct MapInfo {
+  std::int64_t id = 0;
+  std::string name;
+  int descriptor_dim = 0;
+  std::int64_t scans = 0;
+  std::int64_t robots = 0;
+  std::int64_t sessions = 0;
+};
+
+struct RobotInfo {
+  std::string name;
+  std::int64_t scans = 0;
+  std::int64_t sessions = 0;
+};
+
+struct SessionInfo {
+  std::string robot;
+  std::string name;
+  std::int64_t scans = 0;
+  std::int64_t first_seq = 0;
+  std::int64_t last_seq = 0;
+};
+
+// A scan to store. The fingerprint is stored serialised; its descriptor goes to the index.
+struct NewScan {
+  std::string map;
+  std::string robot;
+  std::string session;
+  std::int64_t seq = 0;               // sequence number within the session (unique there)
+  std::optional<double> stamp;        // seconds, caller's clock
+  std::optional<Mat4d> odometry_pose; // the robot's pose in its session frame
+  const Fingerprint* fingerprint = nullptr;
+  const LabelledScan* raw = nullptr;  // also keep the raw cloud (off by default: it is ~1.9 MB per scan)
+};
+
+struct ScanInfo {
+  std::int64_t id = 0;
+  std::string map;
+  std::string robot;
+  std::string session;
+  std::int64_t seq = 0;
+  std::optional<double> stamp;
+  std::optional<Mat4d> odometry_pose;
+  std::int64_t fingerprint_bytes = 0;
+  bool has_raw = false;
+};
+
+struct SearchRequest {
+  std::string map;
+  std::vector<float> descriptor;
+  int k = 50;
+  std::vector<std::string> robots;    // only these robots (empty: all)
+  std::vector<std::string> exclude_robots;
+  std::vector<std::string> sessions;  // only these sessions, as "robot/session" (empty: all)
+  // Exclusion of the querying robot's own recent scans: scans of `self_robot` whose seq is within
+  // `exclude_recent` of `self_seq` in the same session, or whose stamp is within `exclude_seconds` of
+  // `self_stamp` (any session of that robot).
+  std::string self_robot;
+  std::string self_session;
+  std::int64_t self_seq = 0;
+  std::int64_t exclude_recent = 0;
+  std::optional<double> self_stamp;
+  double exclude_seconds = 0;
+  std::vector<std::int64_t> exclude_scan_ids;  // e.g. the query scan itself
+};
+
+struct SearchHit {
+  std::int64_t scan_id = 0;
+  float distance = 0;  // L2 distance between descriptors
+};
+
+struct Stats {
+  std::int64_t maps = 0, robots = 0, sessions = 0, scans = 0;
+  std::int64_t index_entries = 0;
+  std::int64_t db_bytes = 0;
+  std::int64_t fingerprint_bytes = 0;
+  double cache_mb = 0;
+  std::int64_t cache_hits = 0, cache_misses = 0;
+};
+
+class MapStore {
+ public:
+  // Opens or creates the database. Throws StorageError (kCorrupt for a foreign or damaged file,
+  // kNewerSchema, kReadOnly, kIo, ...); a failed open leaves the file as it was.
+  static std::unique_ptr<MapStore> open(const StoreOptions& options);
+  virtual ~MapStore() = default;
+
+  // Maps. createMap is idempotent for an existing map with the same dimension.
+  virtual MapInfo createMap(const std::string& name, int descriptor_dim) = 0;
+  virtual std::vector<MapInfo> listMaps() const = 0;
+  virtual std::optional<MapInfo> findMap(const std::string& name) const = 0;
+  virtual std::vector<RobotInfo> listRobots(const std::string& map) const = 0;
+  virtual std::vector<SessionInfo> listSessions(const std::string& map, const std::string& robot = "") const = 0;
+
+  // Stores a scan (robot and session are created on first use) and returns its id once it is durable
+  // (per StoreOptions::sync). All or nothing.
+  virtual std::int64_t addScan(const NewScan& scan) = 0;
+
+  virtual std::vector<SearchHit> search(const SearchRequest& request) const = 0;
+  virtual std::optional<ScanInfo> scanInfo(std::int64_t scan_id) const = 0;
+  // The fingerprint of a stored scan, from the cache or the database. nullptr if no such scan.
+  virtual std::shared_ptr<const Fingerprint> fingerprint(std::int64_t scan_id) const = 0;
+  virtual std::optional<LabelledScan> rawScan(std::int64_t scan_id) const = 0;
+  // The scan of (map, robot, session, seq), if stored.
+  virtual std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot,
+                                               const std::string& session, std::int64_t seq) const = 0;
+
+  // Deletions remove scans from the index and the database together. Return the number of scans removed.
+  virtual std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session) = 0;
+  virtual std::int64_t deleteRobot(const std::string& map, const std::string& robot) = 0;
+
+  // Online backup of the live database to a new file (VACUUM INTO). Fails if dest exists.
+  virtual void backup(const std::string& dest) const = 0;
+  // "ok", or SQLite's description of the damage.
+  virtual std::string integrityCheck() const = 0;
+  virtual Stats stats(const std::string& map = "") const = 0;
+  // Writes index snapshots now (also done on destruction when enabled).
+  virtual void snapshot() = 0;
+};
+
+// Schema version this build writes; older files are migrated forward on open.
+inline constexpr int kSchemaVersion = 1;
+
+}  // namespace sglc::storage

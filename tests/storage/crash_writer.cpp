@@ -1,0 +1,27 @@
+// Child process of the crash test: stores scans into a map and prints each acknowledged scan id on its own
+// line (flushed) as soon as addScan returns. The parent kills it with SIGKILL at a random moment.
+// Usage: storage_crash_writer DB_PATH ROBOT FIRST_SEQ COUNT
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "storage_test_util.hpp"
+
+int main(int argc, char** argv) {
+  if (argc != 5) return 2;
+  using namespace sglc::storage;
+  StoreOptions opts;
+  opts.path = argv[1];
+  opts.sync = StoreOptions::Sync::kFull;
+  auto store = MapStore::open(opts);
+  store->createMap("m", sglc::DescriptorLayout{}.scanDim());
+  const long first = std::atol(argv[3]), count = std::atol(argv[4]);
+  for (long seq = first; seq < first + count; ++seq) {
+    const auto fp = sglc::storage::testing::randomFingerprint(static_cast<std::uint64_t>(seq) * 31 + 7, 20);
+    NewScan ns{.map = "m", .robot = argv[2], .session = "run", .seq = seq, .fingerprint = &fp};
+    const auto id = store->addScan(ns);
+    std::printf("%lld %ld\n", static_cast<long long>(id), seq);
+    std::fflush(stdout);
+  }
+  return 0;
+}

@@ -1,0 +1,465 @@
+// MapStore: round trips, search filters, deletions, backups, and every error the issue lists.
+#include <sqlite3.h>
+
+#include <algorithm>
+#include <fstream>
+#include <map>
+#include <set>
+
+#include "storage_test_util.hpp"
+
+namespace sglc::storage {
+namespace {
+
+using testing::options;
+using testing::randomFingerprint;
+using testing::TempDir;
+
+std::vector<std::uint8_t> fileBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+StorageError::Code errorCode(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const StorageError& e) {
+    return e.code();
+  }
+  ADD_FAILURE() << "no StorageError thrown";
+  return StorageError::Code::kIo;
+}
+
+struct Stored {
+  std::int64_t id;
+  std::string robot, session;
+  std::int64_t seq;
+  double stamp;
+  Fingerprint fp;
+};
+
+// Fills map "m" with robots r0..r(robots-1), sessions s0..s(sessions-1), `per` scans each.
+std::vector<Stored> fill(MapStore& store, int robots, int sessions, int per, std::uint64_t seed = 1) {
+  store.createMap("m", DescriptorLayout{}.scanDim());
+  std::vector<Stored> out;
+  for (int r = 0; r < robots; ++r)
+    for (int s = 0; s < sessions; ++s)
+      for (int q = 0; q < per; ++q) {
+        Stored st{0, "r" + std::to_string(r), "s" + std::to_string(s), q, 100.0 * s + q,
+                  randomFingerprint(seed + out.size() * 7919)};
+        NewScan ns;
+        ns.map = "m";
+        ns.robot = st.robot;
+        ns.session = st.session;
+        ns.seq = q;
+        ns.stamp = st.stamp;
+        ns.fingerprint = &st.fp;
+        st.id = store.addScan(ns);
+        out.push_back(std::move(st));
+      }
+  return out;
+}
+
+// Brute-force reference: the k nearest stored scans accepted by `keep`.
+std::vector<std::int64_t> bruteForce(const std::vector<Stored>& all, const std::vector<float>& q, int k,
+                                     const std::function<bool(const Stored&)>& keep) {
+  std::vector<std::pair<float, std::int64_t>> d;
+  for (const auto& s : all) {
+    if (!keep(s)) continue;
+    double sum = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) sum += double(q[i] - s.fp.descriptor[i]) * (q[i] - s.fp.descriptor[i]);
+    d.emplace_back(static_cast<float>(std::sqrt(sum)), s.id);
+  }
+  std::sort(d.begin(), d.end());
+  std::vector<std::int64_t> ids;
+  for (int i = 0; i < k && i < static_cast<int>(d.size()); ++i) ids.push_back(d[i].second);
+  return ids;
+}
+
+std::vector<std::int64_t> ids(const std::vector<SearchHit>& hits) {
+  std::vector<std::int64_t> out;
+  for (const auto& h : hits) out.push_back(h.scan_id);
+  return out;
+}
+
+TEST(MapStore, StoresAndFindsItsOwnDescriptorFirst) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  const auto all = fill(*store, 2, 2, 10);
+  for (const auto& s : {all[0], all[17], all[39]}) {
+    SearchRequest req;
+    req.map = "m";
+    req.descriptor = s.fp.descriptor;
+    req.k = 5;
+    const auto hits = store->search(req);
+    ASSERT_EQ(hits.size(), 5u);
+    EXPECT_EQ(hits[0].scan_id, s.id);
+    EXPECT_NEAR(hits[0].distance, 0.0f, 1e-5f);
+    EXPECT_TRUE(std::is_sorted(hits.begin(), hits.end(),
+                               [](const SearchHit& a, const SearchHit& b) { return a.distance < b.distance; }));
+  }
+  const auto info = store->scanInfo(all[17].id);
+  ASSERT_TRUE(info);
+  EXPECT_EQ(info->robot, all[17].robot);
+  EXPECT_EQ(info->session, all[17].session);
+  EXPECT_EQ(info->seq, all[17].seq);
+  ASSERT_TRUE(info->stamp);
+  EXPECT_EQ(*info->stamp, all[17].stamp);
+  EXPECT_EQ(store->findScan("m", all[17].robot, all[17].session, all[17].seq), all[17].id);
+  EXPECT_FALSE(store->findScan("m", all[17].robot, all[17].session, 999));
+  const auto st = store->stats();
+  EXPECT_EQ(st.scans, 40);
+  EXPECT_EQ(st.index_entries, 40);
+  EXPECT_EQ(st.robots, 2);
+  EXPECT_EQ(st.sessions, 4);
+  EXPECT_EQ(st.maps, 1);
+}
+
+TEST(MapStore, RoundTripAcrossReopenWithAndWithoutSnapshot) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  std::vector<std::vector<std::int64_t>> before;
+  Mat4d pose = Mat4d::Identity();
+  pose.topRightCorner<3, 1>() = Vec3d(1.5, -2.25, 0.125);
+  {
+    auto store = MapStore::open(options(path));
+    all = fill(*store, 2, 1, 15);
+    NewScan ns;
+    Fingerprint fp = randomFingerprint(424242);
+    ns.map = "m";
+    ns.robot = "posed";
+    ns.session = "a";
+    ns.odometry_pose = pose;
+    ns.fingerprint = &fp;
+    all.push_back({store->addScan(ns), "posed", "a", 0, 0, fp});
+    for (const auto& s : all) {
+      SearchRequest req{.map = "m", .descriptor = s.fp.descriptor, .k = 7};
+      before.push_back(ids(store->search(req)));
+    }
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    if (pass == 1) std::filesystem::remove_all(path + ".index");  // force a rebuild from SQLite
+    auto store = MapStore::open(options(path));
+    EXPECT_EQ(store->stats().index_entries, static_cast<std::int64_t>(all.size()));
+    for (std::size_t i = 0; i < all.size(); ++i) {
+      const auto fp = store->fingerprint(all[i].id);
+      ASSERT_NE(fp, nullptr);
+      EXPECT_EQ(serialize(*fp), serialize(all[i].fp)) << "scan " << all[i].id;
+      SearchRequest req{.map = "m", .descriptor = all[i].fp.descriptor, .k = 7};
+      EXPECT_EQ(ids(store->search(req)), before[i]) << "pass " << pass;
+    }
+    const auto info = store->scanInfo(all.back().id);
+    ASSERT_TRUE(info && info->odometry_pose);
+    EXPECT_TRUE(info->odometry_pose->isApprox(pose, 0.0));
+  }
+}
+
+TEST(MapStore, FiltersKeepTheFullTopK) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  const auto all = fill(*store, 3, 2, 12);
+  const auto& q = all[5];
+  const int k = 10;
+  struct Case {
+    const char* name;
+    SearchRequest req;
+    std::function<bool(const Stored&)> keep;
+  };
+  std::vector<Case> cases;
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.robots = {"r1"};
+    cases.push_back({"only r1", r, [](const Stored& s) { return s.robot == "r1"; }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.exclude_robots = {"r0"};
+    cases.push_back({"other robots", r, [](const Stored& s) { return s.robot != "r0"; }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.sessions = {"r2/s1", "r0/s0"};
+    cases.push_back({"sessions", r, [](const Stored& s) {
+                       return (s.robot == "r2" && s.session == "s1") || (s.robot == "r0" && s.session == "s0");
+                     }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.self_robot = q.robot;
+    r.self_session = q.session;
+    r.self_seq = q.seq;
+    r.exclude_recent = 4;
+    cases.push_back({"recent by count", r, [&](const Stored& s) {
+                       return !(s.robot == q.robot && s.session == q.session && std::llabs(s.seq - q.seq) < 4);
+                     }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.self_robot = q.robot;
+    r.self_stamp = q.stamp;
+    r.exclude_seconds = 150;
+    cases.push_back({"recent by time", r, [&](const Stored& s) {
+                       return !(s.robot == q.robot && std::abs(s.stamp - q.stamp) < 150);
+                     }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.exclude_scan_ids = {q.id};
+    cases.push_back({"not itself", r, [&](const Stored& s) { return s.id != q.id; }});
+  }
+  {
+    SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
+    r.robots = {"nobody"};
+    cases.push_back({"unknown robot", r, [](const Stored&) { return false; }});
+  }
+  for (const auto& c : cases) {
+    const auto got = ids(store->search(c.req));
+    const auto want = bruteForce(all, q.fp.descriptor, k, c.keep);
+    EXPECT_EQ(got, want) << c.name;
+  }
+}
+
+TEST(MapStore, RejectsBadWritesAndLeavesNothingBehind) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  const auto all = fill(*store, 1, 1, 3);
+  Fingerprint fp = randomFingerprint(99);
+  NewScan ns{.map = "m", .robot = "r0", .session = "s0", .seq = 1, .fingerprint = &fp};
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kAlreadyExists);
+  ns.seq = 50;
+  ns.map = "nope";
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kNotFound);
+  ns.map = "m";
+  ns.robot = "";
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kInvalidArgument);
+  ns.robot = "fresh-robot";
+  Fingerprint wrong = fp;
+  wrong.descriptor.pop_back();
+  ns.fingerprint = &wrong;
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kInvalidArgument);
+  Fingerprint nan = fp;
+  nan.descriptor[3] = std::nanf("");
+  ns.fingerprint = &nan;
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kInvalidArgument);
+  ns.fingerprint = nullptr;
+  EXPECT_EQ(errorCode([&] { store->addScan(ns); }), StorageError::Code::kInvalidArgument);
+  EXPECT_EQ(errorCode([&] { store->createMap("m", 17); }), StorageError::Code::kAlreadyExists);
+  SearchRequest req{.map = "m", .descriptor = std::vector<float>(5, 0.0f), .k = 3};
+  EXPECT_EQ(errorCode([&] { store->search(req); }), StorageError::Code::kInvalidArgument);
+  req.map = "nope";
+  EXPECT_EQ(errorCode([&] { store->search(req); }), StorageError::Code::kNotFound);
+  // Nothing of the failed writes exists: no new robot, no new scan.
+  const auto st = store->stats("m");
+  EXPECT_EQ(st.scans, 3);
+  EXPECT_EQ(st.index_entries, 3);
+  EXPECT_EQ(store->listRobots("m").size(), 1u);
+  EXPECT_EQ(store->integrityCheck(), "ok");
+}
+
+TEST(MapStore, DeletesSessionsAndRobotsFromIndexAndDatabase) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));
+    all = fill(*store, 2, 2, 5);
+    EXPECT_EQ(store->deleteSession("m", "r0", "s1"), 5);
+    EXPECT_EQ(store->deleteRobot("m", "r1"), 10);
+    EXPECT_EQ(errorCode([&] { store->deleteRobot("m", "r1"); }), StorageError::Code::kNotFound);
+    EXPECT_EQ(errorCode([&] { store->deleteSession("m", "r0", "zz"); }), StorageError::Code::kNotFound);
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    auto store = MapStore::open(options(path));
+    const auto st = store->stats("m");
+    EXPECT_EQ(st.scans, 5);
+    EXPECT_EQ(st.index_entries, 5);
+    EXPECT_EQ(st.robots, 1);
+    EXPECT_EQ(st.sessions, 1);
+    for (const auto& s : all) {
+      const bool kept = s.robot == "r0" && s.session == "s0";
+      EXPECT_EQ(store->fingerprint(s.id) != nullptr, kept) << s.robot << "/" << s.session;
+      SearchRequest req{.map = "m", .descriptor = s.fp.descriptor, .k = 20};
+      const auto hits = ids(store->search(req));
+      EXPECT_EQ(hits.size(), 5u);
+      EXPECT_EQ(std::count(hits.begin(), hits.end(), s.id), kept ? 1 : 0);
+    }
+    EXPECT_EQ(store->integrityCheck(), "ok");
+  }
+}
+
+TEST(MapStore, BackupIsACompleteMapAndNeverOverwrites) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  const auto all = fill(*store, 1, 2, 6);
+  store->backup(dir.file("backup.db"));
+  EXPECT_EQ(errorCode([&] { store->backup(dir.file("backup.db")); }), StorageError::Code::kAlreadyExists);
+  auto copy = MapStore::open(options(dir.file("backup.db")));
+  EXPECT_EQ(copy->stats().scans, 12);
+  for (const auto& s : all) {
+    const auto fp = copy->fingerprint(s.id);
+    ASSERT_NE(fp, nullptr);
+    EXPECT_EQ(serialize(*fp), serialize(s.fp));
+  }
+  EXPECT_EQ(copy->integrityCheck(), "ok");
+}
+
+TEST(MapStore, RefusesForeignCorruptAndNewerFilesWithoutTouchingThem) {
+  TempDir dir;
+  // Random bytes.
+  const auto junk = dir.file("junk.db");
+  {
+    std::ofstream out(junk, std::ios::binary);
+    for (int i = 0; i < 8192; ++i) out.put(static_cast<char>((i * 7919) & 0xFF));
+  }
+  const auto junk_before = fileBytes(junk);
+  EXPECT_EQ(errorCode([&] { MapStore::open(options(junk)); }), StorageError::Code::kCorrupt);
+  EXPECT_EQ(fileBytes(junk), junk_before);
+  // Another application's SQLite database.
+  const auto foreign = dir.file("foreign.db");
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(foreign.c_str(), &db), SQLITE_OK);
+    sqlite3_exec(db, "CREATE TABLE t(x); INSERT INTO t VALUES(1);", nullptr, nullptr, nullptr);
+    sqlite3_close(db);
+  }
+  const auto foreign_before = fileBytes(foreign);
+  EXPECT_EQ(errorCode([&] { MapStore::open(options(foreign)); }), StorageError::Code::kCorrupt);
+  EXPECT_EQ(fileBytes(foreign), foreign_before);
+  // One of ours, written by a newer version.
+  const auto newer = dir.file("newer.db");
+  { fill(*MapStore::open(options(newer)), 1, 1, 2); }
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(newer.c_str(), &db), SQLITE_OK);
+    sqlite3_exec(db, "PRAGMA user_version=99", nullptr, nullptr, nullptr);
+    sqlite3_close(db);
+  }
+  const auto newer_before = fileBytes(newer);
+  try {
+    MapStore::open(options(newer));
+    ADD_FAILURE() << "opened a newer schema";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kNewerSchema);
+    EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(fileBytes(newer), newer_before);
+  // A directory where the file should be.
+  std::filesystem::create_directory(dir.file("adir"));
+  EXPECT_EQ(errorCode([&] { MapStore::open(options(dir.file("adir"))); }), StorageError::Code::kInvalidArgument);
+}
+
+TEST(MapStore, FullDiskFailsTheWriteAndKeepsEverythingBefore) {
+  TempDir dir;
+  auto opts = options(dir.file("map.db"));
+  opts.max_db_mb = 0.5;  // a quota is how SQLite reports a full disk (SQLITE_FULL)
+  opts.sync = StoreOptions::Sync::kFull;
+  std::vector<std::int64_t> stored;
+  {
+    auto store = MapStore::open(opts);
+    store->createMap("m", DescriptorLayout{}.scanDim());
+    bool full = false;
+    for (int i = 0; i < 1000 && !full; ++i) {
+      Fingerprint fp = randomFingerprint(i + 1, 60);
+      NewScan ns{.map = "m", .robot = "r", .session = "s", .seq = i, .fingerprint = &fp};
+      try {
+        stored.push_back(store->addScan(ns));
+      } catch (const StorageError& e) {
+        EXPECT_EQ(e.code(), StorageError::Code::kFull) << e.what();
+        full = true;
+      }
+    }
+    ASSERT_TRUE(full) << "quota never reached";
+    ASSERT_GT(stored.size(), 3u);
+    EXPECT_EQ(store->stats().scans, static_cast<std::int64_t>(stored.size()));
+    EXPECT_EQ(store->stats().index_entries, static_cast<std::int64_t>(stored.size()));
+  }
+  opts.max_db_mb = 0;
+  auto store = MapStore::open(opts);
+  EXPECT_EQ(store->integrityCheck(), "ok");
+  EXPECT_EQ(store->stats().scans, static_cast<std::int64_t>(stored.size()));
+  for (auto id : stored) EXPECT_NE(store->fingerprint(id), nullptr);
+}
+
+TEST(MapStore, ReadOnlyDirectoryAndFileGiveAClearError) {
+  TempDir dir;
+  const auto ro_dir = dir.file("ro");
+  std::filesystem::create_directory(ro_dir);
+  { fill(*MapStore::open(options(ro_dir + "/existing.db")), 1, 1, 2); }
+  const auto before = fileBytes(ro_dir + "/existing.db");
+  std::filesystem::permissions(ro_dir + "/existing.db", std::filesystem::perms::owner_read);
+  std::filesystem::permissions(ro_dir, std::filesystem::perms::owner_read | std::filesystem::perms::owner_exec);
+  // Root ignores permission bits, so the check runs in a child that gives up root.
+  const pid_t pid = fork();
+  ASSERT_GE(pid, 0);
+  if (pid == 0) {
+    if (geteuid() == 0 && (setgid(65534) != 0 || setuid(65534) != 0)) _exit(3);
+    int failures = 0;
+    for (const auto& p : {ro_dir + "/new.db", ro_dir + "/existing.db"}) {
+      try {
+        MapStore::open(options(p));
+        ++failures;
+      } catch (const StorageError& e) {
+        if (e.code() != StorageError::Code::kReadOnly) ++failures;
+      } catch (...) {
+        ++failures;
+      }
+    }
+    _exit(failures);
+  }
+  int status = 0;
+  waitpid(pid, &status, 0);
+  std::filesystem::permissions(ro_dir, std::filesystem::perms::owner_all);
+  ASSERT_TRUE(WIFEXITED(status));
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "exit 3: could not drop privileges; otherwise the count of wrong answers";
+  EXPECT_FALSE(std::filesystem::exists(ro_dir + "/new.db"));
+  EXPECT_EQ(fileBytes(ro_dir + "/existing.db"), before);
+}
+
+TEST(MapStore, CacheServesRepeatsAndStaysWithinItsBudget) {
+  TempDir dir;
+  auto opts = options(dir.file("map.db"));
+  opts.cache_mb = 0.05;  // room for a handful of fingerprints
+  auto store = MapStore::open(opts);
+  const auto all = fill(*store, 1, 1, 30);
+  for (const auto& s : all) ASSERT_NE(store->fingerprint(s.id), nullptr);
+  const auto misses = store->stats().cache_misses;
+  EXPECT_EQ(misses, 30);
+  ASSERT_NE(store->fingerprint(all.back().id), nullptr);
+  EXPECT_EQ(store->stats().cache_hits, 1);
+  EXPECT_LE(store->stats().cache_mb, 0.05 + 1e-9);
+  EXPECT_GT(store->stats().cache_mb, 0.0);
+}
+
+TEST(MapStore, ApproximateIndexAgreesWithExactSearch) {
+  TempDir dir;
+  auto opts = options(dir.file("map.db"));
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(opts);
+    all = fill(*store, 2, 1, 1000);
+  }
+  opts.index.type = IndexOptions::Type::kIvf;
+  opts.index.ivf_min_scans = 1000;
+  opts.index.ivf_nprobe = 16;
+  auto store = MapStore::open(opts);
+  int found = 0, total = 0;
+  for (int i = 0; i < 2000; i += 97) {
+    // Query near a stored scan: its own descriptor plus a little noise.
+    std::vector<float> q = all[i].fp.descriptor;
+    for (std::size_t d = 0; d < q.size(); ++d) q[d] += 0.001f * static_cast<float>((d * 31 + i) % 7);
+    SearchRequest req{.map = "m", .descriptor = q, .k = 10};
+    const auto got = ids(store->search(req));
+    const auto want = bruteForce(all, q, 10, [](const Stored&) { return true; });
+    ASSERT_EQ(got.size(), 10u);
+    EXPECT_EQ(got[0], all[i].id);
+    for (auto id : want) found += std::count(got.begin(), got.end(), id) > 0;
+    total += 10;
+    req.robots = {"r1"};
+    for (auto id : ids(store->search(req))) EXPECT_GE(id, all[1000].id);  // r1's scans come second
+  }
+  EXPECT_GT(static_cast<double>(found) / total, 0.5) << "recall@10 of the IVF index on random descriptors";
+}
+
+}  // namespace
+}  // namespace sglc::storage
