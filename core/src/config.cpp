@@ -185,6 +185,7 @@ Config parseConfig(const std::string& yaml_text) {
 std::string dumpConfig(const Config& config) {
   Config copy = config;
   YAML::Emitter out;
+  out.SetDoublePrecision(15);
   out << YAML::BeginMap;
   std::string section;
   out << YAML::Key << "labels" << YAML::Value << YAML::BeginMap;

@@ -51,7 +51,7 @@ struct MatchConfig {
   double d_b = 2.0;              // max difference of each box dimension (m)
   double min_cosine = 0.5;       // node descriptor similarity floor
   double d_l = 20.0;             // neighbourhood radius for local triangles (m)
-  double triangle_tol = 0.5;     // side-length tolerance for "same triangle" (m)
+  double triangle_tol = 0.25;    // side-length tolerance for "same triangle" (m; reference value)
   int t_m = 2;                   // triangles that must agree for a match to survive
   int prune_min_matches = 15;    // prune only when at least this many matches (reference behaviour)
 };
