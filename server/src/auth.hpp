@@ -1,0 +1,35 @@
+// Bearer-token authorisation: a token file lists tokens and the maps each may use.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+
+namespace sglc::server {
+
+class TokenTable {
+ public:
+  // No file: every call is allowed. File format: one token per line, `TOKEN map1,map2` or `TOKEN *`
+  // ('#' starts a comment). Throws std::runtime_error naming the line on a malformed file.
+  static TokenTable load(const std::string& path);
+  bool enabled() const { return enabled_; }
+
+  // The caller's grant, from its `authorization: Bearer TOKEN` metadata. Throws RpcError(UNAUTHENTICATED).
+  struct Grant {
+    bool all = false;
+    const std::set<std::string>* maps = nullptr;
+    bool allows(const std::string& map) const { return all || (maps && maps->count(map)); }
+  };
+  Grant authenticate(const grpc::ServerContext& ctx) const;
+  // Throws RpcError(PERMISSION_DENIED) unless the grant covers the map ("" = the whole database).
+  static void require(const Grant& grant, const std::string& map);
+
+ private:
+  bool enabled_ = false;
+  std::map<std::string, std::set<std::string>> tokens_;  // token -> maps ("*" = all)
+};
+
+}  // namespace sglc::server

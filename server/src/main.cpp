@@ -1,0 +1,223 @@
+// sglc-server: the SGLC loop-closure service over gRPC, on a persistent SQLite map database.
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <signal.h>
+#include <spdlog/spdlog.h>
+#include <yaml-cpp/yaml.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <thread>
+
+#include "service.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string readFile(const std::string& path, const char* what) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error(std::string(what) + " " + path + ": cannot read");
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+struct Settings {
+  std::string db = "var/sglc.db";
+  std::string listen = "127.0.0.1:50051";
+  std::string config;
+  int threads = 8;
+  double max_message_mb = 64;
+  std::size_t max_points = 2'000'000;
+  std::string tls_cert, tls_key, tokens, backup_dir;
+  double shutdown_grace_s = 10;
+  sglc::Config engine;
+  sglc::storage::StoreOptions store;
+};
+
+// The config file has three sections: engine (the same keys as `sglc-pair --config`), storage and server.
+// Command-line flags override it.
+void applyConfigFile(Settings& s, const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(readFile(path, "config"));
+  } catch (const YAML::Exception& e) {
+    throw std::runtime_error(path + ": not valid YAML: " + e.what());
+  }
+  for (const auto& section : root) {
+    const auto name = section.first.as<std::string>();
+    const auto& node = section.second;
+    if (name == "engine") {
+      YAML::Emitter out;
+      out << node;
+      s.engine = sglc::parseConfig(out.c_str());
+      continue;
+    }
+    if (name != "storage" && name != "server") throw std::runtime_error(path + ": unknown section '" + name + "'");
+    for (const auto& item : node) {
+      const auto key = name + "." + item.first.as<std::string>();
+      const auto& v = item.second;
+      try {
+        if (key == "storage.sync") {
+          const auto m = v.as<std::string>();
+          if (m == "full") s.store.sync = sglc::storage::StoreOptions::Sync::kFull;
+          else if (m == "normal") s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
+          else if (m == "off") s.store.sync = sglc::storage::StoreOptions::Sync::kOff;
+          else throw std::runtime_error("storage.sync must be full, normal or off");
+        } else if (key == "storage.cache_mb") s.store.cache_mb = v.as<double>();
+        else if (key == "storage.busy_timeout_ms") s.store.busy_timeout_ms = v.as<int>();
+        else if (key == "storage.snapshot_index") s.store.snapshot_index = v.as<bool>();
+        else if (key == "storage.max_db_mb") s.store.max_db_mb = v.as<double>();
+        else if (key == "storage.index") {
+          const auto t = v.as<std::string>();
+          if (t == "exact") s.store.index.type = sglc::storage::IndexOptions::Type::kExact;
+          else if (t == "ivf") s.store.index.type = sglc::storage::IndexOptions::Type::kIvf;
+          else throw std::runtime_error("storage.index must be exact or ivf");
+        } else if (key == "storage.ivf_nlist") s.store.index.ivf_nlist = v.as<int>();
+        else if (key == "storage.ivf_nprobe") s.store.index.ivf_nprobe = v.as<int>();
+        else if (key == "storage.ivf_min_scans") s.store.index.ivf_min_scans = v.as<int>();
+        else if (key == "server.db") s.db = v.as<std::string>();
+        else if (key == "server.listen") s.listen = v.as<std::string>();
+        else if (key == "server.threads") s.threads = v.as<int>();
+        else if (key == "server.max_message_mb") s.max_message_mb = v.as<double>();
+        else if (key == "server.max_points") s.max_points = v.as<std::size_t>();
+        else if (key == "server.tls_cert") s.tls_cert = v.as<std::string>();
+        else if (key == "server.tls_key") s.tls_key = v.as<std::string>();
+        else if (key == "server.tokens") s.tokens = v.as<std::string>();
+        else if (key == "server.backup_dir") s.backup_dir = v.as<std::string>();
+        else if (key == "server.shutdown_grace_s") s.shutdown_grace_s = v.as<double>();
+        else throw std::runtime_error("unknown parameter '" + key + "'");
+      } catch (const YAML::Exception& e) {
+        throw std::runtime_error(path + ": bad value for '" + key + "': " + e.what());
+      } catch (const std::runtime_error& e) {
+        throw std::runtime_error(path + ": " + e.what());
+      }
+    }
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"SGLC loop-closure service: gRPC (sglc.v1) on a persistent SQLite map database."};
+  Settings s;
+  std::string config_path;
+  app.add_option("--config", config_path, "YAML file with sections engine, storage, server");
+  auto* db_opt = app.add_option("--db", s.db, "map database (SQLite file; created if missing)");
+  auto* listen_opt = app.add_option("--listen", s.listen, "address to serve on");
+  auto* threads_opt = app.add_option("--threads", s.threads, "maximum RPC worker threads");
+  auto* tokens_opt = app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
+  auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
+  auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
+  auto* msg_opt = app.add_option("--max-message-mb", s.max_message_mb, "largest accepted message (MB)");
+  bool sync_normal = false;
+  app.add_flag("--sync-normal", sync_normal, "SQLite synchronous=NORMAL (survives process crashes, not power loss)");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::CallForHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    std::cerr << "sglc-server: error: " << e.what() << " (see --help)" << std::endl;
+    return 2;
+  }
+
+  std::unique_ptr<grpc::Server> server;
+  std::unique_ptr<sglc::server::ServiceState> state;
+  try {
+    // Flags win over the file: remember them, load the file, re-apply.
+    const Settings flags = s;
+    if (!config_path.empty()) applyConfigFile(s, config_path);
+    if (*db_opt) s.db = flags.db;
+    if (*listen_opt) s.listen = flags.listen;
+    if (*threads_opt) s.threads = flags.threads;
+    if (*tokens_opt) s.tokens = flags.tokens;
+    if (*cert_opt) s.tls_cert = flags.tls_cert;
+    if (*key_opt) s.tls_key = flags.tls_key;
+    if (*msg_opt) s.max_message_mb = flags.max_message_mb;
+    if (sync_normal) s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
+    if (s.threads < 1 || s.threads > 1024) throw std::runtime_error("--threads must be 1..1024");
+    if (!(s.max_message_mb > 0 && s.max_message_mb <= 2047)) throw std::runtime_error("--max-message-mb must be in (0, 2047]");
+    if (s.tls_cert.empty() != s.tls_key.empty()) throw std::runtime_error("--tls-cert and --tls-key go together");
+    s.store.path = s.db;
+    if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();
+
+    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir};
+    state = std::make_unique<sglc::server::ServiceState>(sglc::Pipeline(s.engine),
+                                                         sglc::server::TokenTable::load(s.tokens), limits);
+    sglc::server::LoopClosureService loop_service(*state);
+    sglc::server::MapAdminService admin_service(*state);
+
+    grpc::EnableDefaultHealthCheckService(true);
+    grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+    grpc::ServerBuilder builder;
+    std::shared_ptr<grpc::ServerCredentials> creds = grpc::InsecureServerCredentials();
+    if (!s.tls_cert.empty()) {
+      grpc::SslServerCredentialsOptions ssl;
+      ssl.pem_key_cert_pairs.push_back({readFile(s.tls_key, "TLS key"), readFile(s.tls_cert, "TLS certificate")});
+      creds = grpc::SslServerCredentials(ssl);
+    }
+    int port = 0;
+    builder.AddListeningPort(s.listen, creds, &port);
+    builder.RegisterService(&loop_service);
+    builder.RegisterService(&admin_service);
+    const int max_bytes = static_cast<int>(s.max_message_mb * 1024 * 1024);
+    builder.SetMaxReceiveMessageSize(max_bytes);
+    builder.SetMaxSendMessageSize(max_bytes);
+    grpc::ResourceQuota quota("sglc");
+    quota.SetMaxThreads(s.threads + 2);
+    builder.SetResourceQuota(quota);
+    builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, std::max(2, s.threads / 2));
+
+    // SIGTERM / SIGINT are taken by a dedicated thread (blocked everywhere else).
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGTERM);
+    sigaddset(&signals, SIGINT);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+    server = builder.BuildAndStart();
+    if (!server || port == 0) throw std::runtime_error("cannot listen on " + s.listen);
+    auto* health = server->GetHealthCheckService();
+    health->SetServingStatus(false);  // NOT_SERVING until the map database is loaded
+    spdlog::info("{{\"event\":\"listening\",\"address\":\"{}\",\"port\":{},\"tls\":{},\"auth\":{}}}", s.listen, port,
+                 !s.tls_cert.empty(), state->tokens().enabled());
+
+    const auto t0 = std::chrono::steady_clock::now();
+    std::unique_ptr<sglc::storage::MapStore> store;
+    try {
+      store = sglc::storage::MapStore::open(s.store);
+    } catch (...) {
+      server->Shutdown();
+      server->Wait();
+      server.reset();
+      throw;
+    }
+    const auto st = store->stats();
+    state->attach(store.get());
+    health->SetServingStatus(true);
+    spdlog::info("{{\"event\":\"serving\",\"db\":\"{}\",\"maps\":{},\"scans\":{},\"load_ms\":{:.1f}}}", s.db, st.maps,
+                 st.scans, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+
+    int sig = 0;
+    sigwait(&signals, &sig);
+    spdlog::info("{{\"event\":\"shutdown\",\"signal\":{}}}", sig);
+    health->SetServingStatus(false);
+    // Refuse new calls, let in-flight ones finish (up to the grace period), then close the database cleanly.
+    server->Shutdown(std::chrono::system_clock::now() +
+                     std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));
+    server->Wait();
+    state->detach();
+    store.reset();
+    spdlog::info("{{\"event\":\"stopped\"}}");
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "sglc-server: error: " << e.what() << std::endl;
+    return 1;
+  }
+}

@@ -1,0 +1,485 @@
+#include "service.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "codec.hpp"
+
+namespace sglc::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using storage::StorageError;
+
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+grpc::StatusCode toGrpc(StorageError::Code code) {
+  switch (code) {
+    case StorageError::Code::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
+    case StorageError::Code::kNotFound: return grpc::StatusCode::NOT_FOUND;
+    case StorageError::Code::kAlreadyExists: return grpc::StatusCode::ALREADY_EXISTS;
+    case StorageError::Code::kFull: return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case StorageError::Code::kBusy: return grpc::StatusCode::UNAVAILABLE;
+    case StorageError::Code::kCorrupt: return grpc::StatusCode::DATA_LOSS;
+    default: return grpc::StatusCode::INTERNAL;
+  }
+}
+
+const char* codeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return "OK";
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    default: return "OTHER";
+  }
+}
+
+// One structured log line per RPC (never the cloud), and exceptions turned into statuses.
+struct CallLog {
+  const char* method;
+  std::string map, robot;
+  Clock::time_point start = Clock::now();
+};
+
+template <typename F>
+grpc::Status run(const grpc::ServerContext* ctx, CallLog log, F&& body) {
+  grpc::Status status;
+  try {
+    body(log);
+  } catch (const RpcError& e) {
+    status = grpc::Status(e.code(), e.what());
+  } catch (const StorageError& e) {
+    status = grpc::Status(toGrpc(e.code()), e.what());
+  } catch (const InputError& e) {
+    status = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, e.what());
+  } catch (const std::bad_alloc&) {
+    status = grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, "out of memory");
+  } catch (const std::exception& e) {
+    status = grpc::Status(grpc::StatusCode::INTERNAL, e.what());
+  }
+  nlohmann::ordered_json line = {{"method", log.method},
+                         {"map", log.map},
+                         {"robot", log.robot},
+                         {"code", codeName(status.error_code())},
+                         {"ms", std::round(msSince(log.start) * 1000.0) / 1000.0},
+                         {"peer", ctx->peer()}};
+  if (!status.ok()) line["error"] = status.error_message();
+  if (status.ok()) spdlog::info("{}", line.dump());
+  else spdlog::warn("{}", line.dump());
+  return status;
+}
+
+// Deadline and cancellation, checked between expensive steps.
+void checkAlive(const grpc::ServerContext* ctx) {
+  if (ctx->IsCancelled()) throw RpcError(grpc::StatusCode::CANCELLED, "the client cancelled the call");
+  if (std::chrono::system_clock::now() > ctx->deadline())
+    throw RpcError(grpc::StatusCode::DEADLINE_EXCEEDED, "deadline exceeded during processing; nothing was stored");
+}
+
+// Who is asking and what they may see.
+struct Asker {
+  std::string map, robot, session;
+  std::int64_t seq = 0;
+  std::optional<double> stamp;
+  std::int64_t self_scan = 0;  // a stored query scan never matches itself
+};
+
+void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const Fingerprint& query, const Asker& who,
+               const v1::QueryOptions& opt, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
+               v1::Timing* timing) {
+  const auto top_k = opt.top_k() ? opt.top_k() : 5u;
+  if (top_k > 100) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "top_k must be at most 100");
+  const auto candidates = opt.candidates() ? opt.candidates() : std::max(top_k, 10u);
+  if (candidates > 200) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "candidates must be at most 200");
+  if (opt.exclude_recent() < 0 || !std::isfinite(opt.exclude_seconds()) || opt.exclude_seconds() < 0)
+    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "exclude_recent and exclude_seconds must be >= 0");
+  const bool refine = opt.refine_set() ? opt.refine() : true;
+
+  storage::SearchRequest req;
+  req.map = who.map;
+  req.descriptor = query.descriptor;
+  req.k = static_cast<int>(candidates);
+  req.self_robot = who.robot;
+  req.self_session = who.session;
+  req.self_seq = who.seq;
+  req.exclude_recent = opt.exclude_recent();
+  req.self_stamp = who.stamp;
+  req.exclude_seconds = opt.exclude_seconds();
+  if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
+  switch (opt.scope()) {
+    case v1::SCOPE_UNSPECIFIED:
+    case v1::SCOPE_WHOLE_MAP: break;
+    case v1::SCOPE_SAME_ROBOT:
+    case v1::SCOPE_OTHER_ROBOTS:
+      if (who.robot.empty())
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scope SAME_ROBOT / OTHER_ROBOTS needs the query's robot");
+      (opt.scope() == v1::SCOPE_SAME_ROBOT ? req.robots : req.exclude_robots).push_back(who.robot);
+      break;
+    case v1::SCOPE_SESSIONS:
+      if (opt.sessions().empty())
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scope SESSIONS needs at least one 'robot/session'");
+      req.sessions.assign(opt.sessions().begin(), opt.sessions().end());
+      break;
+    default: throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "unknown scope");
+  }
+  auto& store = state.store();
+  auto t0 = Clock::now();
+  const auto hits = store.search(req);
+  timing->set_search_ms(msSince(t0));
+
+  struct Verified {
+    storage::SearchHit hit;
+    std::shared_ptr<const Fingerprint> fp;
+    LoopResult result;
+  };
+  std::vector<Verified> results;
+  t0 = Clock::now();
+  for (const auto& hit : hits) {
+    checkAlive(ctx);
+    auto fp = store.fingerprint(hit.scan_id);
+    if (!fp) continue;  // deleted meanwhile
+    auto r = state.pipeline().verify(query, *fp);
+    if (r.is_loop || opt.include_rejected()) results.push_back({hit, std::move(fp), std::move(r)});
+  }
+  timing->set_verify_ms(msSince(t0));
+  std::stable_sort(results.begin(), results.end(), [](const Verified& a, const Verified& b) {
+    if (a.result.is_loop != b.result.is_loop) return a.result.is_loop;
+    if (a.result.score != b.result.score) return a.result.score > b.result.score;
+    return a.hit.scan_id < b.hit.scan_id;
+  });
+  if (opt.has_min_score())
+    std::erase_if(results, [&](const Verified& v) { return v.result.is_loop && v.result.score < opt.min_score(); });
+  if (results.size() > top_k) results.resize(top_k);
+  t0 = Clock::now();
+  for (auto& v : results) {
+    if (!refine || !v.result.is_loop) continue;
+    checkAlive(ctx);
+    state.pipeline().refine(query, *v.fp, v.result);
+  }
+  timing->set_refine_ms(msSince(t0));
+  for (const auto& v : results) {
+    auto* c = out->Add();
+    c->set_scan_id(v.hit.scan_id);
+    if (auto info = store.scanInfo(v.hit.scan_id)) {
+      c->set_robot(info->robot);
+      c->set_session(info->session);
+      c->set_seq(info->seq);
+    }
+    c->set_score(v.result.score);
+    c->set_verified(v.result.is_loop);
+    c->set_inliers(v.result.inliers);
+    c->set_fitness(v.result.fitness);
+    c->set_rmse(v.result.rmse);
+    c->set_refined(v.result.refined);
+    c->set_descriptor_distance(v.hit.distance);
+    encodeTransform(v.result.T, c->mutable_t_query_candidate());
+  }
+}
+
+// The shared body of the three ingest RPCs.
+void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const TokenTable::Grant& grant,
+            const v1::IngestRequest& req, const std::string& points, const std::string& labels,
+            v1::IngestResponse* resp) {
+  const auto t_start = Clock::now();
+  const auto& key = req.key();
+  checkName("key.map", key.map());
+  checkName("key.robot", key.robot());
+  checkName("key.session", key.session());
+  TokenTable::require(grant, key.map());
+  if (req.has_stamp() && !std::isfinite(req.stamp()))
+    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "stamp is not finite");
+  std::optional<Mat4d> pose;
+  if (req.has_odometry_pose() && req.odometry_pose().m_size() > 0)
+    pose = decodeTransform(req.odometry_pose(), "odometry_pose");
+  auto& store = state.store();
+  if (!store.findMap(key.map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + key.map() + "'");
+  const auto scan = decodeScan(points, labels, state.limits().max_points);
+  checkAlive(ctx);
+
+  auto t0 = Clock::now();
+  const auto fp = state.pipeline().fingerprint(scan);
+  resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
+  if (req.query()) {
+    Asker who{key.map(), key.robot(), key.session(), key.seq(), std::nullopt, 0};
+    if (req.has_stamp()) who.stamp = req.stamp();
+    findLoops(state, ctx, fp, who, req.query_options(), resp->mutable_loops(), resp->mutable_timing());
+  }
+  checkAlive(ctx);  // past this point the scan is stored and the call succeeds
+  storage::NewScan ns;
+  ns.map = key.map();
+  ns.robot = key.robot();
+  ns.session = key.session();
+  ns.seq = key.seq();
+  if (req.has_stamp()) ns.stamp = req.stamp();
+  ns.odometry_pose = pose;
+  ns.fingerprint = &fp;
+  ns.raw = req.store_raw() ? &scan : nullptr;
+  t0 = Clock::now();
+  resp->set_scan_id(state.store().addScan(ns));
+  resp->mutable_timing()->set_store_ms(msSince(t0));
+  resp->set_seq(key.seq());
+  resp->mutable_timing()->set_total_ms(msSince(t_start));
+}
+
+}  // namespace
+
+storage::MapStore& ServiceState::store() const {
+  auto* s = store_.load();
+  if (!s) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the map database is loading or the server is shutting down");
+  return *s;
+}
+
+// ------------------------------------------------------------------------------------------------ LoopClosure
+
+grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req,
+                                        v1::IngestResponse* resp) {
+  return run(ctx, {"Ingest", req->key().map(), req->key().robot()}, [&](CallLog&) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    ingest(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), resp);
+  });
+}
+
+grpc::Status LoopClosureService::IngestChunked(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestChunk>* reader,
+                                               v1::IngestResponse* resp) {
+  return run(ctx, {"IngestChunked", "", ""}, [&](CallLog& log) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    v1::IngestChunk chunk;
+    if (!reader->Read(&chunk)) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "no chunks received");
+    if (!chunk.has_header()) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "the first chunk must carry the header");
+    v1::IngestRequest header = chunk.header();
+    log.map = header.key().map();
+    log.robot = header.key().robot();
+    TokenTable::require(grant, header.key().map());
+    std::string points = std::move(*header.mutable_scan()->mutable_points());
+    std::string labels = std::move(*header.mutable_scan()->mutable_labels());
+    const std::size_t limit = state_.limits().max_points * 16 + 16;
+    bool first = true;
+    do {
+      if (!first && chunk.has_header())
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "only the first chunk may carry a header");
+      first = false;
+      points += chunk.points();
+      labels += chunk.labels();
+      if (points.size() + labels.size() > limit)
+        throw RpcError(grpc::StatusCode::RESOURCE_EXHAUSTED, "chunked scan exceeds the server's point limit (" +
+                                                                 std::to_string(state_.limits().max_points) + ")");
+      chunk.Clear();
+    } while (reader->Read(&chunk));
+    ingest(state_, ctx, grant, header, points, labels, resp);
+  });
+}
+
+grpc::Status LoopClosureService::IngestStream(grpc::ServerContext* ctx,
+                                              grpc::ServerReaderWriter<v1::IngestResponse, v1::IngestRequest>* stream) {
+  return run(ctx, {"IngestStream", "", ""}, [&](CallLog& log) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    v1::IngestRequest req;
+    while (stream->Read(&req)) {
+      log.map = req.key().map();
+      log.robot = req.key().robot();
+      v1::IngestResponse resp;
+      ingest(state_, ctx, grant, req, req.scan().points(), req.scan().labels(), &resp);
+      if (!stream->Write(resp)) throw RpcError(grpc::StatusCode::CANCELLED, "the client closed the stream");
+    }
+  });
+}
+
+grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::QueryRequest* req,
+                                       v1::QueryResponse* resp) {
+  return run(ctx, {"Query", req->map(), req->robot()}, [&](CallLog&) {
+    const auto t_start = Clock::now();
+    const auto grant = state_.tokens().authenticate(*ctx);
+    checkName("map", req->map());
+    TokenTable::require(grant, req->map());
+    auto& store = state_.store();
+    if (!store.findMap(req->map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");
+    Asker who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
+    if (req->has_stamp()) who.stamp = req->stamp();
+    std::shared_ptr<const Fingerprint> fp;
+    if (req->has_scan()) {
+      const auto scan = decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
+      const auto t0 = Clock::now();
+      fp = std::make_shared<const Fingerprint>(state_.pipeline().fingerprint(scan));
+      resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
+    } else if (req->has_scan_id()) {
+      const auto info = store.scanInfo(req->scan_id());
+      if (!info || info->map != req->map())
+        throw RpcError(grpc::StatusCode::NOT_FOUND,
+                       "map '" + req->map() + "' has no scan " + std::to_string(req->scan_id()));
+      fp = store.fingerprint(req->scan_id());
+      if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "scan " + std::to_string(req->scan_id()) + " was deleted");
+      who = {req->map(), info->robot, info->session, info->seq, info->stamp, req->scan_id()};
+    } else {
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "give either scan or scan_id");
+    }
+    findLoops(state_, ctx, *fp, who, req->options(), resp->mutable_candidates(), resp->mutable_timing());
+    resp->mutable_timing()->set_total_ms(msSince(t_start));
+  });
+}
+
+// ------------------------------------------------------------------------------------------------ MapAdmin
+
+namespace {
+void fillMap(const storage::MapInfo& m, v1::MapInfo* out) {
+  out->set_name(m.name);
+  out->set_scans(m.scans);
+  out->set_robots(m.robots);
+  out->set_sessions(m.sessions);
+  out->set_descriptor_dim(m.descriptor_dim);
+}
+}  // namespace
+
+grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::CreateMapRequest* req, v1::MapInfo* resp) {
+  return run(ctx, {"CreateMap", req->name(), ""}, [&](CallLog&) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    checkName("name", req->name());
+    TokenTable::require(grant, req->name());
+    const auto& config = state_.pipeline().config();
+    const int dim =
+        descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph, config.descriptor).scanDim();
+    fillMap(state_.store().createMap(req->name(), dim), resp);
+  });
+}
+
+grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest*,
+                                       v1::ListMapsResponse* resp) {
+  return run(ctx, {"ListMaps", "", ""}, [&](CallLog&) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    for (const auto& m : state_.store().listMaps())
+      if (grant.allows(m.name)) fillMap(m, resp->add_maps());
+  });
+}
+
+grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::ListRobotsRequest* req,
+                                         v1::ListRobotsResponse* resp) {
+  return run(ctx, {"ListRobots", req->map(), ""}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    for (const auto& r : state_.store().listRobots(req->map())) {
+      auto* o = resp->add_robots();
+      o->set_name(r.name);
+      o->set_scans(r.scans);
+      o->set_sessions(r.sessions);
+    }
+  });
+}
+
+grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::ListSessionsRequest* req,
+                                           v1::ListSessionsResponse* resp) {
+  return run(ctx, {"ListSessions", req->map(), req->robot()}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    for (const auto& s : state_.store().listSessions(req->map(), req->robot())) {
+      auto* o = resp->add_sessions();
+      o->set_robot(s.robot);
+      o->set_name(s.name);
+      o->set_scans(s.scans);
+      o->set_first_seq(s.first_seq);
+      o->set_last_seq(s.last_seq);
+    }
+  });
+}
+
+grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetScanRequest* req,
+                                      v1::GetScanResponse* resp) {
+  return run(ctx, {"GetScan", "", ""}, [&](CallLog& log) {
+    const auto grant = state_.tokens().authenticate(*ctx);
+    auto& store = state_.store();
+    const auto info = store.scanInfo(req->scan_id());
+    if (!info) throw RpcError(grpc::StatusCode::NOT_FOUND, "no scan " + std::to_string(req->scan_id()));
+    log.map = info->map;
+    log.robot = info->robot;
+    TokenTable::require(grant, info->map);
+    resp->set_scan_id(info->id);
+    auto* key = resp->mutable_key();
+    key->set_map(info->map);
+    key->set_robot(info->robot);
+    key->set_session(info->session);
+    key->set_seq(info->seq);
+    if (info->stamp) resp->set_stamp(*info->stamp);
+    if (info->odometry_pose) encodeTransform(*info->odometry_pose, resp->mutable_odometry_pose());
+    resp->set_fingerprint_bytes(info->fingerprint_bytes);
+    resp->set_has_raw(info->has_raw);
+    if (req->include_graph()) {
+      const auto fp = store.fingerprint(info->id);
+      if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "scan was deleted");
+      const auto& classes = state_.pipeline().config().labels.node_classes;
+      for (const auto& n : fp->nodes) {
+        auto* o = resp->add_nodes();
+        o->set_x(n.center.x());
+        o->set_y(n.center.y());
+        o->set_z(n.center.z());
+        o->set_length(n.size.x());
+        o->set_width(n.size.y());
+        o->set_height(n.size.z());
+        o->set_cls(n.cls < classes.size() ? classes[n.cls].name : std::to_string(n.cls));
+      }
+      for (float v : fp->descriptor) resp->add_scan_descriptor(v);
+    }
+  });
+}
+
+grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::DeleteSessionRequest* req,
+                                            v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteSession", req->map(), req->robot()}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    resp->set_scans_removed(state_.store().deleteSession(req->map(), req->robot(), req->session()));
+  });
+}
+
+grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req,
+                                          v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteRobot", req->map(), req->robot()}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    resp->set_scans_removed(state_.store().deleteRobot(req->map(), req->robot()));
+  });
+}
+
+grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req,
+                                       v1::GetStatsResponse* resp) {
+  return run(ctx, {"GetStats", req->map(), ""}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    const auto s = state_.store().stats(req->map());
+    resp->set_maps(s.maps);
+    resp->set_robots(s.robots);
+    resp->set_sessions(s.sessions);
+    resp->set_scans(s.scans);
+    resp->set_index_entries(s.index_entries);
+    resp->set_db_bytes(s.db_bytes);
+    resp->set_fingerprint_bytes(s.fingerprint_bytes);
+    resp->set_cache_mb(s.cache_mb);
+  });
+}
+
+grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) {
+  return run(ctx, {"Backup", "", ""}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), "");
+    namespace fs = std::filesystem;
+    const fs::path name(req->path());
+    if (req->path().empty() || name.is_absolute() || name.has_parent_path() || name.filename() != name ||
+        req->path() == "." || req->path() == "..")
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
+                     "backup path must be a plain file name; it is written into the server's backup directory");
+    const auto dir = fs::path(state_.limits().backup_dir);
+    std::error_code ec;
+    fs::create_directories(dir, ec);
+    if (ec) throw RpcError(grpc::StatusCode::INTERNAL, dir.string() + ": " + ec.message());
+    const auto dest = (dir / name).string();
+    state_.store().backup(dest);
+    resp->set_path(dest);
+    resp->set_bytes(static_cast<std::int64_t>(fs::file_size(dest, ec)));
+  });
+}
+
+}  // namespace sglc::server
