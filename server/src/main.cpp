@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
     server->Wait();
     state->detach();
     store.reset();
-    spdlog::info("{{\"event\":\"stopped\"}}");
+    spdlog::info("{}", R"({"event":"stopped"})");
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "sglc-server: error: " << e.what() << std::endl;

@@ -1,0 +1,326 @@
+#!/usr/bin/env python3
+"""End-to-end tests of build/bin/sglc-server on loopback, through the generated sglc.v1 stubs.
+
+Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR
+Starts real servers on free loopback ports with temporary databases. Exit 77 when grpcio/numpy are missing.
+"""
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import traceback
+
+try:
+    import grpc
+    import numpy as np
+    from grpc_health.v1 import health_pb2, health_pb2_grpc  # noqa: F401  (optional)
+except ImportError:
+    try:
+        import grpc
+        import numpy as np
+        health_pb2 = None
+    except ImportError as e:
+        print(f"SKIP: {e} (needs Debian's python3-grpcio and python3-numpy; run with /usr/bin/python3)")
+        sys.exit(77)
+
+SERVER, STUBS, DATA = sys.argv[1], sys.argv[2], sys.argv[3]
+sys.path.insert(0, STUBS)
+from sglc.v1 import sglc_pb2 as pb  # noqa: E402
+from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
+
+SEQ = os.path.join(DATA, "semantickitti_scans", "sequences", "00")
+HAVE_DATA = os.path.isdir(SEQ)
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    def __init__(self, db, extra=()):
+        self.port = free_port()
+        self.addr = f"127.0.0.1:{self.port}"
+        self.log = open(db + ".log", "ab")
+        self.proc = subprocess.Popen([SERVER, "--db", db, "--listen", self.addr, "--sync-normal", *extra],
+                                     stdout=self.log, stderr=subprocess.STDOUT)
+        self.channel = grpc.insecure_channel(self.addr)
+        grpc.channel_ready_future(self.channel).result(timeout=30)
+        self.admin = rpc.MapAdminStub(self.channel)
+        self.loop = rpc.LoopClosureStub(self.channel)
+        # Serving once the database is loaded.
+        for _ in range(300):
+            try:
+                self.admin.ListMaps(pb.ListMapsRequest(), timeout=5)
+                break
+            except grpc.RpcError as e:
+                if e.code() not in (grpc.StatusCode.UNAVAILABLE,):
+                    break
+                time.sleep(0.05)
+
+    def stop(self, sig=signal.SIGTERM):
+        self.channel.close()
+        if self.proc.poll() is None:
+            self.proc.send_signal(sig)
+            self.proc.wait(timeout=60)
+        self.log.close()
+        return self.proc.returncode
+
+
+def load_scan(frame):
+    pts = np.fromfile(os.path.join(SEQ, "velodyne", frame + ".bin"), dtype="<f4").reshape(-1, 4)[:, :3]
+    lab = np.fromfile(os.path.join(SEQ, "labels", frame + ".label"), dtype="<u4")
+    return pb.Scan(points=np.ascontiguousarray(pts).tobytes(), labels=lab.tobytes())
+
+
+def synthetic_scan(n=2000, seed=0):
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-20, 20, size=(n, 3)).astype("<f4")
+    lab = rng.choice(np.array([40, 50, 70, 80, 10], dtype="<u4"), size=n)
+    return pb.Scan(points=pts.tobytes(), labels=lab.tobytes())
+
+
+def reference_pose():
+    with open(os.path.join(DATA, "semantickitti_scans", "pairs.txt")) as f:
+        for line in f:
+            c = line.split()
+            if c and c[0] == "00" and c[1] == "000052" and c[2] == "004501":
+                T = np.eye(4)
+                T[:3, :] = np.array([float(v) for v in c[7:19]]).reshape(3, 4)
+                return T
+    raise RuntimeError("pairs.txt has no 52-4501 row")
+
+
+def pose_error(T, G):
+    dt = np.linalg.norm(T[:3, 3] - G[:3, 3])
+    c = (np.trace(T[:3, :3].T @ G[:3, :3]) - 1) / 2
+    return dt, np.degrees(np.arccos(np.clip(c, -1, 1)))
+
+
+def key(robot, seq, session="run", m="m"):
+    return pb.ScanKey(map=m, robot=robot, session=session, seq=seq)
+
+
+def expect_code(code, fn, what):
+    try:
+        fn()
+    except grpc.RpcError as e:
+        assert e.code() == code, f"{what}: expected {code}, got {e.code()}: {e.details()}"
+        assert e.details(), f"{what}: the status has no message"
+        return e.details()
+    raise AssertionError(f"{what}: expected {code}, the call succeeded")
+
+
+# ------------------------------------------------------------------------------------------------ tests
+
+def test_inter_robot_loop_and_restart(tmp):
+    if not HAVE_DATA:
+        print("  skipped: real scans absent")
+        return
+    db = os.path.join(tmp, "map.db")
+    s = Server(db)
+    try:
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=load_scan("004501"), query=True))
+        assert r_b.scan_id > 0 and len(r_b.loops) == 0, "the first scan has no loop"
+        opts = pb.QueryOptions(scope=pb.SCOPE_OTHER_ROBOTS, top_k=3)
+        r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=load_scan("000052"), query=True,
+                                             query_options=opts))
+        assert len(r_a.loops) == 1, f"expected the inter-robot loop, got {len(r_a.loops)}"
+        loop = r_a.loops[0]
+        assert loop.scan_id == r_b.scan_id and loop.robot == "b" and loop.verified and loop.refined
+        T = np.array(loop.t_query_candidate.m).reshape(4, 4)  # maps b (candidate) into a (query)
+        dt, dr = pose_error(T, reference_pose())
+        assert dt < 0.10 and dr < 0.5, f"pose error {dt:.3f} m {dr:.3f} deg"
+        print(f"  inter-robot loop: score {loop.score:.3f}, inliers {loop.inliers}, RTE {dt:.4f} m, RRE {dr:.4f} deg")
+        # Same-robot scope finds nothing; query by stored id finds the other scan with the inverse pose.
+        same = s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
+                                            options=pb.QueryOptions(scope=pb.SCOPE_SAME_ROBOT)))
+        assert len(same.candidates) == 0
+        by_id = s.loop.Query(pb.QueryRequest(map="m", scan_id=r_b.scan_id))
+        assert [c.scan_id for c in by_id.candidates] == [r_a.scan_id]
+        Tba = np.array(by_id.candidates[0].t_query_candidate.m).reshape(4, 4)
+        dt, dr = pose_error(np.linalg.inv(Tba), reference_pose())
+        assert dt < 0.10 and dr < 0.5, f"reverse query pose error {dt:.3f} m {dr:.3f} deg"
+        # Relocalization: a scan sent in the call, nothing stored.
+        # Scan 52 itself is stored as robot a: it comes first with an identity pose, then b's scan.
+        reloc = s.loop.Query(pb.QueryRequest(map="m", scan=load_scan("000052")))
+        assert [c.scan_id for c in reloc.candidates] == [r_a.scan_id, r_b.scan_id], reloc
+        dt, dr = pose_error(np.array(reloc.candidates[0].t_query_candidate.m).reshape(4, 4), np.eye(4))
+        assert dt < 0.01 and dr < 0.05, f"self-relocalization is off by {dt:.4f} m {dr:.4f} deg"
+        stats_before = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+        assert stats_before.scans == 2 and stats_before.robots == 2
+        answer_before = [(c.scan_id, round(c.score, 9), tuple(round(v, 9) for v in c.t_query_candidate.m))
+                         for c in s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id)).candidates]
+    finally:
+        # A crash, not a clean shutdown: every acknowledged scan must survive.
+        s.stop(signal.SIGKILL)
+    s = Server(db)
+    try:
+        st = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+        assert st.scans == 2 and st.index_entries == 2, f"after restart: {st}"
+        answer_after = [(c.scan_id, round(c.score, 9), tuple(round(v, 9) for v in c.t_query_candidate.m))
+                        for c in s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id)).candidates]
+        assert answer_after == answer_before, "answers changed across a restart"
+        info = s.admin.GetScan(pb.GetScanRequest(scan_id=r_a.scan_id, include_graph=True))
+        assert info.key.robot == "a" and info.key.seq == 52 and len(info.nodes) > 10
+        assert len(info.scan_descriptor) == 231
+    finally:
+        assert s.stop() == 0, "graceful shutdown exits 0"
+
+
+def test_bad_inputs(tmp):
+    s = Server(os.path.join(tmp, "bad.db"), extra=["--max-message-mb", "1"])
+    try:
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        good = synthetic_scan()
+        C = grpc.StatusCode
+        cases = [
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("r", 1), scan=pb.Scan(points=b"\0" * 13, labels=b"")),
+             "12"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("r", 1), scan=pb.Scan(points=b"\0" * 24, labels=b"\0" * 4)),
+             "labels"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("r", 1), scan=pb.Scan()), "empty"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(
+                key=key("r", 1),
+                scan=pb.Scan(points=np.array([[0, 0, np.nan]], dtype="<f4").tobytes(), labels=b"\0" * 4)), "finite"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("", 1), scan=good), "robot"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("r", 1), scan=good,
+                                                  odometry_pose=pb.Transform(m=[1.0] * 5)), "16"),
+            (C.NOT_FOUND, pb.IngestRequest(key=key("r", 1, m="nomap"), scan=good), "nomap"),
+            (C.INVALID_ARGUMENT, pb.IngestRequest(key=key("r", 1), scan=good, query=True,
+                                                  query_options=pb.QueryOptions(top_k=1000)), "top_k"),
+        ]
+        for code, req, word in cases:
+            msg = expect_code(code, lambda: s.loop.Ingest(req, timeout=30), f"ingest ({word})")
+            assert word.lower() in msg.lower(), f"message '{msg}' does not mention '{word}'"
+        # Oversized message: refused by the transport.
+        big = pb.Scan(points=b"\0" * (12 * 100000), labels=b"\0" * (4 * 100000))
+        expect_code(C.RESOURCE_EXHAUSTED, lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 1), scan=big)),
+                    "oversized message")
+        # Duplicate key.
+        s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good))
+        expect_code(C.ALREADY_EXISTS, lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good)),
+                    "duplicate key")
+        expect_code(C.NOT_FOUND, lambda: s.loop.Query(pb.QueryRequest(map="m", scan_id=999999)), "unknown scan")
+        expect_code(C.INVALID_ARGUMENT, lambda: s.loop.Query(pb.QueryRequest(map="m")), "query without source")
+        expect_code(C.INVALID_ARGUMENT, lambda: s.loop.Query(pb.QueryRequest(
+            map="m", scan=good, options=pb.QueryOptions(scope=pb.SCOPE_SAME_ROBOT))), "same-robot scope without robot")
+        expect_code(C.NOT_FOUND, lambda: s.admin.ListRobots(pb.ListRobotsRequest(map="nomap")), "unknown map")
+        expect_code(C.NOT_FOUND, lambda: s.admin.DeleteRobot(pb.DeleteRobotRequest(map="m", robot="ghost")),
+                    "unknown robot")
+        expect_code(C.INVALID_ARGUMENT, lambda: s.admin.Backup(pb.BackupRequest(path="/etc/x.db")), "absolute path")
+        # Chunked ingest: a header plus two chunks make a valid scan; a bad concatenation is refused.
+        n = 3000
+        pts = np.random.default_rng(1).uniform(-10, 10, (n, 3)).astype("<f4").tobytes()
+        lab = np.full(n, 40, dtype="<u4").tobytes()
+        chunks = [pb.IngestChunk(header=pb.IngestRequest(key=key("r", 100))),
+                  pb.IngestChunk(points=pts[:12 * 1000], labels=lab[:4 * 1000]),
+                  pb.IngestChunk(points=pts[12 * 1000:], labels=lab[4 * 1000:])]
+        assert s.loop.IngestChunked(iter(chunks)).scan_id > 0
+        bad_chunks = [pb.IngestChunk(header=pb.IngestRequest(key=key("r", 101))), pb.IngestChunk(points=pts[:7])]
+        expect_code(C.INVALID_ARGUMENT, lambda: s.loop.IngestChunked(iter(bad_chunks)), "torn chunks")
+        # Nothing was stored by any failed call: two good scans only.
+        st = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+        assert st.scans == 2 and st.index_entries == 2, f"stored after failures: {st}"
+        # Deadline: far too short for fingerprinting; the scan must not be stored.
+        expect_code(C.DEADLINE_EXCEEDED,
+                    lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 200), scan=synthetic_scan(60000)),
+                                          timeout=0.002), "deadline")
+        time.sleep(0.5)
+        assert s.admin.GetStats(pb.GetStatsRequest(map="m")).scans == 2, "a timed-out ingest was stored"
+    finally:
+        assert s.stop() == 0
+
+
+def test_tokens(tmp):
+    tokens = os.path.join(tmp, "tokens.txt")
+    with open(tokens, "w") as f:
+        f.write("# admin\nadmin-token-123 *\nfleet-token-456 m\n")
+    s = Server(os.path.join(tmp, "auth.db"), extra=["--tokens", tokens])
+    try:
+        C = grpc.StatusCode
+        admin = [("authorization", "Bearer admin-token-123")]
+        fleet = [("authorization", "Bearer fleet-token-456")]
+        expect_code(C.UNAUTHENTICATED, lambda: s.admin.ListMaps(pb.ListMapsRequest()), "no token")
+        expect_code(C.UNAUTHENTICATED, lambda: s.admin.ListMaps(
+            pb.ListMapsRequest(), metadata=[("authorization", "Bearer wrong-token-0")]), "wrong token")
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"), metadata=admin)
+        s.admin.CreateMap(pb.CreateMapRequest(name="secret"), metadata=admin)
+        assert [m.name for m in s.admin.ListMaps(pb.ListMapsRequest(), metadata=fleet).maps] == ["m"]
+        s.loop.Ingest(pb.IngestRequest(key=key("r", 1), scan=synthetic_scan()), metadata=fleet)
+        expect_code(C.PERMISSION_DENIED, lambda: s.loop.Ingest(
+            pb.IngestRequest(key=key("r", 1, m="secret"), scan=synthetic_scan()), metadata=fleet), "other map")
+        expect_code(C.PERMISSION_DENIED, lambda: s.admin.Backup(pb.BackupRequest(path="b.db"), metadata=fleet),
+                    "backup needs all maps")
+        r = s.admin.Backup(pb.BackupRequest(path="b.db"), metadata=admin)
+        assert r.bytes > 0 and os.path.exists(r.path)
+    finally:
+        assert s.stop() == 0
+
+
+def test_concurrent_clients(tmp):
+    s = Server(os.path.join(tmp, "conc.db"))
+    try:
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        errors, done = [], []
+
+        def robot(i):
+            try:
+                ch = grpc.insecure_channel(s.addr)
+                stub = rpc.LoopClosureStub(ch)
+                reqs = [pb.IngestRequest(key=key(f"r{i}", q), scan=synthetic_scan(3000, seed=100 * i + q), query=True)
+                        for q in range(8)]
+                seqs = [r.seq for r in stub.IngestStream(iter(reqs), timeout=120)]
+                if seqs != list(range(8)):
+                    errors.append(f"robot {i}: responses out of order {seqs}")
+                for q in range(8):
+                    stub.Query(pb.QueryRequest(map="m", scan=synthetic_scan(3000, seed=100 * i + q)), timeout=60)
+                ch.close()
+                done.append(i)
+            except Exception as e:  # noqa: BLE001
+                errors.append(f"robot {i}: {e}")
+
+        threads = [threading.Thread(target=robot, args=(i,)) for i in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=180)
+        assert not errors, errors
+        assert len(done) == 6
+        st = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+        assert st.scans == 48 and st.robots == 6 and st.index_entries == 48, st
+    finally:
+        assert s.stop() == 0
+
+
+def main():
+    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients]
+    passed = failed = 0
+    for t in tests:
+        tmp = tempfile.mkdtemp(prefix="sglc-server-test-")
+        try:
+            print(f"{t.__name__}:")
+            t(tmp)
+            passed += 1
+            print("  ok")
+        except Exception:  # noqa: BLE001
+            failed += 1
+            traceback.print_exc()
+            for log in [f for f in os.listdir(tmp) if f.endswith(".log")]:
+                print(f"--- {log} (last lines)")
+                print("".join(open(os.path.join(tmp, log), errors="replace").readlines()[-15:]))
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    print(f"{passed} passed, {failed} failed")
+    sys.exit(1 if failed else 0)
+
+
+if __name__ == "__main__":
+    main()
