@@ -5,9 +5,15 @@ set -euo pipefail
 
 PACKAGES=(
   build-essential cmake ninja-build pkg-config git
+  # engine
   libeigen3-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev zlib1g-dev
+  # map database: SQLite + FAISS (OpenBLAS makes FAISS's BLAS calls far faster than the reference BLAS)
+  libsqlite3-dev libfaiss-dev libopenblas0-pthread
+  # service
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
+  # tests, benchmarks, Python clients and plots
   libgtest-dev libgmock-dev libbenchmark-dev
-  python3 python3-numpy
+  python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib
 )
 
 missing=()
