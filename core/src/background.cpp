@@ -2,6 +2,8 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
+#include <tuple>
 #include <cmath>
 #include <numbers>
 
@@ -73,6 +75,7 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
   struct Acc {
     int n = 0;
     Vec3f corner = Vec3f::Zero();  // sums are taken relative to the voxel corner, so floats suffice
+    std::array<int, 3> cell{0, 0, 0};
     float s[3] = {0, 0, 0};
     float ss[6] = {0, 0, 0, 0, 0, 0};  // xx, xy, xz, yy, yz, zz
     int votes[5] = {0, 0, 0, 0, 0};
@@ -98,6 +101,7 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
       if (inserted) {
         acc.emplace_back();
         acc.back().corner = Vec3f(cx * voxel, cy * voxel, cz * voxel);
+        acc.back().cell = {cx, cy, cz};
       }
       last_key = key;
     }
@@ -116,8 +120,17 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
     ++a.votes[static_cast<int>(b)];
   }
   const double max_var = config.plane_max_thickness_m * config.plane_max_thickness_m;
+  // Emit in voxel order (z, y, x), so the result does not depend on the order of the points.
+  std::vector<std::size_t> order(acc.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+    const auto& a = acc[x].cell;
+    const auto& b = acc[y].cell;
+    return std::tie(a[2], a[1], a[0]) < std::tie(b[2], b[1], b[0]);
+  });
   std::vector<Plane> planes;
-  for (const Acc& a : acc) {
+  for (std::size_t idx : order) {
+    const Acc& a = acc[idx];
     if (a.n < config.plane_min_points) continue;
     const Vec3d mean = Vec3d(a.s[0], a.s[1], a.s[2]) / a.n;
     Mat3d cov;

@@ -31,10 +31,12 @@ void unite(std::vector<int>& parent, int a, int b) {
 std::vector<Cluster> clusterInstances(const Points& points, const std::vector<std::int8_t>& point_class,
                                       const ClusterConfig& config) {
   constexpr float kPi = std::numbers::pi_v<float>;
-  const float az_step = static_cast<float>(config.azimuth_deg * std::numbers::pi / 180.0);
   const float el_step = static_cast<float>(config.elevation_deg * std::numbers::pi / 180.0);
   const float inv_range = static_cast<float>(1.0 / config.range_m);
-  const int n_az = static_cast<int>(std::ceil(2.0 * std::numbers::pi / (az_step)));
+  // A whole number of azimuth sectors (the width is adjusted to divide the circle), so that the first and the
+  // last sector really are neighbours across the +-pi cut.
+  const int n_az = std::max(1, static_cast<int>(std::lround(360.0 / config.azimuth_deg)));
+  const float az_scale = static_cast<float>(n_az / (2.0 * std::numbers::pi));
   const float max_range2 = static_cast<float>(config.max_range_m * config.max_range_m);
 
   struct Voxel {
@@ -53,7 +55,7 @@ std::vector<Cluster> clusterInstances(const Points& points, const std::vector<st
     if (rho2 > max_range2 || rho2 < 1e-6f) continue;
     const float rho = std::sqrt(rho2);
     Voxel v;
-    v.az = std::min(static_cast<int>((detail::fastAtan2(p.y(), p.x()) + kPi) / az_step), n_az - 1);
+    v.az = std::min(static_cast<int>((detail::fastAtan2(p.y(), p.x()) + kPi) * az_scale), n_az - 1);
     v.r = static_cast<int>(rho * inv_range);
     v.el = static_cast<int>((detail::fastAtan2(p.z(), rho) + kPi / 2) / el_step);
     v.cls = cls;

@@ -185,7 +185,7 @@ Config parseConfig(const std::string& yaml_text) {
 std::string dumpConfig(const Config& config) {
   Config copy = config;
   YAML::Emitter out;
-  out.SetDoublePrecision(15);
+  out.SetDoublePrecision(17);  // exact round trip of every double
   out << YAML::BeginMap;
   std::string section;
   out << YAML::Key << "labels" << YAML::Value << YAML::BeginMap;

@@ -140,20 +140,27 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   fp.d_i = r.f32();
   fp.background_cell = r.f32();
   fp.plane_voxel = r.f32();
-  if (!(fp.d_max > 0 && fp.d_i > 0 && fp.background_cell > 0 && fp.plane_voxel > 0))
+  // The same ranges validateConfig enforces, and a layout that agrees with them: derived data (node
+  // descriptors, plane lookup) is rebuilt from these values on load.
+  if (!(fp.d_max > 0 && fp.d_max < 1000 && fp.d_i > 0 && fp.d_max / fp.d_i <= 1000 && fp.background_cell >= 0.05f &&
+        fp.plane_voxel > 0.05f && fp.layout.k_eigen <= 1000 && fp.layout.rings <= 1000))
     throw InputError("fingerprint: invalid geometry parameters");
+  if (fp.layout.bins != static_cast<int>(std::ceil(static_cast<double>(fp.d_max) / fp.d_i - 1e-9)))
+    throw InputError("fingerprint: descriptor bins do not match d_max / d_i");
   fp.num_points = r.get<std::uint32_t>();
   const auto n_nodes = r.count(29);
   fp.nodes.resize(n_nodes);
   fp.instance_offsets.assign(1, 0);
+  std::uint64_t total_points = 0;
   for (auto& n : fp.nodes) {
     for (int k = 0; k < 3; ++k) n.center[k] = r.f32();
     for (int k = 0; k < 3; ++k) n.size[k] = r.f32();
     n.cls = r.get<std::uint8_t>();
     if (n.cls >= fp.layout.num_classes) throw InputError("fingerprint: node class out of range");
     const auto count = r.get<std::uint32_t>();
-    if (count > (1u << 24)) throw InputError("fingerprint: implausible instance size");
-    fp.instance_offsets.push_back(fp.instance_offsets.back() + count);
+    total_points += count;
+    if (count > (1u << 24) || total_points > (1u << 26)) throw InputError("fingerprint: implausible instance size");
+    fp.instance_offsets.push_back(static_cast<std::uint32_t>(total_points));
   }
   r.need(static_cast<std::size_t>(fp.instance_offsets.back()) * 6);
   fp.instance_points.resize(fp.instance_offsets.back());

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -9,9 +10,12 @@ namespace sglc {
 namespace {
 
 std::vector<char> readAll(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path + ": is a directory, not a file");
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
   const std::streamsize size = in.tellg();
+  if (size < 0) throw InputError(path + ": cannot determine the file size");
   in.seekg(0);
   std::vector<char> data(static_cast<std::size_t>(size));
   if (size > 0 && !in.read(data.data(), size)) throw InputError(path + ": read failed");

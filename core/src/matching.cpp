@@ -36,7 +36,15 @@ std::vector<int> hungarian(const Eigen::MatrixXd& cost) {
   const int rows = static_cast<int>(cost.rows()), cols = static_cast<int>(cost.cols());
   if (rows == 0 || cols == 0) return std::vector<int>(rows, -1);
   const bool transposed = rows > cols;
-  const Eigen::MatrixXd a = transposed ? Eigen::MatrixXd(cost.transpose()) : cost;
+  Eigen::MatrixXd a = transposed ? Eigen::MatrixXd(cost.transpose()) : cost;
+  // Non-finite costs (the usual way to forbid a pair) become a large finite one, so potentials stay finite;
+  // the caller sees forbidden pairs by their cost.
+  double finite_max = 0;
+  for (Eigen::Index k = 0; k < a.size(); ++k)
+    if (std::isfinite(a.data()[k])) finite_max = std::max(finite_max, std::abs(a.data()[k]));
+  const double big = (finite_max + 1.0) * static_cast<double>(a.rows() + 1);
+  for (Eigen::Index k = 0; k < a.size(); ++k)
+    if (!std::isfinite(a.data()[k])) a.data()[k] = big;
   const int n = static_cast<int>(a.rows()), m = static_cast<int>(a.cols());  // n <= m
   constexpr double kInf = std::numeric_limits<double>::infinity();
   // Shortest augmenting paths with row/column potentials (u, v); column 0 is a virtual start.

@@ -36,6 +36,8 @@ void downsampleInstance(const Points& points, const Cluster& cluster, double vox
   }
 }
 
+constexpr float kMaxCoordinate = 320.0f;
+
 bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
   return a.layout.num_classes == b.layout.num_classes && a.layout.bins == b.layout.bins &&
          a.layout.k_eigen == b.layout.k_eigen && a.layout.rings == b.layout.rings && a.d_max == b.d_max &&
@@ -66,6 +68,8 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3f& p = scan.points[i];
     if (!p.allFinite()) throw InputError("point " + std::to_string(i) + " has a non-finite coordinate");
+    // Fingerprints keep centimetres in 16 bits: points beyond +-320 m on any axis cannot be landmarks.
+    if (p.cwiseAbs().maxCoeff() > kMaxCoordinate) continue;
     const int role = labels_.role(scan.labels[i]);
     if (role >= 0) {
       node_points.push_back(p);

@@ -1,0 +1,61 @@
+// A SemanticKITTI-layout sequence directory, as `sglc ingest` reads it:
+//
+//   DIR/velodyne/NNNNNN.bin    KITTI scans (float32 x, y, z, reflectance)
+//   DIR/labels/NNNNNN.label    SemanticKITTI labels (uint32 per point); required for every selected scan
+//   DIR/poses.txt              optional: odometry poses (KITTI format, 3x4 row-major per line), in frame order
+//   DIR/times.txt              optional: one timestamp in seconds per line, in frame order
+//
+// "In frame order" means line i belongs to frame number i (the KITTI convention, which needs at least
+// highest-frame-number + 1 lines). A file with exactly one line per .bin present is also accepted and then
+// read by position (line k belongs to the k-th frame in ascending order), for directories that hold a
+// subset of a sequence with a matching subset of poses. Anything else is an error.
+//
+// Poses are passed on unchanged; KITTI's own poses.txt is in the left camera's frame, not the LiDAR's.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sglc/types.hpp"
+
+namespace sglc::client {
+
+// An inclusive range of frame numbers; an unset end is open.
+struct FrameRange {
+  std::optional<std::int64_t> first;
+  std::optional<std::int64_t> last;
+  bool contains(std::int64_t frame) const {
+    return (!first || frame >= *first) && (!last || frame <= *last);
+  }
+};
+
+// "a:b" (both inclusive), "a:" (from a), ":b" (up to b), "a" (only a). Throws InputError otherwise.
+FrameRange parseFrameRange(const std::string& text);
+
+struct SequenceFrame {
+  std::string name;          // file stem, e.g. "000720"
+  std::int64_t number = 0;   // 720
+  std::string bin_path;
+  std::string label_path;
+  std::optional<Mat4d> pose;
+  std::optional<double> stamp;
+};
+
+struct Sequence {
+  std::string dir;
+  std::string name;  // the directory's base name ("00" for .../sequences/00/)
+  std::vector<SequenceFrame> frames;  // selected frames, ascending
+  std::size_t frames_in_dir = 0;      // before selection
+  bool has_poses = false;
+  bool has_stamps = false;
+};
+
+// Lists the selected frames: those in `range`, then every `every`-th of them (the first, the
+// every+1-th, ...). Throws InputError when the directory is not a sequence, `every` < 1, nothing is
+// selected, a selected scan has no label file, or poses.txt / times.txt cannot be read or do not match.
+// Scans themselves are not read.
+Sequence openSequence(const std::string& dir, const FrameRange& range = {}, int every = 1);
+
+}  // namespace sglc::client

@@ -1,0 +1,144 @@
+#include "sglc/client/packing.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+namespace sglc::client {
+
+namespace {
+
+static_assert(sizeof(float) == 4 && sizeof(double) == 8, "IEEE-754 single and double precision expected");
+static_assert(sizeof(Vec3f) == 3 * sizeof(float), "Eigen::Vector3f must be three packed floats");
+static_assert(std::endian::native == std::endian::little || std::endian::native == std::endian::big,
+              "mixed-endian hosts are not supported");
+
+constexpr bool kLittleHost = std::endian::native == std::endian::little;
+
+std::uint32_t byteSwap32(std::uint32_t v) {
+  return ((v & 0x000000FFu) << 24) | ((v & 0x0000FF00u) << 8) | ((v & 0x00FF0000u) >> 8) | ((v & 0xFF000000u) >> 24);
+}
+
+// Copies `count` 4-byte words from src to dst, converting between host order and little-endian.
+void copyWordsLittleEndian(void* dst, const void* src, std::size_t count) {
+  if (count == 0) return;
+  if constexpr (kLittleHost) {
+    std::memcpy(dst, src, count * 4);
+  } else {
+    auto* d = static_cast<unsigned char*>(dst);
+    const auto* s = static_cast<const unsigned char*>(src);
+    for (std::size_t i = 0; i < count; ++i) {
+      std::uint32_t w;
+      std::memcpy(&w, s + 4 * i, 4);
+      w = byteSwap32(w);
+      std::memcpy(d + 4 * i, &w, 4);
+    }
+  }
+}
+
+}  // namespace
+
+std::string packPoints(const Points& points) {
+  std::string out(points.size() * kPointBytes, '\0');
+  copyWordsLittleEndian(out.data(), points.data(), points.size() * 3);
+  return out;
+}
+
+std::string packLabels(const std::vector<std::uint32_t>& labels) {
+  std::string out(labels.size() * kLabelBytes, '\0');
+  copyWordsLittleEndian(out.data(), labels.data(), labels.size());
+  return out;
+}
+
+Points unpackPoints(const std::string& bytes) {
+  if (bytes.size() % kPointBytes != 0)
+    throw InputError("points: " + std::to_string(bytes.size()) +
+                     " bytes is not a multiple of 12 (float32 x, y, z per point)");
+  Points points(bytes.size() / kPointBytes);
+  copyWordsLittleEndian(points.data(), bytes.data(), points.size() * 3);
+  return points;
+}
+
+std::vector<std::uint32_t> unpackLabels(const std::string& bytes) {
+  if (bytes.size() % kLabelBytes != 0)
+    throw InputError("labels: " + std::to_string(bytes.size()) + " bytes is not a multiple of 4 (uint32 per point)");
+  std::vector<std::uint32_t> labels(bytes.size() / kLabelBytes);
+  copyWordsLittleEndian(labels.data(), bytes.data(), labels.size());
+  return labels;
+}
+
+void packScan(const LabelledScan& scan, v1::Scan* out) {
+  if (scan.points.size() != scan.labels.size())
+    throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
+                     std::to_string(scan.labels.size()) + " labels");
+  *out->mutable_points() = packPoints(scan.points);
+  *out->mutable_labels() = packLabels(scan.labels);
+}
+
+v1::Scan packScan(const LabelledScan& scan) {
+  v1::Scan out;
+  packScan(scan, &out);
+  return out;
+}
+
+LabelledScan unpackScan(const v1::Scan& scan) {
+  LabelledScan out;
+  out.points = unpackPoints(scan.points());
+  out.labels = unpackLabels(scan.labels());
+  if (out.points.size() != out.labels.size())
+    throw InputError("scan has " + std::to_string(out.points.size()) + " points but " +
+                     std::to_string(out.labels.size()) + " labels");
+  return out;
+}
+
+void toTransform(const Mat4d& T, v1::Transform* out) {
+  out->clear_m();
+  out->mutable_m()->Reserve(16);
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) out->add_m(T(r, c));
+}
+
+v1::Transform toTransform(const Mat4d& T) {
+  v1::Transform out;
+  toTransform(T, &out);
+  return out;
+}
+
+Mat4d toMatrix(const v1::Transform& t) {
+  if (t.m_size() != 16)
+    throw InputError("transform has " + std::to_string(t.m_size()) + " values, expected 16 (row-major 4x4)");
+  Mat4d T;
+  for (int k = 0; k < 16; ++k) {
+    if (!std::isfinite(t.m(k))) throw InputError("transform value " + std::to_string(k) + " is not finite");
+    T(k / 4, k % 4) = t.m(k);
+  }
+  return T;
+}
+
+std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, std::size_t max_chunk_bytes) {
+  const std::string& points = request.scan().points();
+  const std::string& labels = request.scan().labels();
+  if (points.size() % kPointBytes != 0 || labels.size() % kLabelBytes != 0 ||
+      points.size() / kPointBytes != labels.size() / kLabelBytes)
+    throw InputError("cannot chunk a malformed scan: " + std::to_string(points.size()) + " point bytes, " +
+                     std::to_string(labels.size()) + " label bytes");
+  const std::size_t n = points.size() / kPointBytes;
+  const std::size_t per_chunk = std::max<std::size_t>(1, max_chunk_bytes / (kPointBytes + kLabelBytes));
+
+  std::vector<v1::IngestChunk> chunks;
+  chunks.reserve(1 + (n + per_chunk - 1) / per_chunk);
+  v1::IngestChunk& first = chunks.emplace_back();
+  *first.mutable_header() = request;
+  first.mutable_header()->mutable_scan()->clear_points();
+  first.mutable_header()->mutable_scan()->clear_labels();
+  for (std::size_t begin = 0; begin < n; begin += per_chunk) {
+    const std::size_t count = std::min(per_chunk, n - begin);
+    v1::IngestChunk& chunk = chunks.emplace_back();
+    chunk.set_points(points.substr(begin * kPointBytes, count * kPointBytes));
+    chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));
+  }
+  return chunks;
+}
+
+}  // namespace sglc::client

@@ -1,0 +1,148 @@
+#include "sglc/client/sequence.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "sglc/io.hpp"
+
+namespace sglc::client {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+bool allDigits(const std::string& s) {
+  return !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
+}
+
+std::int64_t parseFrameNumber(const std::string& text, const std::string& whole) {
+  if (!allDigits(text) || text.size() > 12)
+    throw InputError("bad frame range '" + whole + "': '" + text + "' is not a frame number (expected a:b, a:, :b or a)");
+  return std::stoll(text);
+}
+
+std::vector<double> readStamps(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::vector<double> stamps;
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
+    std::istringstream ss(line);
+    double v;
+    std::string extra;
+    if (!(ss >> v) || (ss >> extra) || !std::isfinite(v))
+      throw InputError(path + ":" + std::to_string(line_no) + ": expected one timestamp in seconds");
+    stamps.push_back(v);
+  }
+  return stamps;
+}
+
+// Index into a per-frame file (poses.txt, times.txt) for each frame, per the rule in sequence.hpp.
+enum class Indexing { kByNumber, kByPosition };
+
+Indexing chooseIndexing(const std::string& path, std::size_t lines, std::int64_t max_frame, std::size_t frames) {
+  if (lines > static_cast<std::size_t>(max_frame)) return Indexing::kByNumber;
+  if (lines == frames) return Indexing::kByPosition;
+  throw InputError(path + ": " + std::to_string(lines) + " lines, but frames go up to " + std::to_string(max_frame) +
+                   " (" + std::to_string(frames) + " scans in the directory); expected one line per frame number or per scan");
+}
+
+}  // namespace
+
+FrameRange parseFrameRange(const std::string& text) {
+  FrameRange range;
+  const auto colon = text.find(':');
+  if (colon == std::string::npos) {
+    range.first = range.last = parseFrameNumber(text, text);
+    return range;
+  }
+  const std::string a = text.substr(0, colon), b = text.substr(colon + 1);
+  if (a.empty() && b.empty()) throw InputError("bad frame range ':' (expected a:b, a:, :b or a)");
+  if (!a.empty()) range.first = parseFrameNumber(a, text);
+  if (!b.empty()) range.last = parseFrameNumber(b, text);
+  if (range.first && range.last && *range.first > *range.last)
+    throw InputError("bad frame range '" + text + "': first frame after last");
+  return range;
+}
+
+Sequence openSequence(const std::string& dir, const FrameRange& range, int every) {
+  if (every < 1) throw InputError("--every must be at least 1 (got " + std::to_string(every) + ")");
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw InputError(dir + ": not a directory");
+  const fs::path root(dir);
+  const fs::path velodyne = root / "velodyne";
+  if (!fs::is_directory(velodyne, ec))
+    throw InputError(dir + ": no velodyne/ directory (expected SemanticKITTI layout: velodyne/NNNNNN.bin, labels/NNNNNN.label)");
+
+  Sequence seq;
+  seq.dir = dir;
+  seq.name = fs::weakly_canonical(root, ec).filename().string();
+  if (ec || seq.name.empty() || seq.name == "." || seq.name == "..")
+    seq.name = root.lexically_normal().filename().string();
+
+  std::vector<SequenceFrame> all;
+  for (const auto& entry : fs::directory_iterator(velodyne, ec)) {
+    const fs::path& p = entry.path();
+    if (p.extension() != ".bin" || !allDigits(p.stem().string())) continue;
+    SequenceFrame f;
+    f.name = p.stem().string();
+    if (f.name.size() > 12) continue;
+    f.number = std::stoll(f.name);
+    f.bin_path = p.string();
+    f.label_path = (root / "labels" / (f.name + ".label")).string();
+    all.push_back(std::move(f));
+  }
+  if (ec) throw InputError(velodyne.string() + ": cannot list (" + ec.message() + ")");
+  if (all.empty()) throw InputError(velodyne.string() + ": no NNNNNN.bin scans");
+  std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.number < b.number; });
+  for (std::size_t i = 1; i < all.size(); ++i)
+    if (all[i].number == all[i - 1].number)
+      throw InputError(velodyne.string() + ": " + all[i - 1].name + ".bin and " + all[i].name +
+                       ".bin have the same frame number");
+  seq.frames_in_dir = all.size();
+  const std::int64_t max_frame = all.back().number;
+
+  const fs::path poses_path = root / "poses.txt";
+  if (fs::exists(poses_path, ec)) {
+    const auto poses = readPoses(poses_path.string());
+    const auto how = chooseIndexing(poses_path.string(), poses.size(), max_frame, all.size());
+    for (std::size_t i = 0; i < all.size(); ++i)
+      all[i].pose = poses[how == Indexing::kByNumber ? static_cast<std::size_t>(all[i].number) : i];
+    seq.has_poses = true;
+  }
+  const fs::path times_path = root / "times.txt";
+  if (fs::exists(times_path, ec)) {
+    const auto stamps = readStamps(times_path.string());
+    const auto how = chooseIndexing(times_path.string(), stamps.size(), max_frame, all.size());
+    for (std::size_t i = 0; i < all.size(); ++i)
+      all[i].stamp = stamps[how == Indexing::kByNumber ? static_cast<std::size_t>(all[i].number) : i];
+    seq.has_stamps = true;
+  }
+
+  std::size_t in_range = 0;
+  for (auto& f : all) {
+    if (!range.contains(f.number)) continue;
+    if (in_range++ % static_cast<std::size_t>(every) == 0) seq.frames.push_back(std::move(f));
+  }
+  if (seq.frames.empty()) {
+    std::string sel = (range.first ? std::to_string(*range.first) : "") + ":" + (range.last ? std::to_string(*range.last) : "");
+    throw InputError(velodyne.string() + ": no scans in frame range " + sel + " (scans there go from " +
+                     std::to_string(all.front().number) + " to " + std::to_string(max_frame) + ")");
+  }
+  for (const auto& f : seq.frames)
+    if (!fs::is_regular_file(f.label_path, ec))
+      throw InputError(f.label_path + ": missing (every scan needs its SemanticKITTI labels)");
+  return seq;
+}
+
+}  // namespace sglc::client

@@ -1,0 +1,105 @@
+// `sglc` command-line errors that need no server: every one exits non-zero with exactly one line on
+// stderr that says what is wrong, and prints nothing on stdout.
+#include <gtest/gtest.h>
+
+#include "client_test_util.hpp"
+
+namespace t = sglc::client::test;
+
+namespace {
+
+// Runs sglc with arguments and checks the one-line-error contract; returns the error line.
+std::string expectOneLineError(const std::vector<std::string>& args, const std::string& must_mention) {
+  std::vector<std::string> argv = {t::cliBinary()};
+  argv.insert(argv.end(), args.begin(), args.end());
+  const auto r = t::run(argv);
+  std::string joined;
+  for (const auto& a : args) joined += " " + a;
+  EXPECT_NE(r.exit_code, 0) << "sglc" << joined;
+  EXPECT_NE(r.exit_code, -1) << "sglc" << joined << " crashed or hung";
+  const auto err = t::lines(r.err);
+  EXPECT_EQ(err.size(), 1u) << "sglc" << joined << " stderr: " << r.err;
+  EXPECT_EQ(r.out, "") << "sglc" << joined;
+  const std::string line = err.empty() ? "" : err[0];
+  EXPECT_EQ(line.rfind("sglc: error: ", 0), 0u) << line;
+  EXPECT_NE(line.find(must_mention), std::string::npos) << "sglc" << joined << ": '" << line << "' lacks '"
+                                                         << must_mention << "'";
+  return line;
+}
+
+// A sequence directory with one (tiny, valid) scan.
+std::string tinySequence(const t::TempDir& tmp) {
+  const auto dir = tmp.path() / "seq";
+  std::filesystem::create_directories(dir / "velodyne");
+  std::filesystem::create_directories(dir / "labels");
+  sglc::writeKittiBin((dir / "velodyne/000000.bin").string(), {{1, 2, 3}}, {0.5f});
+  sglc::writeLabels((dir / "labels/000000.label").string(), {40});
+  return dir.string();
+}
+
+}  // namespace
+
+TEST(CliErrors, CommandLineMistakes) {
+  expectOneLineError({}, "subcommand");
+  expectOneLineError({"frobnicate"}, "frobnicate");
+  expectOneLineError({"maps", "--bogus"}, "--bogus");
+  expectOneLineError({"ingest", "--robot", "r", "/tmp"}, "--map");
+  expectOneLineError({"ingest", "--map", "m", "/tmp"}, "--robot");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r"}, "DIR");
+  expectOneLineError({"robots"}, "--map");
+  expectOneLineError({"delete", "--map", "m"}, "--robot");
+  expectOneLineError({"backup"}, "PATH");
+  expectOneLineError({"create-map"}, "MAP");
+  expectOneLineError({"stats", "--top-k", "3"}, "--top-k");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "notanumber"}, "notanumber");
+}
+
+TEST(CliErrors, BadIngestInput) {
+  t::TempDir tmp;
+  const auto dir = tinySequence(tmp);
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", tmp / "missing"}, "not a directory");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", tmp.path().string()}, "velodyne");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "9:3", dir}, "frame range");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "x", dir}, "frame range");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "5:9", dir}, "no scans in frame range");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--every", "0", dir}, "--every");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--scope", "galaxy", dir}, "galaxy");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--scope", "sessions", dir}, "--sessions");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--scope", "sessions", "--sessions", "a/b,nobody", dir},
+                     "'nobody' is not robot/session");
+  expectOneLineError({"ingest", "--map", "", "--robot", "r", dir}, "--map");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--chunk-mb", "0", dir}, "--chunk-mb");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--window", "0", dir}, "--window");
+  std::filesystem::remove(dir + "/labels/000000.label");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", dir}, "000000.label");
+}
+
+TEST(CliErrors, BadQueryInput) {
+  t::TempDir tmp;
+  expectOneLineError({"query", "--map", "m"}, "--scan-id");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--scan", "a.bin", "--labels", "a.label"}, "either");
+  expectOneLineError({"query", "--map", "m", "--scan", "a.bin"}, "--labels");
+  expectOneLineError({"query", "--map", "m", "--scan", tmp / "none.bin", "--labels", tmp / "none.label"}, "none.bin");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--exclude-recent", "-1"}, "--exclude-recent");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--sessions", "a/b"}, "--scope sessions");
+}
+
+TEST(CliErrors, ConnectionProblemsNameTheStatus) {
+  t::TempDir tmp;
+  const std::string nobody = "127.0.0.1:" + std::to_string(t::freePort());
+  expectOneLineError({"maps", "--server", nobody}, "UNAVAILABLE");
+  expectOneLineError({"stats", "--json", "--server", nobody}, "UNAVAILABLE");
+  expectOneLineError({"--server", nobody, "robots", "--map", "m"}, "UNAVAILABLE");
+  expectOneLineError({"ingest", "--server", nobody, "--map", "m", "--robot", "r", tinySequence(tmp)}, "UNAVAILABLE");
+  expectOneLineError({"maps", "--tls-ca", tmp / "nothere.pem"}, "nothere.pem");
+  t::writeFile(tmp / "junk.pem", "not a certificate");
+  expectOneLineError({"maps", "--tls-ca", tmp / "junk.pem"}, "PEM");
+  expectOneLineError({"maps", "--server", ""}, "--server");
+}
+
+TEST(Cli, HelpListsEverySubcommand) {
+  const auto r = t::run({t::cliBinary(), "--help"});
+  EXPECT_EQ(r.exit_code, 0);
+  for (const char* sub : {"ingest", "query", "maps", "robots", "stats", "delete", "backup", "create-map"})
+    EXPECT_NE(r.out.find(sub), std::string::npos) << sub;
+}

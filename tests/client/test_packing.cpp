@@ -1,0 +1,237 @@
+// Packing helpers: scans <-> wire bytes, transforms <-> matrices, chunking, request builders.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <random>
+
+#include "sglc/client/client.hpp"
+#include "sglc/client/packing.hpp"
+
+namespace sc = sglc::client;
+namespace v1 = sglc::v1;
+
+namespace {
+
+sglc::LabelledScan randomScan(std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> coord(-80.f, 80.f);
+  std::uniform_int_distribution<std::uint32_t> label;
+  sglc::LabelledScan scan;
+  for (std::size_t i = 0; i < n; ++i) {
+    scan.points.emplace_back(coord(rng), coord(rng), coord(rng));
+    scan.labels.push_back(label(rng));
+  }
+  return scan;
+}
+
+std::vector<unsigned char> bytesOf(const std::string& s) { return {s.begin(), s.end()}; }
+
+}  // namespace
+
+TEST(Packing, RoundTripIsExact) {
+  const auto scan = randomScan(1000, 7);
+  const v1::Scan packed = sc::packScan(scan);
+  EXPECT_EQ(packed.points().size(), 1000u * 12);
+  EXPECT_EQ(packed.labels().size(), 1000u * 4);
+  EXPECT_EQ(sc::packedSize(packed), sc::packedSize(scan));
+  const auto back = sc::unpackScan(packed);
+  ASSERT_EQ(back.points.size(), scan.points.size());
+  ASSERT_EQ(back.labels, scan.labels);
+  for (std::size_t i = 0; i < scan.points.size(); ++i)
+    ASSERT_EQ(std::memcmp(back.points[i].data(), scan.points[i].data(), 12), 0) << "point " << i;
+}
+
+TEST(Packing, SpecialFloatsSurviveBitForBit) {
+  // Packing does not judge coordinates (the server rejects non-finite ones); it must not alter them.
+  sglc::LabelledScan scan;
+  scan.points = {{-0.0f, 1e-40f, std::numeric_limits<float>::max()}};
+  scan.labels = {0xFFFFFFFFu};
+  const auto back = sc::unpackScan(sc::packScan(scan));
+  EXPECT_EQ(std::memcmp(back.points[0].data(), scan.points[0].data(), 12), 0);
+  EXPECT_EQ(back.labels[0], 0xFFFFFFFFu);
+}
+
+TEST(Packing, EmptyScanRoundTrips) {
+  const v1::Scan packed = sc::packScan(sglc::LabelledScan{});
+  EXPECT_TRUE(packed.points().empty());
+  EXPECT_TRUE(packed.labels().empty());
+  const auto back = sc::unpackScan(packed);
+  EXPECT_TRUE(back.points.empty());
+  EXPECT_TRUE(back.labels.empty());
+}
+
+TEST(Packing, ByteLayoutIsLittleEndianFloat32AndUint32) {
+  sglc::LabelledScan scan;
+  scan.points = {{1.0f, -2.0f, 0.5f}, {0.0f, 3.0f, -0.25f}};
+  scan.labels = {0x00010028u, 0x00000046u};  // instance 1 / class 40 (road); class 70 (vegetation)
+  const v1::Scan packed = sc::packScan(scan);
+  const std::vector<unsigned char> expected_points = {
+      0x00, 0x00, 0x80, 0x3F,  0x00, 0x00, 0x00, 0xC0,  0x00, 0x00, 0x00, 0x3F,   // 1, -2, 0.5
+      0x00, 0x00, 0x00, 0x00,  0x00, 0x00, 0x40, 0x40,  0x00, 0x00, 0x80, 0xBE};  // 0, 3, -0.25
+  const std::vector<unsigned char> expected_labels = {0x28, 0x00, 0x01, 0x00, 0x46, 0x00, 0x00, 0x00};
+  EXPECT_EQ(bytesOf(packed.points()), expected_points);
+  EXPECT_EQ(bytesOf(packed.labels()), expected_labels);
+  EXPECT_EQ(bytesOf(sc::packPoints(scan.points)), expected_points);
+  EXPECT_EQ(bytesOf(sc::packLabels(scan.labels)), expected_labels);
+
+  // And the other way, from hand-written bytes.
+  const auto points = sc::unpackPoints(std::string(expected_points.begin(), expected_points.end()));
+  ASSERT_EQ(points.size(), 2u);
+  EXPECT_EQ(points[0], Eigen::Vector3f(1.0f, -2.0f, 0.5f));
+  EXPECT_EQ(points[1], Eigen::Vector3f(0.0f, 3.0f, -0.25f));
+  EXPECT_EQ(sc::unpackLabels(std::string(expected_labels.begin(), expected_labels.end())), scan.labels);
+}
+
+TEST(Packing, BadSizesAreRejected) {
+  EXPECT_THROW(sc::unpackPoints(std::string(13, '\0')), sglc::InputError);
+  EXPECT_THROW(sc::unpackPoints(std::string(11, '\0')), sglc::InputError);
+  EXPECT_THROW(sc::unpackLabels(std::string(6, '\0')), sglc::InputError);
+
+  v1::Scan mismatched;
+  mismatched.set_points(std::string(24, '\0'));  // 2 points
+  mismatched.set_labels(std::string(4, '\0'));   // 1 label
+  EXPECT_THROW(sc::unpackScan(mismatched), sglc::InputError);
+
+  v1::Scan ragged;
+  ragged.set_points(std::string(25, '\0'));
+  ragged.set_labels(std::string(8, '\0'));
+  try {
+    sc::unpackScan(ragged);
+    FAIL() << "25 point bytes accepted";
+  } catch (const sglc::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("multiple of 12"), std::string::npos) << e.what();
+  }
+
+  sglc::LabelledScan bad;
+  bad.points = {{0, 0, 0}, {1, 1, 1}};
+  bad.labels = {1};
+  EXPECT_THROW(sc::packScan(bad), sglc::InputError);
+  EXPECT_THROW(sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), bad), sglc::InputError);
+}
+
+TEST(Transforms, RoundTripIsRowMajor) {
+  sglc::Mat4d T = sglc::Mat4d::Identity();
+  T.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.3, Eigen::Vector3d(0.2, -0.4, 1).normalized()).toRotationMatrix();
+  T(0, 3) = 2.5;
+  T(1, 3) = -1.25;
+  T(2, 3) = 0.125;
+  const v1::Transform t = sc::toTransform(T);
+  ASSERT_EQ(t.m_size(), 16);
+  EXPECT_EQ(t.m(1), T(0, 1));  // row-major: second value is row 0, column 1
+  EXPECT_EQ(t.m(4), T(1, 0));
+  EXPECT_EQ(t.m(3), 2.5);
+  EXPECT_EQ(t.m(7), -1.25);
+  EXPECT_EQ(t.m(11), 0.125);
+  EXPECT_EQ(t.m(12), 0.0);
+  EXPECT_EQ(t.m(15), 1.0);
+  EXPECT_EQ(sc::toMatrix(t), T);  // exact: doubles travel unchanged
+  EXPECT_TRUE(sc::isSet(t));
+  EXPECT_FALSE(sc::isSet(v1::Transform{}));
+}
+
+TEST(Transforms, MalformedAreRejected) {
+  v1::Transform t;
+  for (int k = 0; k < 15; ++k) t.add_m(0);
+  EXPECT_THROW(sc::toMatrix(t), sglc::InputError);
+  t.add_m(1);
+  EXPECT_NO_THROW(sc::toMatrix(t));
+  t.set_m(5, std::numeric_limits<double>::quiet_NaN());
+  EXPECT_THROW(sc::toMatrix(t), sglc::InputError);
+  EXPECT_THROW(sc::toMatrix(v1::Transform{}), sglc::InputError);
+}
+
+TEST(Chunking, ConcatenationRebuildsTheScanAndChunksRespectTheLimit) {
+  const auto scan = randomScan(1000, 3);
+  sc::IngestOptions options;
+  options.stamp = 12.5;
+  options.query = true;
+  options.query_options.set_top_k(3);
+  const v1::IngestRequest request = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 42), scan, options);
+  const std::size_t limit = 100 * 16 + 5;  // 100 points per chunk, plus slack that cannot hold a whole point
+
+  const auto chunks = sc::splitIntoChunks(request, limit);
+  ASSERT_EQ(chunks.size(), 1u + 10u);
+  // First: the header alone, with the request minus the scan bytes.
+  ASSERT_TRUE(chunks[0].has_header());
+  EXPECT_TRUE(chunks[0].points().empty());
+  EXPECT_TRUE(chunks[0].labels().empty());
+  EXPECT_TRUE(chunks[0].header().scan().points().empty());
+  EXPECT_TRUE(chunks[0].header().scan().labels().empty());
+  EXPECT_EQ(chunks[0].header().key().seq(), 42);
+  EXPECT_EQ(chunks[0].header().stamp(), 12.5);
+  EXPECT_TRUE(chunks[0].header().query());
+  EXPECT_EQ(chunks[0].header().query_options().top_k(), 3u);
+
+  std::string points, labels;
+  for (std::size_t i = 1; i < chunks.size(); ++i) {
+    EXPECT_FALSE(chunks[i].has_header()) << "chunk " << i;
+    EXPECT_LE(chunks[i].points().size() + chunks[i].labels().size(), limit);
+    EXPECT_EQ(chunks[i].points().size() / 12, chunks[i].labels().size() / 4) << "whole points per chunk";
+    EXPECT_EQ(chunks[i].points().size() % 12, 0u);
+    points += chunks[i].points();
+    labels += chunks[i].labels();
+  }
+  EXPECT_EQ(points, request.scan().points());
+  EXPECT_EQ(labels, request.scan().labels());
+}
+
+TEST(Chunking, LimitBelowOnePointStillProgressesAndSmallScansTakeOneChunk) {
+  const auto scan = randomScan(5, 1);
+  const auto request = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), scan);
+  EXPECT_EQ(sc::splitIntoChunks(request, 1).size(), 1u + 5u);
+  const auto whole = sc::splitIntoChunks(request, 1 << 20);
+  ASSERT_EQ(whole.size(), 2u);
+  EXPECT_EQ(whole[1].points(), request.scan().points());
+}
+
+TEST(Chunking, MalformedScanIsRejected) {
+  v1::IngestRequest request;
+  request.mutable_scan()->set_points(std::string(24, '\0'));
+  request.mutable_scan()->set_labels(std::string(4, '\0'));
+  EXPECT_THROW(sc::splitIntoChunks(request, 1000), sglc::InputError);
+}
+
+TEST(Builders, IngestRequestCarriesEveryOption) {
+  const auto scan = randomScan(3, 2);
+  sc::IngestOptions options;
+  options.stamp = 1.5;
+  sglc::Mat4d pose = sglc::Mat4d::Identity();
+  pose(0, 3) = 7;
+  options.odometry_pose = pose;
+  options.store_raw = true;
+  const auto request = sc::makeIngestRequest(sc::makeKey("map", "robot", "session", 9), scan, options);
+  EXPECT_EQ(request.key().map(), "map");
+  EXPECT_EQ(request.key().robot(), "robot");
+  EXPECT_EQ(request.key().session(), "session");
+  EXPECT_EQ(request.key().seq(), 9);
+  ASSERT_TRUE(request.has_stamp());
+  EXPECT_EQ(request.stamp(), 1.5);
+  EXPECT_EQ(sc::toMatrix(request.odometry_pose()), pose);
+  EXPECT_TRUE(request.store_raw());
+  EXPECT_FALSE(request.query());
+  EXPECT_EQ(request.scan().points(), sc::packPoints(scan.points));
+
+  const auto bare = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), scan);
+  EXPECT_FALSE(bare.has_stamp());
+  EXPECT_FALSE(sc::isSet(bare.odometry_pose()));
+}
+
+TEST(Builders, ScopeNames) {
+  EXPECT_EQ(sc::parseScope("same"), v1::SCOPE_SAME_ROBOT);
+  EXPECT_EQ(sc::parseScope("other"), v1::SCOPE_OTHER_ROBOTS);
+  EXPECT_EQ(sc::parseScope("all"), v1::SCOPE_WHOLE_MAP);
+  EXPECT_EQ(sc::parseScope("sessions"), v1::SCOPE_SESSIONS);
+  EXPECT_THROW(sc::parseScope("everything"), sglc::InputError);
+  EXPECT_THROW(sc::parseScope(""), sglc::InputError);
+}
+
+TEST(Errors, RpcErrorCarriesCodeAndMessageOnOneLine) {
+  const sc::RpcError e("MapAdmin.ListRobots", grpc::Status(grpc::StatusCode::NOT_FOUND, "unknown map 'x'\nsecond line"));
+  EXPECT_EQ(e.code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(e.codeName(), "NOT_FOUND");
+  EXPECT_EQ(e.statusMessage(), "unknown map 'x'\nsecond line");
+  EXPECT_EQ(e.method(), "MapAdmin.ListRobots");
+  EXPECT_EQ(std::string(e.what()), "NOT_FOUND: unknown map 'x' second line (MapAdmin.ListRobots)");
+  EXPECT_EQ(sc::statusCodeName(grpc::StatusCode::UNAUTHENTICATED), "UNAUTHENTICATED");
+  EXPECT_EQ(sc::statusCodeName(grpc::StatusCode::RESOURCE_EXHAUSTED), "RESOURCE_EXHAUSTED");
+}

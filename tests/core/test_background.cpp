@@ -1,0 +1,271 @@
+// Background features: ring key, labelled BEV cells and their agreement, plane features.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "sglc/background.hpp"
+#include "test_util.hpp"
+
+namespace sglc {
+namespace {
+
+using test::deg2rad;
+
+Vec3f polar(double r, double angle_rad, double z = -1.0) {
+  return Vec3f(static_cast<float>(r * std::cos(angle_rad)), static_cast<float>(r * std::sin(angle_rad)),
+               static_cast<float>(z));
+}
+
+// Angle of the centre of one-degree sector k (sectors start at -pi).
+double sectorCentre(int k) { return -std::numbers::pi + deg2rad(k + 0.5); }
+
+struct BgCloud {
+  Points points;
+  std::vector<Background> bg;
+  void add(const Vec3f& p, Background b) {
+    points.push_back(p);
+    bg.push_back(b);
+  }
+  void add(const Points& pts, Background b) {
+    for (const auto& p : pts) add(p, b);
+  }
+};
+
+TEST(RingKey, ZeroWithoutRoadOrBuilding) {
+  BgCloud c;
+  for (int k = 0; k < 50; ++k) {
+    c.add(polar(10 + k * 0.5, 0.1 * k), Background::kVegetation);
+    c.add(polar(12 + k * 0.5, 0.1 * k + 1), Background::kFence);
+    c.add(polar(8 + k * 0.5, 0.1 * k + 2), Background::kNone);
+  }
+  // Road and building, but outside [ring_min, ring_max).
+  c.add(polar(4.9, 0.3), Background::kRoad);
+  c.add(polar(50.0, 0.3), Background::kBuilding);
+  c.add(polar(70.0, 0.3), Background::kBuilding);
+  const DescriptorConfig cfg;
+  const auto key = ringKey(c.points, c.bg, cfg);
+  ASSERT_EQ(key.size(), 48u);
+  for (float v : key) EXPECT_EQ(v, 0.0f);
+  EXPECT_EQ(ringKey({}, {}, cfg), std::vector<float>(48, 0.0f));
+}
+
+TEST(RingKey, HandChecked) {
+  // 24 rings over [5, 50): 1.875 m each. Building: ring 0 (r = 6) occupies 3 sectors (two points share one).
+  // Road: ring 8 (r = 20.5) occupies 4 sectors. Key before normalising: [0] = 3, [24 + 8] = 4 -> 0.6, 0.8.
+  BgCloud c;
+  c.add(polar(6.0, sectorCentre(10)), Background::kBuilding);
+  c.add(polar(6.2, sectorCentre(10)), Background::kBuilding);
+  c.add(polar(6.0, sectorCentre(11)), Background::kBuilding);
+  c.add(polar(6.5, sectorCentre(200)), Background::kBuilding);
+  for (int s : {0, 90, 180, 359}) c.add(polar(20.5, sectorCentre(s)), Background::kRoad);
+  c.add(polar(20.5, sectorCentre(5)), Background::kVegetation);  // ignored
+  const auto key = ringKey(c.points, c.bg, DescriptorConfig{});
+  std::vector<float> expected(48, 0.0f);
+  expected[0] = 0.6f;
+  expected[24 + 8] = 0.8f;
+  for (int k = 0; k < 48; ++k) EXPECT_NEAR(key[k], expected[k], 1e-6) << k;
+}
+
+TEST(RingKey, UnitNormAndRotationInvariant) {
+  // Points at sector centres, so a rotation by whole sectors keeps every point well inside a sector.
+  BgCloud c;
+  std::mt19937 rng(17);
+  std::uniform_int_distribution<int> sector(0, 359);
+  std::uniform_real_distribution<double> range(5.2, 49.8);
+  for (int k = 0; k < 400; ++k)
+    c.add(polar(range(rng), sectorCentre(sector(rng)), -1.7), k % 2 ? Background::kRoad : Background::kBuilding);
+  const DescriptorConfig cfg;
+  const auto key = ringKey(c.points, c.bg, cfg);
+  double n = 0;
+  for (float v : key) n += double(v) * v;
+  EXPECT_NEAR(n, 1.0, 1e-6);
+  for (int deg : {1, 7, 90, 179, 180, 263, -45}) {
+    const Points rotated = test::transformPoints(test::makeT(deg, 0, 0, 0), c.points);
+    const auto k2 = ringKey(rotated, c.bg, cfg);
+    for (int r = 0; r < 48; ++r) EXPECT_NEAR(k2[r], key[r], 1e-6) << "rotation " << deg << " ring " << r;
+  }
+}
+
+TEST(BevCells, PriorityInSharedCell) {
+  BgCloud c;
+  // Cell (2, 2) of 0.5 m: road + fence -> fence.
+  c.add(Vec3f(1.1f, 1.1f, -1.7f), Background::kRoad);
+  c.add(Vec3f(1.2f, 1.3f, 0.5f), Background::kFence);
+  // Cell (4, 2): building + vegetation + road -> building.
+  c.add(Vec3f(2.1f, 1.2f, 0), Background::kVegetation);
+  c.add(Vec3f(2.2f, 1.4f, 3), Background::kBuilding);
+  c.add(Vec3f(2.3f, 1.1f, -1.7f), Background::kRoad);
+  // Cell (-3, 2): vegetation + road -> vegetation.
+  c.add(Vec3f(-1.4f, 1.2f, -1.7f), Background::kRoad);
+  c.add(Vec3f(-1.3f, 1.3f, 1.0f), Background::kVegetation);
+  // Cell (0, -1): road only.
+  c.add(Vec3f(0.2f, -0.3f, -1.7f), Background::kRoad);
+  // Ignored: no background class, and beyond range.
+  c.add(Vec3f(3.1f, 3.1f, 0), Background::kNone);
+  c.add(Vec3f(60.0f, 0.0f, 0), Background::kBuilding);
+  const auto cells = bevCells(c.points, c.bg, 0.5, 50.0);
+  ASSERT_EQ(cells.size(), 4u);
+  // Sorted by (iy, ix).
+  auto expect = [&](int k, int ix, int iy, Background b) {
+    EXPECT_EQ(cells[k].ix, ix) << k;
+    EXPECT_EQ(cells[k].iy, iy) << k;
+    EXPECT_EQ(cells[k].cls, static_cast<std::uint8_t>(b)) << k;
+  };
+  expect(0, 0, -1, Background::kRoad);
+  expect(1, -3, 2, Background::kVegetation);
+  expect(2, 2, 2, Background::kFence);
+  expect(3, 4, 2, Background::kBuilding);
+  // The order of points does not matter.
+  BgCloud rev;
+  for (std::size_t i = c.points.size(); i-- > 0;) rev.add(c.points[i], c.bg[i]);
+  const auto cells2 = bevCells(rev.points, rev.bg, 0.5, 50.0);
+  ASSERT_EQ(cells2.size(), cells.size());
+  for (std::size_t k = 0; k < cells.size(); ++k) {
+    EXPECT_EQ(cells2[k].ix, cells[k].ix);
+    EXPECT_EQ(cells2[k].iy, cells[k].iy);
+    EXPECT_EQ(cells2[k].cls, cells[k].cls);
+  }
+}
+
+// An asymmetric place: a road, two building blocks, a vegetation patch and a fenced yard, all large compared
+// with the grid (the stored 0.5 m cells are re-binned into the 1 m agreement grid, so only region borders can
+// disagree after a motion).
+BgCloud street() {
+  BgCloud c;
+  c.add(test::makeFloor(-40, 40, -6, 6, -1.7, 0.25), Background::kRoad);
+  c.add(test::makeFloor(-35, -5, 8, 30, 3.0, 0.25), Background::kBuilding);
+  c.add(test::makeFloor(5, 35, -30, -8, 3.0, 0.25), Background::kBuilding);
+  c.add(test::makeFloor(5, 30, 10, 25, 0.0, 0.25), Background::kVegetation);
+  c.add(test::makeFloor(-30, -8, -25, -10, 0.0, 0.25), Background::kFence);
+  return c;
+}
+
+TEST(BevAgreement, SelfAndMoved) {
+  const BgCloud c = street();
+  const auto q = bevCells(c.points, c.bg, 0.5, 50.0);
+  ASSERT_FALSE(q.empty());
+  EXPECT_DOUBLE_EQ(bevAgreement(q, q, 0.5, Mat4d::Identity(), 1.0, 50.0), 1.0);
+  // The same place seen from a sensor at T (the candidate): candidate points = T^-1 * query points.
+  const Mat4d T = test::makeT(12.0, 3.3, -1.7, 0.2);
+  const auto cand = bevCells(test::transformPoints(T.inverse(), c.points), c.bg, 0.5, 50.0);
+  const double right = bevAgreement(q, cand, 0.5, T, 1.0, 50.0);
+  EXPECT_GT(right, 0.9);
+  EXPECT_LE(right, 1.0);
+  // Wrong poses: shifted across the road, or rotated.
+  const double shifted = bevAgreement(q, cand, 0.5, test::makeT(0, 0, 6.0, 0) * T, 1.0, 50.0);
+  const double rotated = bevAgreement(q, cand, 0.5, test::makeT(20.0, 0, 0, 0) * T, 1.0, 50.0);
+  const double identity = bevAgreement(q, cand, 0.5, Mat4d::Identity(), 1.0, 50.0);
+  EXPECT_LT(shifted, right - 0.25);
+  EXPECT_LT(rotated, right - 0.25);
+  EXPECT_LT(identity, right - 0.25);
+  for (double v : {shifted, rotated, identity}) EXPECT_GE(v, 0.0);
+}
+
+TEST(BevAgreement, EmptyCloudsGiveZero) {
+  const BgCloud c = street();
+  const auto q = bevCells(c.points, c.bg, 0.5, 50.0);
+  const double both = bevAgreement({}, {}, 0.5, Mat4d::Identity(), 1.0, 50.0);
+  const double one = bevAgreement(q, {}, 0.5, Mat4d::Identity(), 1.0, 50.0);
+  const double other = bevAgreement({}, q, 0.5, Mat4d::Identity(), 1.0, 50.0);
+  for (double v : {both, one, other}) {
+    EXPECT_FALSE(std::isnan(v));
+    EXPECT_EQ(v, 0.0);
+  }
+  // Everything outside the grid: nothing to compare, 0 (not NaN).
+  const double far = bevAgreement(q, q, 0.5, test::makeT(0, 500, 0, 0), 1.0, 50.0);
+  EXPECT_FALSE(std::isnan(far));
+  EXPECT_EQ(far, 0.0);
+}
+
+TEST(BevAgreement, ClassMismatchCounts) {
+  // Same cells, different classes: no agreement.
+  std::vector<BevCell> a{{0, 0, 1}, {4, 4, 3}}, b{{0, 0, 2}, {4, 4, 3}};
+  EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 0.5, 10.0), 0.5);
+}
+
+TEST(ExtractPlanes, FlatFloorFacesSensor) {
+  BgCloud c;
+  // Floor 1.7 m below the sensor, offset so no point sits on a voxel face.
+  c.add(test::makeFloor(2.013, 9.913, -3.987, 3.913, -1.7, 0.1), Background::kRoad);
+  const auto planes = extractPlanes(c.points, c.bg, FingerprintConfig{});
+  ASSERT_GE(planes.size(), 40u);  // ~8 x 8 one-metre voxels
+  for (const auto& p : planes) {
+    EXPECT_NEAR(p.normal.x(), 0.0f, 1e-3f);
+    EXPECT_NEAR(p.normal.y(), 0.0f, 1e-3f);
+    EXPECT_NEAR(p.normal.z(), 1.0f, 1e-3f);  // up: towards the sensor above the floor
+    EXPECT_NEAR(p.centroid.z(), -1.7f, 0.006f);
+    EXPECT_EQ(p.cls, static_cast<std::uint8_t>(Background::kRoad));
+    // Stored on the 1 cm grid.
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(p.centroid[k] * 100.0f, std::round(p.centroid[k] * 100.0f), 1e-3f);
+  }
+}
+
+TEST(ExtractPlanes, WallsFaceSensor) {
+  BgCloud c;
+  c.add(test::makeWall(8.05, -4.03, 8.05, 4.03, -1.55, 2.45, 0.1), Background::kBuilding);    // in front
+  c.add(test::makeWall(-6.05, -3.03, -6.05, 3.03, -1.55, 2.45, 0.1), Background::kFence);     // behind
+  const auto planes = extractPlanes(c.points, c.bg, FingerprintConfig{});
+  ASSERT_GE(planes.size(), 20u);
+  int front = 0, back = 0;
+  for (const auto& p : planes) {
+    if (p.centroid.x() > 0) {
+      ++front;
+      EXPECT_NEAR(p.normal.x(), -1.0f, 1e-3f);
+      EXPECT_EQ(p.cls, static_cast<std::uint8_t>(Background::kBuilding));
+    } else {
+      ++back;
+      EXPECT_NEAR(p.normal.x(), 1.0f, 1e-3f);
+      EXPECT_EQ(p.cls, static_cast<std::uint8_t>(Background::kFence));
+    }
+    EXPECT_LT(p.centroid.dot(p.normal), 0.0f);
+  }
+  EXPECT_GT(front, 0);
+  EXPECT_GT(back, 0);
+}
+
+TEST(ExtractPlanes, NoisyBlobVegetationAndSparseGiveNothing) {
+  BgCloud c;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int i = 0; i < 2000; ++i) c.add(Vec3f(5.0f + 3 * u(rng), 2.0f + 3 * u(rng), -1.0f + 3 * u(rng)), Background::kBuilding);
+  // A flat floor, but vegetation (no planes from vegetation).
+  c.add(test::makeFloor(-9.987, -3.013, -2.987, 2.987, -1.7, 0.1), Background::kVegetation);
+  // A flat floor with too few points per voxel (spacing 0.5 m -> 4 points per 1 m voxel < 8).
+  c.add(test::makeFloor(10.013, 19.513, 0.013, 9.513, -1.7, 0.5), Background::kRoad);
+  EXPECT_TRUE(extractPlanes(c.points, c.bg, FingerprintConfig{}).empty());
+  EXPECT_TRUE(extractPlanes({}, {}, FingerprintConfig{}).empty());
+}
+
+TEST(ExtractPlanes, RangeLimit) {
+  BgCloud c;
+  c.add(test::makeFloor(70.013, 75.913, 0.013, 3.913, -1.7, 0.1), Background::kRoad);  // beyond 60 m
+  EXPECT_TRUE(extractPlanes(c.points, c.bg, FingerprintConfig{}).empty());
+  FingerprintConfig cfg;
+  cfg.plane_max_range_m = 100;
+  EXPECT_FALSE(extractPlanes(c.points, c.bg, cfg).empty());
+}
+
+// The header promises planes "sorted by voxel": the output must not depend on the order of the input points.
+TEST(ExtractPlanes, OrderIndependentOfPointOrder) {
+  BgCloud c;
+  c.add(test::makeFloor(-9.987, 9.913, -5.987, 5.913, -1.7, 0.1), Background::kRoad);
+  c.add(test::makeWall(12.05, -6.03, 12.05, 6.03, -1.55, 2.45, 0.1), Background::kBuilding);
+  const auto a = extractPlanes(c.points, c.bg, FingerprintConfig{});
+  ASSERT_FALSE(a.empty());
+  BgCloud rev;
+  std::vector<std::size_t> order(c.points.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::mt19937 rng(8);
+  std::shuffle(order.begin(), order.end(), rng);
+  for (auto i : order) rev.add(c.points[i], c.bg[i]);
+  const auto b = extractPlanes(rev.points, rev.bg, FingerprintConfig{});
+  ASSERT_EQ(a.size(), b.size());
+  int differing = 0;
+  for (std::size_t k = 0; k < a.size(); ++k)
+    differing += (a[k].centroid - b[k].centroid).norm() > 0.011f || (a[k].normal - b[k].normal).norm() > 1e-3f;
+  EXPECT_EQ(differing, 0) << "planes come out in a different order when the input points are shuffled";
+}
+
+}  // namespace
+}  // namespace sglc

@@ -1,0 +1,425 @@
+// The whole pipeline: real SemanticKITTI loop / non-loop pairs, synthetic views, edge cases, determinism and
+// thread safety.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include "sglc/io.hpp"
+#include "sglc/pipeline.hpp"
+#include "test_util.hpp"
+
+namespace sglc {
+namespace {
+
+using test::rotationErrorDeg;
+using test::translationError;
+
+struct PairRow {
+  std::string seq, a, b;
+  bool is_loop = false;
+  Mat4d T_a_b = Mat4d::Identity();  // p_a = T_a_b * p_b
+};
+
+// pairs.txt: seq frame_a frame_b is_loop dist_kittigt_m dist_semkitti_m gap, then T_a_b as 12 values
+// (row-major 3x4), "nan" where there is no loop.
+std::vector<PairRow> readPairs(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<PairRow> rows;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    PairRow r;
+    std::string loop, d1, d2, gap;
+    ss >> r.seq >> r.a >> r.b >> loop >> d1 >> d2 >> gap;
+    r.is_loop = loop == "1";
+    for (int k = 0; k < 12; ++k) {
+      std::string v;
+      ss >> v;
+      if (r.is_loop) r.T_a_b(k / 4, k % 4) = std::stod(v);
+    }
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+bool identical(const LoopResult& a, const LoopResult& b) {
+  return a.is_loop == b.is_loop && a.score == b.score && a.matches == b.matches && a.inliers == b.inliers &&
+         a.graph_similarity == b.graph_similarity && a.background_similarity == b.background_similarity &&
+         (a.T.array() == b.T.array()).all() && a.refined == b.refined && a.fitness == b.fitness &&
+         a.rmse == b.rmse && a.inlier_pairs == b.inlier_pairs;
+}
+
+void expectSane(const LoopResult& r) {
+  EXPECT_TRUE(std::isfinite(r.score));
+  EXPECT_GE(r.score, 0.0);
+  EXPECT_LE(r.score, 1.0);
+  EXPECT_TRUE(r.T.allFinite());
+  EXPECT_TRUE(std::isfinite(r.graph_similarity));
+  EXPECT_TRUE(std::isfinite(r.background_similarity));
+  EXPECT_TRUE(std::isfinite(r.fitness));
+  EXPECT_TRUE(std::isfinite(r.rmse));
+  if (r.is_loop) {
+    EXPECT_STREQ(r.reason, "");
+    EXPECT_EQ(static_cast<int>(r.inlier_pairs.size()), r.inliers);
+    EXPECT_GE(r.inliers, 3);
+    EXPECT_LE(r.inliers, r.matches);
+  } else {
+    EXPECT_STRNE(r.reason, "");
+  }
+}
+
+// Real scans: fingerprints computed once for the whole suite.
+class RealPipeline : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const std::string root = test::scansDir();
+    if (root.empty()) return;
+    pipeline_ = new Pipeline();
+    fps_ = new std::map<std::string, Fingerprint>();
+    auto load = [&](const std::string& key, const std::string& dir, const std::string& frame) {
+      (*fps_)[key] = pipeline_->fingerprint(readScan(dir + "/velodyne/" + frame + ".bin", dir + "/labels/" + frame + ".label"));
+    };
+    for (const char* f : {"000052", "000088", "000850", "004501"}) load(std::string("00/") + f, root + "/sequences/00", f);
+    for (const char* f : {"000000", "000001", "000002", "000003"})
+      load(std::string("demo/") + f, root + "/extra/segnet4d_demo", f);
+    pairs_ = new std::vector<PairRow>(readPairs(root + "/pairs.txt"));
+  }
+  static void TearDownTestSuite() {
+    delete pipeline_;
+    delete fps_;
+    delete pairs_;
+    pipeline_ = nullptr;
+    fps_ = nullptr;
+    pairs_ = nullptr;
+  }
+  void SetUp() override { SGLC_REQUIRE_REAL_DATA(); }
+  static const Fingerprint& fp(const std::string& key) { return fps_->at(key); }
+  static const PairRow& loopRow() {
+    for (const auto& r : *pairs_)
+      if (r.seq == "00" && r.a == "000052" && r.b == "004501") return r;
+    throw std::runtime_error("pairs.txt has no 00 000052 004501 row");
+  }
+
+  static Pipeline* pipeline_;
+  static std::map<std::string, Fingerprint>* fps_;
+  static std::vector<PairRow>* pairs_;
+};
+Pipeline* RealPipeline::pipeline_ = nullptr;
+std::map<std::string, Fingerprint>* RealPipeline::fps_ = nullptr;
+std::vector<PairRow>* RealPipeline::pairs_ = nullptr;
+
+TEST_F(RealPipeline, PairsFileParsed) {
+  ASSERT_EQ(pairs_->size(), 6u);
+  const PairRow& r = loopRow();
+  EXPECT_TRUE(r.is_loop);
+  // The reference pose is a rotation (independent sanity check of the parsing).
+  const Mat3d R = r.T_a_b.topLeftCorner<3, 3>();
+  EXPECT_NEAR((R.transpose() * R - Mat3d::Identity()).norm(), 0.0, 1e-4);
+  EXPECT_NEAR((r.T_a_b.block(0, 3, 3, 1).norm()), 3.0, 0.01);  // dist_semkitti_m column: 3.00
+}
+
+TEST_F(RealPipeline, LoopPairMatchesReferencePose) {
+  const PairRow& row = loopRow();
+  const LoopResult r = pipeline_->match(fp("00/000052"), fp("00/004501"));
+  expectSane(r);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_TRUE(r.refined);
+  const double dt = translationError(r.T, row.T_a_b), dr = rotationErrorDeg(r.T, row.T_a_b);
+  RecordProperty("loop_translation_error_m", std::to_string(dt));
+  RecordProperty("loop_rotation_error_deg", std::to_string(dr));
+  EXPECT_LT(dt, 0.10) << r.T;
+  EXPECT_LT(dr, 0.5) << r.T;
+}
+
+TEST_F(RealPipeline, LoopPairReverseDirection) {
+  const PairRow& row = loopRow();
+  const LoopResult r = pipeline_->match(fp("00/004501"), fp("00/000052"));
+  expectSane(r);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  const Mat4d expected = row.T_a_b.inverse();  // maps 52 into 4501
+  EXPECT_LT(translationError(r.T, expected), 0.10) << r.T;
+  EXPECT_LT(rotationErrorDeg(r.T, expected), 0.5) << r.T;
+}
+
+TEST_F(RealPipeline, VerifyAloneGivesCoarsePose) {
+  const PairRow& row = loopRow();
+  const LoopResult r = pipeline_->verify(fp("00/000052"), fp("00/004501"));
+  expectSane(r);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_FALSE(r.refined);
+  EXPECT_GE(r.graph_similarity, pipeline_->config().verify.t_g);
+  EXPECT_GE(r.background_similarity, pipeline_->config().verify.t_b);
+  // The coarse (node-centre) pose is already close to the reference.
+  EXPECT_LT(translationError(r.T, row.T_a_b), 1.0);
+  EXPECT_LT(rotationErrorDeg(r.T, row.T_a_b), 3.0);
+  // refine() on it gives the same as match().
+  LoopResult refined = r;
+  pipeline_->refine(fp("00/000052"), fp("00/004501"), refined);
+  EXPECT_TRUE(identical(refined, pipeline_->match(fp("00/000052"), fp("00/004501"))));
+}
+
+TEST_F(RealPipeline, StagesCanBeDisabled) {
+  const Fingerprint& a = fp("00/000052");
+  const Fingerprint& b = fp("00/004501");
+  const LoopResult coarse = pipeline_->verify(a, b);
+  ASSERT_TRUE(coarse.is_loop);
+  Config none;
+  none.fine.enabled = false;
+  none.refine.enabled = false;
+  const LoopResult n = Pipeline(none).match(a, b);
+  EXPECT_TRUE(n.refined);
+  EXPECT_TRUE((n.T.array() == coarse.T.array()).all());  // nothing moved the coarse pose
+  // Fine stage only: fitness / rmse are the instance ICP's (header: "with the plane stage disabled").
+  Config fine_only;
+  fine_only.refine.enabled = false;
+  const LoopResult f = Pipeline(fine_only).match(a, b);
+  ASSERT_TRUE(f.is_loop);
+  EXPECT_GT(f.fitness, 0.0);
+  EXPECT_LE(f.fitness, 1.0);
+  EXPECT_GT(f.rmse, 0.0);
+  EXPECT_LT(f.rmse, fine_only.fine.max_corr_end_m);
+  EXPECT_LT(translationError(f.T, loopRow().T_a_b), 0.2);
+}
+
+TEST_F(RealPipeline, NegativesRejectedBothWays) {
+  int negatives = 0;
+  for (const auto& row : *pairs_) {
+    if (row.is_loop) continue;
+    ++negatives;
+    const Fingerprint& a = fp(row.seq + "/" + row.a);
+    const Fingerprint& b = fp(row.seq + "/" + row.b);
+    const LoopResult ab = pipeline_->match(a, b), ba = pipeline_->match(b, a);
+    expectSane(ab);
+    expectSane(ba);
+    EXPECT_FALSE(ab.is_loop) << row.a << " vs " << row.b << " score " << ab.score;
+    EXPECT_FALSE(ba.is_loop) << row.b << " vs " << row.a << " score " << ba.score;
+  }
+  EXPECT_EQ(negatives, 5);
+}
+
+TEST_F(RealPipeline, TrueLoopOutscoresNegatives) {
+  const double loop = pipeline_->verify(fp("00/000052"), fp("00/004501")).score;
+  for (const char* other : {"00/000088", "00/000850"})
+    EXPECT_GT(loop, pipeline_->verify(fp("00/000052"), fp(other)).score) << other;
+}
+
+TEST_F(RealPipeline, ConsecutiveFramesAreLoops) {
+  for (int k = 0; k < 3; ++k) {
+    char a[16], b[16];
+    std::snprintf(a, sizeof a, "demo/%06d", k);
+    std::snprintf(b, sizeof b, "demo/%06d", k + 1);
+    const LoopResult r = pipeline_->match(fp(a), fp(b));
+    expectSane(r);
+    EXPECT_TRUE(r.is_loop) << a << " vs " << b << ": " << r.reason;
+    // Consecutive KITTI frames (10 Hz): well under 0.5 m and 3 degrees apart.
+    EXPECT_LT((r.T.block(0, 3, 3, 1).norm()), 0.5) << a << " vs " << b << "\n" << r.T;
+    EXPECT_LT(rotationErrorDeg(r.T, Mat4d::Identity()), 3.0) << a << " vs " << b;
+  }
+}
+
+TEST_F(RealPipeline, SelfMatchIsIdentity) {
+  const LoopResult r = pipeline_->match(fp("00/000052"), fp("00/000052"));
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_LT((r.T.block(0, 3, 3, 1).norm()), 1e-3) << r.T;
+  EXPECT_LT(rotationErrorDeg(r.T, Mat4d::Identity()), 0.01);
+  EXPECT_DOUBLE_EQ(r.background_similarity, 1.0);
+}
+
+TEST_F(RealPipeline, RepeatedRunsBitIdentical) {
+  const LoopResult a = pipeline_->match(fp("00/000052"), fp("00/004501"));
+  const LoopResult b = pipeline_->match(fp("00/000052"), fp("00/004501"));
+  EXPECT_TRUE(identical(a, b));
+  EXPECT_TRUE((a.T.array() == b.T.array()).all());
+  EXPECT_EQ(a.score, b.score);
+  // A second Pipeline object with the same config agrees too.
+  const Pipeline other;
+  EXPECT_TRUE(identical(a, other.match(fp("00/000052"), fp("00/004501"))));
+}
+
+TEST_F(RealPipeline, FingerprintIsDeterministic) {
+  const std::string dir = test::scansDir() + "/sequences/00";
+  const Fingerprint again = pipeline_->fingerprint(readScan(dir + "/velodyne/004501.bin", dir + "/labels/004501.label"));
+  EXPECT_EQ(serialize(again), serialize(fp("00/004501")));
+}
+
+TEST_F(RealPipeline, SerializedFingerprintsGiveIdenticalResult) {
+  const Fingerprint a = deserialize(serialize(fp("00/000052")));
+  const Fingerprint b = deserialize(serialize(fp("00/004501")));
+  const LoopResult original = pipeline_->match(fp("00/000052"), fp("00/004501"));
+  const LoopResult loaded = pipeline_->match(a, b);
+  EXPECT_TRUE(identical(original, loaded));
+  EXPECT_TRUE((original.T.array() == loaded.T.array()).all());
+  EXPECT_EQ(original.score, loaded.score);
+  // Mixed: a loaded query against an original candidate.
+  EXPECT_TRUE(identical(original, pipeline_->match(a, fp("00/004501"))));
+}
+
+TEST_F(RealPipeline, ConcurrentMatchesIdentical) {
+  const LoopResult expected = pipeline_->match(fp("00/000052"), fp("00/004501"));
+  ASSERT_TRUE(expected.is_loop);
+  constexpr int kThreads = 4;
+  std::vector<LoopResult> results(kThreads);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t)
+    threads.emplace_back([&, t] { results[t] = pipeline_->match(fp("00/000052"), fp("00/004501")); });
+  for (auto& th : threads) th.join();
+  for (int t = 0; t < kThreads; ++t) EXPECT_TRUE(identical(results[t], expected)) << "thread " << t;
+}
+
+// ---- Synthetic scenes: ground truth by construction ----
+
+TEST(SyntheticPipeline, TwoViewsOfTheSameStreet) {
+  const LabelledScan world = test::makeStreetWorld();
+  const Mat4d pose_a = test::makeT(0.0, 0.0, 0.0, 0.0);
+  const Mat4d pose_b = test::makeT(25.0, 4.0, 1.5, 0.0);
+  const Mat4d T_a_b = pose_a.inverse() * pose_b;  // p_a = T_a_b * p_b
+  const Pipeline p;
+  const Fingerprint a = p.fingerprint(test::viewFrom(world, pose_a));
+  const Fingerprint b = p.fingerprint(test::viewFrom(world, pose_b));
+  const LoopResult r = p.match(a, b);
+  expectSane(r);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_LT(translationError(r.T, T_a_b), 0.05) << r.T;
+  EXPECT_LT(rotationErrorDeg(r.T, T_a_b), 0.3) << r.T;
+  // The inlier node pairs are the same physical objects: their centres agree under the true pose.
+  for (const auto& [i, j] : r.inlier_pairs)
+    EXPECT_LT((test::apply(T_a_b, b.nodes[j].center) - a.nodes[i].center).norm(), 0.3) << i << "," << j;
+}
+
+LabelledScan emptyScan() { return {}; }
+
+LabelledScan noLandmarks() {
+  LabelledScan s;
+  test::addPoints(s, test::makeFloor(-20, 20, -8, 8, -1.7, 0.5), test::kRoad);
+  test::addPoints(s, test::makeWall(-20, 9, 20, 9, -1.7, 5, 0.4), test::kBuilding);
+  test::addPoints(s, test::makePole(5, 3, -1.7, 3), test::kUnlabelled);
+  return s;
+}
+
+LabelledScan noBackground() {
+  LabelledScan s;
+  for (int k = 0; k < 8; ++k)
+    test::addPoints(s, test::makePole(-20 + 5.5 * k, (k % 2 ? 6.0 : -5.0) + 0.3 * k, -1.7, 3), test::kPole);
+  test::addPoints(s, test::makeBoxSurface({3, 2, -1}, {2, 0.9, 0.7}, 10, 0.1), test::kCar);
+  return s;
+}
+
+LabelledScan allOneClass() {
+  LabelledScan s;
+  // Every point a pole, everywhere (a scan labelled by a broken network).
+  for (int k = 0; k < 6; ++k) test::addPoints(s, test::makeFloor(-30 + 10 * k, -25 + 10 * k, -5, 5, -1.7 + 0.3 * k, 0.5), test::kPole);
+  return s;
+}
+
+LabelledScan allRoad() {
+  LabelledScan s;
+  test::addPoints(s, test::makeFloor(-30, 30, -30, 30, -1.7, 0.5), test::kRoad);
+  return s;
+}
+
+LabelledScan singlePoint() {
+  LabelledScan s;
+  s.points.emplace_back(3.0f, 4.0f, -1.0f);
+  s.labels.push_back(test::kPole);
+  return s;
+}
+
+LabelledScan pointAtOrigin() {
+  LabelledScan s;
+  for (int k = 0; k < 20; ++k) {
+    s.points.emplace_back(0.0f, 0.0f, 0.0f);
+    s.labels.push_back(k % 2 ? test::kPole : test::kRoad);
+  }
+  return s;
+}
+
+TEST(SyntheticPipeline, EdgeCaseScans) {
+  const Pipeline p;
+  const Fingerprint street = p.fingerprint(test::viewFrom(test::makeStreetWorld(), Mat4d::Identity()));
+  const std::pair<const char*, LabelledScan> cases[] = {
+      {"empty", emptyScan()},          {"no landmarks", noLandmarks()}, {"no road/building", noBackground()},
+      {"all one class", allOneClass()}, {"all road", allRoad()},          {"single point", singlePoint()},
+      {"points at the origin", pointAtOrigin()},
+  };
+  for (const auto& [name, scan] : cases) {
+    SCOPED_TRACE(name);
+    Fingerprint fp;
+    ASSERT_NO_THROW(fp = p.fingerprint(scan));
+    EXPECT_EQ(static_cast<int>(fp.descriptor.size()), fp.layout.scanDim());
+    for (float v : fp.descriptor) ASSERT_TRUE(std::isfinite(v));
+    EXPECT_TRUE(fp.node_descriptors.allFinite());
+    EXPECT_EQ(fp.num_points, scan.points.size());
+    const Fingerprint& f = fp;
+    const std::pair<const Fingerprint*, const Fingerprint*> combos[] = {{&f, &f}, {&f, &street}, {&street, &f}};
+    for (const auto& [q, c] : combos) {
+      LoopResult r;
+      ASSERT_NO_THROW(r = p.match(*q, *c));
+      expectSane(r);
+      EXPECT_FALSE(r.is_loop) << r.score;
+    }
+    // And through serialisation.
+    EXPECT_NO_THROW(deserialize(serialize(fp)));
+  }
+}
+
+TEST(SyntheticPipeline, InvalidInput) {
+  const Pipeline p;
+  LabelledScan s = noBackground();
+  s.labels.pop_back();
+  EXPECT_THROW(p.fingerprint(s), InputError);
+  s = noBackground();
+  s.points[10].x() = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(p.fingerprint(s), InputError);
+  s = noBackground();
+  s.points[3].z() = std::numeric_limits<float>::infinity();
+  EXPECT_THROW(p.fingerprint(s), InputError);
+}
+
+TEST(SyntheticPipeline, InvalidConfigRejected) {
+  Config c;
+  c.verify.t_b = 2.0;
+  EXPECT_THROW(Pipeline{c}, InputError);
+  Config roles;
+  roles.labels.road.push_back(80);  // pole and road
+  EXPECT_THROW(Pipeline{roles}, InputError);
+}
+
+TEST(SyntheticPipeline, DifferentGeometryRejected) {
+  const LabelledScan scan = test::viewFrom(test::makeStreetWorld(), Mat4d::Identity());
+  const Pipeline p;
+  Config c;
+  c.graph.d_max = 50;
+  const Pipeline q(c);
+  const Fingerprint a = p.fingerprint(scan), b = q.fingerprint(scan);
+  EXPECT_THROW(p.verify(a, b), InputError);
+  EXPECT_THROW(p.match(b, a), InputError);
+}
+
+TEST(SyntheticPipeline, CustomLabelSet) {
+  // Two node classes with custom ids: the descriptors follow the class count.
+  Config c;
+  c.labels.node_classes = {{"post", {1}}, {"box", {2}}};
+  c.labels.road = {3};
+  c.labels.building = {4};
+  c.labels.fence = {};
+  c.labels.vegetation = {};
+  const Pipeline p(c);
+  LabelledScan s;
+  for (int k = 0; k < 6; ++k) test::addPoints(s, test::makePole(-15 + 6.0 * k, k % 2 ? 5.0 : -5.0, -1.7, 3), 1);
+  test::addPoints(s, test::makeBoxSurface({4, 1, -1}, {2, 0.9, 0.7}, 0, 0.1), 2);
+  test::addPoints(s, test::makeFloor(-20, 20, -8, 8, -1.7, 0.5), 3);
+  const Fingerprint fp = p.fingerprint(s);
+  EXPECT_EQ(fp.layout.num_classes, 2);
+  EXPECT_EQ(static_cast<int>(fp.descriptor.size()), 2 + 3 * 30 + 48);
+  EXPECT_EQ(fp.nodes.size(), 7u);
+  int boxes = 0;
+  for (const auto& n : fp.nodes) boxes += n.cls == 1;
+  EXPECT_EQ(boxes, 1);
+}
+
+}  // namespace
+}  // namespace sglc

@@ -1,0 +1,137 @@
+#!/usr/bin/env python3
+"""Contract test of sglc-sim: output layout, same seed same bytes, progress and summary, one-line errors.
+
+Usage: test_sim_cli.py SGLC_SIM_BINARY SHARED_DATA_DIR. The KITTI part is skipped (with a message) when
+SHARED_DATA_DIR has no KITTI poses; the rest uses the built-in route.
+"""
+import filecmp
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+binary, data = sys.argv[1], sys.argv[2]
+failures = []
+SMALL = ["--beams", "16", "--columns", "256"]
+
+
+def check(cond, what):
+    if not cond:
+        failures.append(what)
+        print("FAIL:", what)
+
+
+def run(*args):
+    return subprocess.run([binary, *args], capture_output=True, text=True, timeout=300)
+
+
+with tempfile.TemporaryDirectory() as tmp:
+    a, b, c = (os.path.join(tmp, x) for x in "abc")
+    p = run("--route", "loop", "--frames", "0:3,1905:1911", "--seed", "3", "--out", a, *SMALL)
+    check(p.returncode == 0, f"loop route run exits 0 (got {p.returncode}: {p.stderr.strip()})")
+    check("wrote 9 frames" in p.stdout, "summary says how many frames were written")
+    for word in ("frames/s", "ground truth", "peak memory", "world:"):
+        check(word in p.stdout, f"summary mentions '{word}'")
+    check("frames (100%)" in p.stderr, "progress lines go to stderr")
+    for name in ("poses.txt", "calib.txt", "times.txt", "frames.txt", "pairs_distance.txt", "loop_distance4.txt",
+                 "sim_info.json"):
+        check(os.path.isfile(os.path.join(a, name)), f"{name} written")
+    bins = sorted(os.listdir(os.path.join(a, "velodyne")))
+    labels = sorted(os.listdir(os.path.join(a, "labels")))
+    check(bins == [f"{k:06d}.bin" for k in range(9)], "velodyne/000000.bin .. 000008.bin")
+    check(labels == [f"{k:06d}.label" for k in range(9)], "labels/000000.label .. 000008.label")
+    for k in range(9):
+        nb = os.path.getsize(os.path.join(a, "velodyne", f"{k:06d}.bin"))
+        nl = os.path.getsize(os.path.join(a, "labels", f"{k:06d}.label"))
+        check(nb == 4 * nl and nl > 0, f"frame {k}: 16 bytes per point in .bin, 4 in .label")
+    with open(os.path.join(a, "poses.txt")) as f:
+        check(len(f.read().splitlines()) == 9, "poses.txt has one row per frame")
+    with open(os.path.join(a, "frames.txt")) as f:
+        check([int(x) for x in f.read().split()] == [0, 1, 2, 1905, 1906, 1907, 1908, 1909, 1910],
+              "frames.txt maps output frames to trajectory frames")
+    with open(os.path.join(a, "sim_info.json")) as f:
+        info = json.load(f)
+    check(info["seed"] == 3 and info["sensor"]["beams"] == 16 and info["frames"] == 9, "sim_info.json records the run")
+    with open(os.path.join(a, "pairs_distance.txt")) as f:
+        rows = [line.split() for line in f if not line.startswith("#")]
+    check(any(r[2] == "1" for r in rows), "the end of the route revisits its start (a positive pair)")
+
+    # Same seed, same bytes (whatever the thread count); another seed, another world.
+    p = run("--route", "loop", "--frames", "0:3,1905:1911", "--seed", "3", "--out", b, "--threads", "1", *SMALL)
+    check(p.returncode == 0, "second run exits 0")
+    same = filecmp.cmpfiles(a, b, ["poses.txt", "calib.txt", "pairs_distance.txt", "loop_distance4.txt",
+                                   "velodyne/000004.bin", "labels/000004.label"], shallow=False)
+    check(not same[1] and not same[2], f"same seed gives the same bytes (differ: {same[1]}, errors: {same[2]})")
+    p = run("--route", "loop", "--frames", "0:3", "--seed", "4", "--out", c, *SMALL)
+    check(p.returncode == 0, "third run exits 0")
+    p = run("--route", "loop", "--frames", "0:2", "--out", c, *SMALL)
+    check(p.returncode == 1 and "--overwrite" in p.stderr, "an output folder with scans is refused")
+    p = run("--route", "loop", "--frames", "0:3", "--seed", "4", "--out", c, "--overwrite", "--quiet", *SMALL)
+    check(p.returncode == 0, "--overwrite replaces an earlier run")
+    check(not filecmp.cmp(os.path.join(a, "velodyne", "000001.bin"), os.path.join(c, "velodyne", "000001.bin"),
+                          shallow=False), "another seed gives another scan")
+
+    # Label noise and odometry drift options.
+    d = os.path.join(tmp, "d")
+    p = run("--route", "loop", "--frames", "0:40:10", "--seed", "3", "--out", d, "--label-noise", "0.05",
+            "--odom-noise", "0.01", "--quiet", *SMALL)
+    check(p.returncode == 0 and p.stderr == "", f"--quiet run is silent on stderr ({p.stderr.strip()})")
+    check(os.path.isfile(os.path.join(d, "odometry.txt")), "--odom-noise writes odometry.txt")
+    # Output frame 0 is trajectory frame 0 in both runs: same points, noisy labels.
+    check(filecmp.cmp(os.path.join(a, "velodyne", "000000.bin"), os.path.join(d, "velodyne", "000000.bin"),
+                      shallow=False), "label noise leaves the points alone")
+    check(not filecmp.cmp(os.path.join(a, "labels", "000000.label"), os.path.join(d, "labels", "000000.label"),
+                          shallow=False), "--label-noise changes labels")
+
+    # Field of view.
+    f = os.path.join(tmp, "f")
+    p = run("--route", "loop", "--frames", "0:2", "--out", f, "--beams", "8", "--columns", "64", "--fov-up", "10",
+            "--fov-down", "-10", "--quiet")
+    with open(os.path.join(f, "sim_info.json")) as fh:
+        elevation = json.load(fh)["sensor"]["elevation_deg"]
+    check(p.returncode == 0 and len(elevation) == 8 and elevation[0] == 10 and elevation[-1] == -10,
+          f"--fov-up/--fov-down spread the beams ({elevation})")
+
+    # KITTI trajectory (needs the shared data).
+    poses = os.path.join(data, "kitti_odometry_gt_poses", "poses", "00.txt")
+    calib = os.path.join(data, "semantickitti_scans", "sequences", "00", "calib.txt")
+    if os.path.isfile(poses) and os.path.isfile(calib):
+        k = os.path.join(tmp, "k")
+        p = run("--poses", poses, "--calib", calib, "--frames", "52,4501", "--seed", "7", "--out", k, *SMALL)
+        check(p.returncode == 0, f"KITTI 00 run exits 0 ({p.stderr.strip()})")
+        with open(os.path.join(k, "pairs_distance.txt")) as f:
+            rows = [line.split() for line in f if not line.startswith("#")]
+        check(["000001", "000000", "1"] in rows, "KITTI 00 frames 52 and 4501 are a positive pair")
+        p = run("--poses", poses, "--frames", "0:2", "--out", k)
+        check(p.returncode == 2 and "--calib" in p.stderr, "--poses without --calib is a usage error")
+    else:
+        print(f"SKIP (KITTI part): {poses} not found")
+
+    # Errors: one line on stderr, exit 2 for usage, 1 for bad input.
+    for args, code, word in [
+        (["--route", "loop"], 2, "--out"),
+        (["--out", os.path.join(tmp, "e")], 2, "--route"),
+        (["--route", "loop", "--poses", "x", "--calib", "y", "--out", os.path.join(tmp, "e")], 2, "either"),
+        (["--route", "square", "--out", os.path.join(tmp, "e")], 2, "route"),
+        (["--route", "loop", "--frames", "5:3", "--out", os.path.join(tmp, "e")], 1, "frame selection"),
+        (["--route", "loop", "--frames", "0:99999", "--out", os.path.join(tmp, "e")], 1, "frame selection"),
+        (["--route", "loop", "--beams", "0", "--out", os.path.join(tmp, "e")], 1, "beams"),
+        (["--poses", os.path.join(tmp, "missing.txt"), "--calib", calib, "--out", os.path.join(tmp, "e")], 1,
+         "missing.txt"),
+        (["--route", "loop", "--label-noise", "2", "--out", os.path.join(tmp, "e")], 2, "label-noise"),
+        (["--route", "loop", "--calib", "c.txt", "--out", os.path.join(tmp, "e")], 2, "--calib"),
+        (["--route", "loop", "--fov-up", "3", "--out", os.path.join(tmp, "e")], 2, "--fov-down"),
+    ]:
+        p = run(*args)
+        lines = p.stderr.strip().splitlines()
+        check(p.returncode == code, f"{args}: exit {code} (got {p.returncode})")
+        check(len(lines) == 1 and lines[0].startswith("sglc-sim: error:") and word in lines[0],
+              f"{args}: one error line mentioning '{word}' (got {p.stderr.strip()!r})")
+    p = run("--help")
+    check(p.returncode == 0 and "--poses" in p.stdout and "--frames" in p.stdout, "--help lists the options")
+
+if failures:
+    print(f"{len(failures)} check(s) failed")
+    sys.exit(1)
+print("all sglc-sim CLI checks passed")

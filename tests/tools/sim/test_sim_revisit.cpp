@@ -1,0 +1,108 @@
+// Revisits: the same landmarks seen again from another viewpoint, and the engine closing the loop on them.
+#include "sglc/pipeline.hpp"
+#include "sim/ground_truth.hpp"
+#include "sim_test_util.hpp"
+
+namespace sglc::sim::test {
+namespace {
+
+// The closest pair (earlier, later) of the trajectory whose headings differ by less than 30 deg (same
+// direction) or more than 150 deg (reverse), at least 300 frames apart.
+std::pair<int, int> closestRevisit(const Trajectory& t, bool reverse) {
+  std::vector<int> source(t.poses.size());
+  for (std::size_t k = 0; k < source.size(); ++k) source[k] = static_cast<int>(k);
+  double best = 1e9;
+  std::pair<int, int> out{-1, -1};
+  for (const auto& r : loopPoses(t.poses, source, 3.0, 300)) {
+    const double h = headingDifferenceDeg(t.poses[r.first], t.poses[r.second]);
+    if (reverse ? h < 150 : h > 30) continue;
+    const double d = r.T.topRightCorner<3, 1>().norm();
+    if (d < best) {
+      best = d;
+      out = {r.first, r.second};
+    }
+  }
+  return out;
+}
+
+double sharedShare(const Frame& a, const Frame& b, int min_points) {
+  const auto la = landmarkInstances(a, min_points), lb = landmarkInstances(b, min_points);
+  std::vector<std::uint32_t> common;
+  std::set_intersection(la.begin(), la.end(), lb.begin(), lb.end(), std::back_inserter(common));
+  return static_cast<double>(common.size()) / std::max<std::size_t>(1, std::min(la.size(), lb.size()));
+}
+
+SimConfig noiseFree(int beams, int columns) {
+  SimConfig cfg;
+  cfg.sensor = SensorConfig::preset(beams);
+  cfg.sensor.columns = columns;
+  cfg.sensor.noiseFree();
+  return cfg;
+}
+
+TEST(Revisit, LoopRouteRevisitsShareMostLandmarks) {
+  const Simulator sim(loopTrajectory(), noiseFree(32, 900));
+  for (bool reverse : {false, true}) {
+    const auto [i, j] = closestRevisit(loopTrajectory(), reverse);
+    ASSERT_GE(i, 0) << (reverse ? "no reverse revisit" : "no same-direction revisit");
+    SCOPED_TRACE(std::string(reverse ? "reverse" : "same direction") + " revisit " + std::to_string(i) + " / " +
+                 std::to_string(j));
+    const Frame a = sim.render(i), b = sim.render(j);
+    ASSERT_GE(landmarkInstances(a, 5).size(), 8u);
+    EXPECT_GT(sharedShare(a, b, 5), 0.6);
+  }
+}
+
+// The engine on a noise-free revisit: detected, and the relative pose within 0.05 m / 0.2 deg.
+void expectLoopClosed(const Simulator& sim, int candidate, int query) {
+  const Pipeline pipeline;
+  const Frame c = sim.render(candidate), q = sim.render(query);
+  const Mat4d gt = q.pose.inverse() * c.pose;  // maps candidate points into the query frame
+  const LoopResult r = pipeline.match(pipeline.fingerprint(q.scan), pipeline.fingerprint(c.scan));
+  const double te = translationError(r.T, gt), re = rotationErrorDeg(r.T, gt);
+  std::cout << "[ engine   ] query " << query << " candidate " << candidate << ": is_loop " << r.is_loop << ", matches "
+            << r.matches << ", inliers " << r.inliers << ", score " << r.score << ", |t_gt| "
+            << gt.topRightCorner<3, 1>().norm() << " m, error " << te << " m / " << re << " deg" << std::endl;
+  EXPECT_GT(sharedShare(c, q, 5), 0.6);
+  EXPECT_TRUE(r.is_loop) << r.reason;
+  EXPECT_LT(te, 0.05);
+  EXPECT_LT(re, 0.2);
+}
+
+TEST(Revisit, EngineClosesKitti00LoopWithExactPose) {
+  SGLC_REQUIRE_KITTI("00");
+  // KITTI 00 frames 52 and 4501 are 2.96 m apart, 4449 frames apart in time (the real loop pair in
+  // ../shared/data/semantickitti_scans).
+  const Simulator sim(kittiSequence("00"), noiseFree(64, 2083));
+  expectLoopClosed(sim, 52, 4501);
+}
+
+// DOCUMENTS AN ENGINE FAILURE; disabled until the engine is fixed (run it with --gtest_also_run_disabled_tests).
+// The same KITTI 00 pair in the worlds of seeds 1..10, noise-free. Measured with the engine of this commit: all
+// 10 detected, but only seeds 1 and 7 end within 0.05 m / 0.2 deg; the others at 0.02-0.23 m and 0.26-0.84 deg
+// (seed 6: 0.227 m / 0.65 deg). With fine.enabled = false (coarse -> plane refinement only) every seed ends
+// within 0.003 m / 0.01 deg: the instance ICP biases the pose (its point-to-point pairs join differently
+// sampled surfaces of the same objects), and the plane stage, anchored by those pairs, keeps the bias.
+TEST(Revisit, DISABLED_EnginePoseWithinToleranceOnEverySeed) {
+  SGLC_REQUIRE_KITTI("00");
+  for (std::uint64_t seed = 1; seed <= 10; ++seed) {
+    SCOPED_TRACE("seed " + std::to_string(seed));
+    SimConfig cfg = noiseFree(64, 2083);
+    cfg.seed = seed;
+    const Simulator sim(kittiSequence("00"), cfg);
+    expectLoopClosed(sim, 52, 4501);
+  }
+}
+
+// DISABLED: known engine limitation, tracked in the simulator issue. On reverse revisits the instance ICP pairs
+// opposite sides of trunks and poles and biases the pose (here 0.22 deg against 0.2); with fine.enabled=false the
+// plane stage alone is exact. Run with --gtest_also_run_disabled_tests.
+TEST(Revisit, DISABLED_EngineClosesReverseLoopWithExactPose) {
+  const auto [i, j] = closestRevisit(loopTrajectory(), true);
+  ASSERT_GE(i, 0);
+  const Simulator sim(loopTrajectory(), noiseFree(64, 2083));
+  expectLoopClosed(sim, i, j);
+}
+
+}  // namespace
+}  // namespace sglc::sim::test

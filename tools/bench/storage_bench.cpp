@@ -1,0 +1,237 @@
+// sglc-bench-storage: speed and size of the map database, printed as one JSON object.
+//
+// Fingerprints come from simulated HDL-64 frames (KITTI 00's path when ../shared/data is present, else the
+// built-in route). Larger maps reuse them with perturbed scan descriptors (each a distinct unit vector near a
+// real one), so the index sees realistic descriptor statistics.
+//
+//   build/bin/sglc-bench-storage [--dir /tmp/sglc-bench] [--frames 300] [--scans 100000] [--million]
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "sglc/io.hpp"
+#include "sglc/pipeline.hpp"
+#include "sglc/storage/map_store.hpp"
+#include "sim/simulator.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using namespace sglc;
+
+double ms(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(p * (v.size() - 1) + 0.5)];
+}
+
+nlohmann::ordered_json summary(const std::vector<double>& v) {
+  return {{"median_ms", percentile(v, 0.5)}, {"p90_ms", percentile(v, 0.9)}, {"n", v.size()}};
+}
+
+std::vector<float> perturb(const std::vector<float>& d, std::mt19937_64& rng, float sigma) {
+  std::normal_distribution<float> g(0.0f, sigma);
+  std::vector<float> out(d.size());
+  double norm = 0;
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    out[i] = std::max(0.0f, d[i] + g(rng));
+    norm += double(out[i]) * out[i];
+  }
+  for (auto& v : out) v = static_cast<float>(v / std::sqrt(norm));
+  return out;
+}
+
+// Adds `count` scans cycling through the base fingerprints with perturbed descriptors.
+void fill(storage::MapStore& store, const std::string& map, const std::vector<Fingerprint>& base, std::int64_t first,
+          std::int64_t count, std::mt19937_64& rng, std::vector<std::vector<float>>* keep_some) {
+  for (std::int64_t i = first; i < first + count; ++i) {
+    Fingerprint fp = base[static_cast<std::size_t>(i) % base.size()];
+    fp.descriptor = perturb(fp.descriptor, rng, 0.01f);
+    storage::NewScan ns;
+    ns.map = map;
+    ns.robot = "r" + std::to_string(i % 4);
+    ns.session = "s" + std::to_string(i / 25000);
+    ns.seq = i;
+    ns.fingerprint = &fp;
+    store.addScan(ns);
+    if (keep_some && i % 997 == 0) keep_some->push_back(fp.descriptor);
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Map database benchmark (JSON on stdout)."};
+  std::string dir = (fs::temp_directory_path() / "sglc-bench-storage").string();
+  int frames = 300;
+  std::int64_t scans = 100000;
+  bool million = false;
+  std::string data = "../shared/data";
+  app.add_option("--dir", dir, "scratch directory (removed first)");
+  app.add_option("--frames", frames, "simulated frames to fingerprint");
+  app.add_option("--scans", scans, "size of the exact-search map");
+  app.add_flag("--million", million, "also build a 1M-scan map with the approximate (IVF) index");
+  app.add_option("--data", data, "shared data directory (KITTI poses)");
+  CLI11_PARSE(app, argc, argv);
+
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  nlohmann::ordered_json out;
+  const Pipeline pipeline;
+
+  // 1. Realistic fingerprints from the simulator.
+  sim::Trajectory traj;
+  const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
+  const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
+  if (fs::exists(poses) && fs::exists(calib)) traj = sim::loadKittiTrajectory(poses, calib);
+  else traj = sim::loopRoute();
+  sim::SimConfig sc;
+  sc.threads = 2;
+  const sim::Simulator simulator(traj, sc);
+  std::vector<Fingerprint> base;
+  std::vector<double> blob_bytes;
+  const int stride = std::max(1, simulator.numFrames() / frames);
+  for (int f = 0; f < simulator.numFrames() && static_cast<int>(base.size()) < frames; f += stride) {
+    base.push_back(pipeline.fingerprint(simulator.render(f).scan));
+    blob_bytes.push_back(static_cast<double>(serialize(base.back()).size()));
+  }
+  out["source"] = traj.source;
+  out["fingerprints"] = base.size();
+  out["fingerprint_bytes"] = {{"median", percentile(blob_bytes, 0.5)}, {"max", percentile(blob_bytes, 1.0)}};
+
+  std::mt19937_64 rng(42);
+  const auto dim = base.front().layout.scanDim();
+  // 2. Store with synchronous=FULL, then fetches from the cache.
+  {
+    storage::StoreOptions o;
+    o.path = dir + "/full.db";
+    o.sync = storage::StoreOptions::Sync::kFull;
+    auto store = storage::MapStore::open(o);
+    store->createMap("m", dim);
+    std::vector<double> store_ms, fetch_ms, cold_ms;
+    std::vector<std::int64_t> ids;
+    for (std::size_t i = 0; i < base.size(); ++i) {
+      storage::NewScan ns{.map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
+      const auto t0 = Clock::now();
+      ids.push_back(store->addScan(ns));
+      store_ms.push_back(ms(t0));
+    }
+    for (auto id : ids) {
+      const auto t0 = Clock::now();
+      store->fingerprint(id);
+      cold_ms.push_back(ms(t0));
+    }
+    for (int rep = 0; rep < 5; ++rep)
+      for (auto id : ids) {
+        const auto t0 = Clock::now();
+        store->fingerprint(id);
+        fetch_ms.push_back(ms(t0));
+      }
+    out["store_full_sync"] = summary(store_ms);
+    out["fetch_from_db"] = summary(cold_ms);
+    out["fetch_from_cache"] = summary(fetch_ms);
+    const auto st = store->stats();
+    out["bytes_per_scan_db"] = static_cast<double>(st.db_bytes) / static_cast<double>(st.scans);
+  }
+  // 3. A large map, exact search, reopen.
+  {
+    storage::StoreOptions o;
+    o.path = dir + "/big.db";
+    o.sync = storage::StoreOptions::Sync::kOff;  // bulk fill; the timed store above is FULL
+    std::vector<std::vector<float>> queries;
+    auto t0 = Clock::now();
+    {
+      auto store = storage::MapStore::open(o);
+      store->createMap("m", dim);
+      fill(*store, "m", base, 0, scans, rng, &queries);
+      out["fill_s"] = ms(t0) / 1000.0;
+      std::vector<double> search_ms, filtered_ms;
+      for (const auto& q : queries) {
+        storage::SearchRequest req{.map = "m", .descriptor = perturb(q, rng, 0.005f), .k = 50};
+        auto t1 = Clock::now();
+        store->search(req);
+        search_ms.push_back(ms(t1));
+        req.exclude_robots = {"r1"};
+        req.self_robot = "r0";
+        req.self_session = "s0";
+        req.exclude_recent = 100;
+        t1 = Clock::now();
+        store->search(req);
+        filtered_ms.push_back(ms(t1));
+      }
+      out["search_top50_exact"] = summary(search_ms);
+      out["search_top50_exact"]["scans"] = scans;
+      out["search_top50_exact_filtered"] = summary(filtered_ms);
+      const auto st = store->stats();
+      out["big_map"] = {{"scans", st.scans}, {"db_bytes", st.db_bytes},
+                        {"bytes_per_scan", static_cast<double>(st.db_bytes) / static_cast<double>(st.scans)}};
+    }
+    t0 = Clock::now();
+    { auto store = storage::MapStore::open(o); }
+    out["open_with_snapshot_s"] = ms(t0) / 1000.0;
+    fs::remove_all(o.path + ".index");
+    t0 = Clock::now();
+    { auto store = storage::MapStore::open(o); }
+    out["open_rebuild_s"] = ms(t0) / 1000.0;
+  }
+  // 4. One million scans with the approximate index, recall against exact search.
+  if (million) {
+    std::vector<Fingerprint> small;  // nodes and descriptor only: the index is what is measured here
+    for (const auto& fp : base) {
+      Fingerprint s;
+      s.layout = fp.layout;
+      s.d_max = fp.d_max;
+      s.d_i = fp.d_i;
+      s.background_cell = fp.background_cell;
+      s.plane_voxel = fp.plane_voxel;
+      s.descriptor = fp.descriptor;
+      s.instance_offsets = {0};
+      small.push_back(std::move(s));
+    }
+    storage::StoreOptions o;
+    o.path = dir + "/million.db";
+    o.sync = storage::StoreOptions::Sync::kOff;
+    std::vector<std::vector<float>> queries;
+    auto t0 = Clock::now();
+    {
+      auto store = storage::MapStore::open(o);
+      store->createMap("m", dim);
+      fill(*store, "m", small, 0, 1000000, rng, &queries);
+    }
+    out["million_fill_s"] = ms(t0) / 1000.0;
+    queries.resize(std::min<std::size_t>(queries.size(), 200));
+    auto exact = storage::MapStore::open(o);
+    o.index.type = storage::IndexOptions::Type::kIvf;
+    t0 = Clock::now();
+    auto approx = storage::MapStore::open(o);
+    out["million_open_ivf_s"] = ms(t0) / 1000.0;
+    std::vector<double> exact_ms, approx_ms;
+    std::size_t hit = 0, total = 0;
+    for (const auto& q0 : queries) {
+      storage::SearchRequest req{.map = "m", .descriptor = perturb(q0, rng, 0.005f), .k = 50};
+      auto t1 = Clock::now();
+      const auto e = exact->search(req);
+      exact_ms.push_back(ms(t1));
+      t1 = Clock::now();
+      const auto a = approx->search(req);
+      approx_ms.push_back(ms(t1));
+      for (const auto& h : e)
+        hit += std::any_of(a.begin(), a.end(), [&](const storage::SearchHit& x) { return x.scan_id == h.scan_id; });
+      total += e.size();
+    }
+    out["million_search_top50_exact"] = summary(exact_ms);
+    out["million_search_top50_ivf"] = summary(approx_ms);
+    out["million_search_top50_ivf"]["nprobe"] = o.index.ivf_nprobe;
+    out["million_recall_at_50"] = static_cast<double>(hit) / static_cast<double>(std::max<std::size_t>(total, 1));
+  }
+  std::cout << out.dump(2) << std::endl;
+  fs::remove_all(dir);
+  return 0;
+}

@@ -1,0 +1,543 @@
+// Ray casting of one spinning-LiDAR revolution against the world.
+//
+// Per frame, the primitives near the sensor are gathered once, moved into sensor-centred float coordinates,
+// sorted by their horizontal distance, and bucketed into 0.5-degree azimuth sectors. A ray tests only the
+// primitives of its sector, nearest first, and stops as soon as the next one cannot be closer than its
+// current hit (ground included), so occlusion is exact and cheap. Columns are split between threads; every
+// random choice is a hash of (seed, frame, ray), so the output does not depend on the thread count.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <thread>
+
+#include "sim/rng.hpp"
+#include "sim/simulator.hpp"
+
+namespace sglc::sim {
+namespace {
+
+constexpr int kSectors = 720;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+constexpr float kPi = std::numbers::pi_v<float>;
+
+// A primitive in sensor-centred coordinates (world axes, origin at the sensor).
+struct LocalPrim {
+  float ox, oy;      // box: ray origin in the box frame; cylinder / ellipsoid: -centre (x, y)
+  float z0, z1;      // vertical extent relative to the sensor
+  float hx, hy;
+  float c, s;        // box axis
+  float near;        // horizontal distance from the sensor to the bounding circle (>= 0)
+  float jitter;
+  float reflectivity;
+  std::uint32_t label;
+  std::uint32_t id;  // stable id: static index, or statics + k for moving parts
+  Shape shape;
+  std::uint8_t flags;
+  std::uint8_t pass;
+};
+
+struct Span {
+  float t0 = kInf, t1 = kInf;
+  int axis = 0;  // box: entry slab (0 x, 1 y, 2 z)
+};
+
+// Slab test for one axis; o + t u within [lo, hi].
+inline bool slab(float o, float u, float lo, float hi, float& tmin, float& tmax, int axis, int& entry_axis) {
+  if (std::abs(u) < 1e-12f) return o >= lo && o <= hi;
+  float a = (lo - o) / u, b = (hi - o) / u;
+  if (a > b) std::swap(a, b);
+  if (a > tmin) {
+    tmin = a;
+    entry_axis = axis;
+  }
+  tmax = std::min(tmax, b);
+  return tmin <= tmax;
+}
+
+// Entry/exit of a ray from the sensor (origin) along unit d; false when missed, behind, or when the sensor is
+// inside the solid (its own vehicle's shell, a passing agent).
+inline bool intersect(const LocalPrim& p, float dx, float dy, float dz, Span& span) {
+  switch (p.shape) {
+    case Shape::kBox: {
+      const float ux = p.c * dx + p.s * dy, uy = -p.s * dx + p.c * dy;
+      float tmin = -kInf, tmax = kInf;
+      int axis = 0;
+      if (!slab(p.ox, ux, -p.hx, p.hx, tmin, tmax, 0, axis)) return false;
+      if (!slab(p.oy, uy, -p.hy, p.hy, tmin, tmax, 1, axis)) return false;
+      if (!slab(0.0f, dz, p.z0, p.z1, tmin, tmax, 2, axis)) return false;
+      if (tmin <= 0.0f) return false;
+      span = {tmin, tmax, axis};
+      return true;
+    }
+    case Shape::kCylinder: {
+      const float a = dx * dx + dy * dy;
+      if (a < 1e-12f) return false;
+      const float b = 2.0f * (p.ox * dx + p.oy * dy);
+      const float c = p.ox * p.ox + p.oy * p.oy - p.hx * p.hx;
+      if (c <= 0.0f) return false;
+      const float disc = b * b - 4.0f * a * c;
+      if (disc < 0.0f) return false;
+      const float sq = std::sqrt(disc);
+      const float t0 = (-b - sq) / (2.0f * a);
+      if (t0 <= 0.0f) return false;
+      const float z = t0 * dz;
+      if (z < p.z0 || z > p.z1) return false;
+      span = {t0, (-b + sq) / (2.0f * a), 0};
+      return true;
+    }
+    case Shape::kEllipsoid: {
+      const float rz = 0.5f * (p.z1 - p.z0), cz = 0.5f * (p.z1 + p.z0);
+      const float qx = p.ox / p.hx, qy = p.oy / p.hy, qz = -cz / rz;
+      const float ux = dx / p.hx, uy = dy / p.hy, uz = dz / rz;
+      const float a = ux * ux + uy * uy + uz * uz;
+      const float b = 2.0f * (qx * ux + qy * uy + qz * uz);
+      const float c = qx * qx + qy * qy + qz * qz - 1.0f;
+      if (c <= 0.0f) return false;
+      const float disc = b * b - 4.0f * a * c;
+      if (disc < 0.0f) return false;
+      const float sq = std::sqrt(disc);
+      const float t0 = (-b - sq) / (2.0f * a);
+      if (t0 <= 0.0f) return false;
+      span = {t0, (-b + sq) / (2.0f * a), 0};
+      return true;
+    }
+  }
+  return false;
+}
+
+// Unit surface normal at t (world axes).
+inline Vec3f normalAt(const LocalPrim& p, const Vec3f& d, const Span& span, float t) {
+  switch (p.shape) {
+    case Shape::kBox:
+      if (span.axis == 2) return Vec3f::UnitZ();
+      return span.axis == 0 ? Vec3f(p.c, p.s, 0.0f) : Vec3f(-p.s, p.c, 0.0f);
+    case Shape::kCylinder: {
+      const Vec3f n(t * d.x() + p.ox, t * d.y() + p.oy, 0.0f);
+      return n.normalized();
+    }
+    case Shape::kEllipsoid: {
+      const float rz = 0.5f * (p.z1 - p.z0), cz = 0.5f * (p.z1 + p.z0);
+      const Vec3f n((t * d.x() + p.ox) / (p.hx * p.hx), (t * d.y() + p.oy) / (p.hy * p.hy),
+                    (t * d.z() - cz) / (rz * rz));
+      return n.normalized();
+    }
+  }
+  return Vec3f::UnitZ();
+}
+
+// Is a box hit inside a facade window? A grid of windows 1.3 m wide every 2.6 m, 1.3 m tall every 3 m.
+inline bool inWindow(const LocalPrim& p, const Vec3f& d, const Span& span, float t) {
+  if (span.axis == 2) return false;
+  const float ux = p.c * d.x() + p.s * d.y(), uy = -p.s * d.x() + p.c * d.y();
+  const float along = span.axis == 0 ? p.oy + t * uy : p.ox + t * ux;
+  const float z = t * d.z() - p.z0;
+  const float fz = std::fmod(z, 3.0f), fa = std::fmod(along + 1000.0f, 2.6f);
+  return fz > 1.4f && fz < 2.7f && fa > 0.6f && fa < 1.9f;
+}
+
+float groundReflectivity(std::uint32_t cls) {
+  switch (cls) {
+    case label::kRoad: return 0.26f;
+    case label::kParking: return 0.35f;
+    case label::kSidewalk: return 0.37f;
+    case label::kTerrain: return 0.42f;
+    default: return 0.35f;
+  }
+}
+
+// Smallest t > 0 where the ray from o along d meets the ground height field, or -1. Regula falsi (Illinois)
+// on f(t) = z(t) - ground(x(t), y(t)), bracketed by the sensor (above ground) and max range.
+// f0 = f(0), the sensor's height above the ground (the same for every ray of a frame).
+double groundHit(const GroundPatch& ground, const Vec3d& o, const Vec3d& d, double t_max, double f0) {
+  auto f = [&](double t) { return o.z() + t * d.z() - ground.height(o.x() + t * d.x(), o.y() + t * d.y()); };
+  if (f0 <= 0.0) return -1.0;
+  double a = 0.0, fa = f0, b = t_max, fb;
+  // First probe: the flat-ground estimate; it usually brackets the root tightly on one side.
+  const double tp = d.z() < 0.0 ? f0 / -d.z() : t_max;
+  if (tp < t_max) {
+    const double fp = f(tp);
+    if (fp > 0.0) {
+      a = tp;
+      fa = fp;
+      fb = f(t_max);
+      if (fb > 0.0) return -1.0;
+    } else {
+      b = tp;
+      fb = fp;
+    }
+  } else {
+    fb = f(t_max);
+    if (fb > 0.0) return -1.0;
+  }
+  int side = 0;
+  double r = b;
+  for (int it = 0; it < 40; ++it) {
+    r = (fa * b - fb * a) / (fa - fb);
+    const double fr = f(r);
+    if (std::abs(fr) < 1e-5 || b - a < 1e-5) break;
+    if (fr * fb > 0.0) {
+      b = r;
+      fb = fr;
+      if (side == -1) fa *= 0.5;
+      side = -1;
+    } else {
+      a = r;
+      fa = fr;
+      if (side == 1) fb *= 0.5;
+      side = 1;
+    }
+  }
+  return r;
+}
+
+// atan2 with a polynomial (max error ~1e-5 rad); only used to pick a ray's azimuth sector, whose primitive
+// lists carry a margin far larger than that.
+inline float fastAtan2(float y, float x) {
+  const float ax = std::abs(x), ay = std::abs(y);
+  const float mx = std::max(ax, ay);
+  if (mx == 0.0f) return 0.0f;
+  const float z = std::min(ax, ay) / mx, z2 = z * z;
+  float r = z * (0.99997726f + z2 * (-0.33262347f + z2 * (0.19354346f + z2 * (-0.11643287f + z2 * (0.05265332f + z2 * -0.01172120f)))));
+  if (ay > ax) r = 0.5f * kPi - r;
+  if (x < 0.0f) r = kPi - r;
+  return y < 0.0f ? -r : r;
+}
+
+}  // namespace
+
+Simulator::Simulator(Trajectory trajectory, SimConfig config)
+    : trajectory_(std::move(trajectory)), config_(std::move(config)),
+      world_(trajectory_.poses, config_.seed, config_.world) {
+  const auto& s = config_.sensor;
+  if (s.elevation_deg.empty()) throw InputError("sensor: no beams");
+  if (s.elevation_deg.size() > 65535 || s.columns < 8 || s.columns > 65535)
+    throw InputError("sensor: beams must be 1..65535 and columns 8..65535");
+  if (!(s.max_range > s.min_range) || s.min_range < 0) throw InputError("sensor: need 0 <= min_range < max_range");
+  if (s.max_range > 150.0) throw InputError("sensor: max_range above 150 m is not supported (the world ends there)");
+  if (trajectory_.frame_dt <= 0) throw InputError("trajectory: frame_dt must be positive");
+  for (double e : s.elevation_deg) {
+    sin_el_.push_back(static_cast<float>(std::sin(e * std::numbers::pi / 180.0)));
+    cos_el_.push_back(static_cast<float>(std::cos(e * std::numbers::pi / 180.0)));
+  }
+  for (int c = 0; c < s.columns; ++c) {
+    const double az = -std::numbers::pi + (c + 0.5) * 2.0 * std::numbers::pi / s.columns;
+    sin_az_.push_back(static_cast<float>(std::sin(az)));
+    cos_az_.push_back(static_cast<float>(std::cos(az)));
+  }
+  ego_blocked_.assign(static_cast<std::size_t>(s.columns) * s.beams(), 0);
+  if (s.ego_vehicle) {
+    // Sensor-frame box of the ego vehicle's rear (roof end, tailgate): in KITTI scans the ground within about
+    // 5.3 m straight behind the car is hidden, elsewhere the lowest beam reaches it at about 4 m.
+    struct Box {
+      float x0, x1, y0, y1, z0, z1;
+    };
+    const float ground = -static_cast<float>(config_.world.sensor_height);
+    const Box boxes[1] = {{-2.7f, -0.5f, -0.9f, 0.9f, ground + 0.25f, ground + 0.85f}};
+    for (int c = 0; c < s.columns; ++c)
+      for (int b = 0; b < s.beams(); ++b) {
+        const float d[3] = {cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]};
+        for (const Box& box : boxes) {
+          float tmin = 0.0f, tmax = 1e9f;
+          const float lo[3] = {box.x0, box.y0, box.z0}, hi[3] = {box.x1, box.y1, box.z1};
+          bool hit = true;
+          for (int k = 0; k < 3 && hit; ++k) {
+            if (std::abs(d[k]) < 1e-9f) {
+              hit = lo[k] <= 0.0f && 0.0f <= hi[k];
+              continue;
+            }
+            float a = lo[k] / d[k], bb = hi[k] / d[k];
+            if (a > bb) std::swap(a, bb);
+            tmin = std::max(tmin, a);
+            tmax = std::min(tmax, bb);
+            hit = tmin <= tmax;
+          }
+          if (hit) ego_blocked_[static_cast<std::size_t>(c) * s.beams() + b] = 1;
+        }
+      }
+  }
+}
+
+Frame Simulator::render(int index) const {
+  Frame f;
+  render(index, f, config_.threads);
+  return f;
+}
+
+void Simulator::render(int index, Frame& out, int threads) const {
+  if (index < 0 || index >= numFrames())
+    throw InputError("frame " + std::to_string(index) + " is outside the trajectory (0.." +
+                     std::to_string(numFrames() - 1) + ")");
+  const SensorConfig& sensor = config_.sensor;
+  const int B = sensor.beams(), C = sensor.columns;
+  const Mat4d& P = trajectory_.poses[index];
+  const Vec3d o = P.topRightCorner<3, 1>();
+  const Eigen::Matrix3f R = P.topLeftCorner<3, 3>().cast<float>();
+  const double time = index * trajectory_.frame_dt;
+  const std::uint64_t frame_key = hashKeys(config_.seed, 0xF4A3E5ULL, static_cast<std::uint64_t>(index));
+  const float max_range = static_cast<float>(sensor.max_range);
+
+  // ---- gather and bucket the primitives around the sensor
+  std::vector<int> ids;
+  world_.staticsNear(o.x(), o.y(), sensor.max_range, ids);
+  std::vector<Primitive> moving;
+  world_.movingNear(time, o.x(), o.y(), sensor.max_range, moving);
+  const auto& statics = world_.statics();
+  std::vector<LocalPrim> prims;
+  prims.reserve(ids.size() + moving.size());
+  auto local = [&](const Primitive& p, std::uint32_t id) {
+    LocalPrim q;
+    const double rx = p.cx - o.x(), ry = p.cy - o.y();
+    q.shape = p.shape;
+    q.flags = p.flags;
+    q.pass = p.pass_through;
+    q.jitter = p.depth_jitter;
+    q.reflectivity = p.reflectivity;
+    q.label = p.label;
+    q.id = id;
+    q.hx = p.hx;
+    q.hy = p.hy;
+    q.c = p.cos_yaw;
+    q.s = p.sin_yaw;
+    q.z0 = static_cast<float>(p.z0 - o.z());
+    q.z1 = static_cast<float>(p.z1 - o.z());
+    if (p.shape == Shape::kBox) {
+      q.ox = static_cast<float>(-(p.cos_yaw * rx + p.sin_yaw * ry));
+      q.oy = static_cast<float>(-(-p.sin_yaw * rx + p.cos_yaw * ry));
+    } else {
+      q.ox = static_cast<float>(-rx);
+      q.oy = static_cast<float>(-ry);
+    }
+    q.near = static_cast<float>(std::max(0.0, std::hypot(rx, ry) - p.radius));
+    if (q.near < max_range) prims.push_back(q);
+  };
+  for (int id : ids) local(statics[id], static_cast<std::uint32_t>(id));
+  for (std::size_t k = 0; k < moving.size(); ++k) local(moving[k], static_cast<std::uint32_t>(statics.size() + k));
+  std::sort(prims.begin(), prims.end(),
+            [](const LocalPrim& a, const LocalPrim& b) { return a.near != b.near ? a.near < b.near : a.id < b.id; });
+
+  // Sector lists (CSR), nearest first because prims are already sorted.
+  const float sector_w = 2.0f * kPi / kSectors;
+  std::vector<int> sector_start(kSectors + 1, 0), first(prims.size()), last(prims.size());
+  for (std::size_t i = 0; i < prims.size(); ++i) {
+    const LocalPrim& q = prims[i];
+    // Centre relative to the sensor, from the stored local origin.
+    float cx, cy;
+    if (q.shape == Shape::kBox) {
+      cx = -(q.c * q.ox - q.s * q.oy);
+      cy = -(q.s * q.ox + q.c * q.oy);
+    } else {
+      cx = -q.ox;
+      cy = -q.oy;
+    }
+    const float dist = std::hypot(cx, cy), radius = dist - q.near;
+    if (q.near <= 0.0f || dist <= radius * 1.0001f) {
+      first[i] = 0;
+      last[i] = kSectors - 1;
+    } else {
+      const float phi = std::atan2(cy, cx);
+      const float alpha = std::asin(std::min(1.0f, radius / dist)) + 0.6f * sector_w;
+      if (alpha >= kPi) {
+        first[i] = 0;
+        last[i] = kSectors - 1;
+      } else {
+        first[i] = static_cast<int>(std::floor((phi - alpha + kPi) / sector_w));
+        last[i] = static_cast<int>(std::floor((phi + alpha + kPi) / sector_w));
+      }
+    }
+    for (int k = first[i]; k <= last[i]; ++k) ++sector_start[((k % kSectors) + kSectors) % kSectors + 1];
+  }
+  for (int k = 0; k < kSectors; ++k) sector_start[k + 1] += sector_start[k];
+  std::vector<int> sector_items(sector_start[kSectors]);
+  {
+    std::vector<int> fill(sector_start.begin(), sector_start.end() - 1);
+    for (std::size_t i = 0; i < prims.size(); ++i)
+      for (int k = first[i]; k <= last[i]; ++k) sector_items[fill[((k % kSectors) + kSectors) % kSectors]++] = static_cast<int>(i);
+  }
+
+  // ---- cast: results in a column-major image (pixel = column * beams + beam)
+  const std::size_t N = static_cast<std::size_t>(B) * C;
+  std::vector<float> img_range(N, -1.0f), img_intensity(N, 0.0f);
+  std::vector<std::uint32_t> img_label(N, 0);
+  std::vector<Vec3f> img_point(N);
+  const double ground_max = sensor.max_range + 1.0;
+  GroundPatch ground;
+  world_.groundPatch(o.x(), o.y(), ground_max + 2.0, ground);
+  const double ground_f0 = o.z() - ground.height(o.x(), o.y());
+
+  auto castColumns = [&](int c_begin, int c_end) {
+    for (int c = c_begin; c < c_end; ++c) {
+      for (int b = 0; b < B; ++b) {
+        if (ego_blocked_[static_cast<std::size_t>(c) * B + b]) continue;
+        const std::uint32_t ray = static_cast<std::uint32_t>(c) * static_cast<std::uint32_t>(B) + static_cast<std::uint32_t>(b);
+        const std::uint64_t ray_key = mix64(frame_key ^ (static_cast<std::uint64_t>(ray) << 20));
+        const Vec3f ds(cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]);
+        const Vec3f d = R * ds;
+        float best = kInf;
+        int hit = -1;  // -1 none, -2 ground, >= 0 prim
+        Span hit_span;
+        const double tg = groundHit(ground, o, d.cast<double>(), ground_max, ground_f0);
+        if (tg > 0.0) {
+          best = static_cast<float>(tg);
+          hit = -2;
+        }
+        const float h = std::sqrt(d.x() * d.x() + d.y() * d.y());
+        const float slope = h > 1e-6f ? d.z() / h : (d.z() > 0 ? kInf : -kInf);
+        const float az = fastAtan2(d.y(), d.x());
+        const int sector = std::clamp(static_cast<int>((az + kPi) / sector_w), 0, kSectors - 1);
+        const float limit = std::min(best, max_range + 1.0f);
+        float cutoff = limit * h;  // a primitive whose near distance exceeds best * h cannot be hit earlier
+        for (int q = sector_start[sector]; q < sector_start[sector + 1]; ++q) {
+          const LocalPrim& p = prims[sector_items[q]];
+          if (p.near >= cutoff) break;
+          const float z_near = slope * p.near;
+          if ((d.z() > 0.0f && z_near > p.z1) || (d.z() < 0.0f && z_near < p.z0)) continue;
+          Span span;
+          if (!intersect(p, d.x(), d.y(), d.z(), span)) continue;
+          if (span.t0 >= best) continue;
+          float t = span.t0;
+          if (p.pass || p.jitter > 0.0f) {
+            const std::uint64_t hsh = mix64(ray_key ^ p.id);
+            if ((hsh & 0xFFu) < p.pass) continue;  // slipped through foliage / a mesh fence
+            if (p.jitter > 0.0f)
+              t += static_cast<float>(unitFromBits(hsh)) * std::min(p.jitter, std::max(0.0f, span.t1 - span.t0));
+            if (t >= best) continue;
+          }
+          best = t;
+          hit = sector_items[q];
+          hit_span = span;
+          cutoff = best * h;
+        }
+        if (hit == -1 || best > max_range || best < sensor.min_range) continue;
+
+        // ---- sensor model: label, incidence, dropout, range noise, intensity
+        std::uint32_t lab;
+        float refl, cos_inc;
+        bool glass = false;
+        if (hit == -2) {
+          const double gx = o.x() + best * d.x(), gy = o.y() + best * d.y();
+          lab = world_.groundLabelAt(gx, gy, ground.distance(gx, gy));
+          refl = groundReflectivity(lab);
+          cos_inc = std::abs(d.z());
+        } else {
+          const LocalPrim& p = prims[hit];
+          lab = p.label;
+          refl = p.reflectivity;
+          cos_inc = std::abs(normalAt(p, d, hit_span, best).dot(d));
+          glass = (p.flags & kGlass) || ((p.flags & kWindows) && inWindow(p, d, hit_span, best));
+        }
+        const float rr = best / max_range;
+        float p_drop = static_cast<float>(sensor.dropout + sensor.far_dropout * rr * rr);
+        if (cos_inc < 0.2f) p_drop += static_cast<float>(sensor.grazing_dropout) * (1.0f - cos_inc / 0.2f);
+        if (glass) p_drop += static_cast<float>(sensor.glass_dropout);
+        if (p_drop > 0.0f && unitFromBits(mix64(ray_key ^ 0x0D50ULL)) < p_drop) continue;
+        float range = best;
+        if (sensor.range_noise > 0)
+          range += static_cast<float>(sensor.range_noise) * approxNormalFromBits(mix64(ray_key ^ 0x4A7CULL));
+        if (range < sensor.min_range || range > max_range) continue;
+        float intensity = refl * (0.75f + 0.25f * cos_inc);
+        if (sensor.intensity_noise) intensity += 0.03f * approxNormalFromBits(mix64(ray_key ^ 0x1E7ULL));
+        const std::size_t px = static_cast<std::size_t>(c) * B + b;
+        img_range[px] = range;
+        img_point[px] = ds * range;
+        img_label[px] = lab;
+        img_intensity[px] = std::clamp(intensity, 0.0f, 0.99f);
+      }
+    }
+  };
+  threads = std::clamp(threads, 1, C);
+  if (threads == 1) {
+    castColumns(0, C);
+  } else {
+    std::vector<std::thread> pool;
+    for (int k = 1; k < threads; ++k)
+      pool.emplace_back(castColumns, static_cast<int>(static_cast<long>(C) * k / threads),
+                        static_cast<int>(static_cast<long>(C) * (k + 1) / threads));
+    castColumns(0, C / threads);
+    for (auto& t : pool) t.join();
+  }
+
+  // ---- compact, column by column (each column top beam first)
+  out.index = index;
+  out.time = time;
+  out.pose = P;
+  out.scan.points.clear();
+  out.scan.labels.clear();
+  out.intensity.clear();
+  out.clean_labels.clear();
+  out.beam.clear();
+  out.column.clear();
+  std::size_t count = 0;
+  for (float r : img_range) count += r > 0.0f;
+  out.scan.points.reserve(count);
+  out.scan.labels.reserve(count);
+  out.intensity.reserve(count);
+  out.beam.reserve(count);
+  out.column.reserve(count);
+  for (int c = 0; c < C; ++c)
+    for (int b = 0; b < B; ++b) {
+      const std::size_t px = static_cast<std::size_t>(c) * B + b;
+      if (img_range[px] <= 0.0f) continue;
+      out.scan.points.push_back(img_point[px]);
+      out.scan.labels.push_back(img_label[px]);
+      out.intensity.push_back(img_intensity[px]);
+      out.beam.push_back(static_cast<std::uint16_t>(b));
+      out.column.push_back(static_cast<std::uint16_t>(c));
+    }
+  if (config_.label_noise.any()) applyLabelNoise(out, config_.label_noise, config_.seed, B, C);
+}
+
+// ---- sensor presets
+
+SensorConfig SensorConfig::hdl64() {
+  SensorConfig s;
+  s.name = "hdl64";
+  // Upper block: 32 lasers from +2 deg down at 1/3 deg; lower block: 32 lasers from -8.83 to -24.8 deg.
+  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(2.0 - k / 3.0);
+  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(-8.83 - k * (24.8 - 8.83) / 31.0);
+  s.columns = 2083;
+  s.max_range = 80.0;
+  return s;
+}
+
+SensorConfig SensorConfig::hdl32() {
+  SensorConfig s;
+  s.name = "hdl32";
+  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(10.67 - k * (10.67 + 30.67) / 31.0);
+  s.columns = 1800;
+  s.max_range = 100.0;
+  return s;
+}
+
+SensorConfig SensorConfig::beams128() {
+  SensorConfig s;
+  s.name = "beams128";
+  for (int k = 0; k < 128; ++k) s.elevation_deg.push_back(15.0 - k * 40.0 / 127.0);
+  s.columns = 1800;
+  s.max_range = 120.0;
+  return s;
+}
+
+SensorConfig SensorConfig::preset(int beams) {
+  if (beams == 64) return hdl64();
+  if (beams == 32) return hdl32();
+  if (beams == 128) return beams128();
+  if (beams < 1 || beams > 1024) throw InputError("sensor: beams must be between 1 and 1024, got " + std::to_string(beams));
+  SensorConfig s = hdl64();
+  s.name = "uniform" + std::to_string(beams);
+  s.elevation_deg.clear();
+  for (int k = 0; k < beams; ++k) s.elevation_deg.push_back(beams == 1 ? -8.0 : 2.0 - k * 26.8 / (beams - 1));
+  return s;
+}
+
+SensorConfig& SensorConfig::noiseFree() {
+  range_noise = 0.0;
+  dropout = 0.0;
+  far_dropout = 0.0;
+  grazing_dropout = 0.0;
+  glass_dropout = 0.0;
+  intensity_noise = false;
+  return *this;
+}
+
+}  // namespace sglc::sim

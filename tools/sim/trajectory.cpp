@@ -1,0 +1,194 @@
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <numbers>
+
+#include "sglc/io.hpp"
+#include "sim/simulator.hpp"
+
+namespace sglc::sim {
+
+Trajectory kittiTrajectory(const std::vector<Mat4d>& camera_poses, const Mat4d& Tr, std::string source) {
+  const Mat3d R = Tr.topLeftCorner<3, 3>();
+  if ((R.transpose() * R - Mat3d::Identity()).norm() > 1e-3 || std::abs(R.determinant() - 1.0) > 1e-3)
+    throw InputError("calibration Tr is not a rigid transform (its rotation is not orthonormal)");
+  Trajectory t;
+  t.Tr = Tr;
+  t.source = std::move(source);
+  const Mat4d Tr_inv = Tr.inverse();
+  t.poses.reserve(camera_poses.size());
+  for (const auto& P : camera_poses) t.poses.push_back(Tr_inv * P * Tr);
+  return t;
+}
+
+Trajectory loadKittiTrajectory(const std::string& poses_path, const std::string& calib_path) {
+  const auto poses = readPoses(poses_path);
+  if (poses.empty()) throw InputError(poses_path + ": no poses");
+  return kittiTrajectory(poses, readCalibTr(calib_path), poses_path);
+}
+
+namespace {
+
+using Vec2 = Eigen::Vector2d;
+
+// Ground of the built-in route (flat at the start, so that frame 0's LiDAR frame is level).
+double routeGround(double x, double y) {
+  return 0.8 * std::cos(2 * std::numbers::pi * x / 230.0) + 0.5 * std::cos(2 * std::numbers::pi * y / 170.0) - 1.3;
+}
+Vec2 routeGroundGradient(double x, double y) {
+  return {-0.8 * 2 * std::numbers::pi / 230.0 * std::sin(2 * std::numbers::pi * x / 230.0),
+          -0.5 * 2 * std::numbers::pi / 170.0 * std::sin(2 * std::numbers::pi * y / 170.0)};
+}
+
+}  // namespace
+
+Trajectory loopRoute() {
+  // Street corners of the driven centreline; corners are rounded with a 10 m radius.
+  const std::vector<Vec2> corners = {{0, 0},     {200, 0},   {200, 120}, {0, 120},   {0, 0},
+                                     {200, 0},   {200, 120}, {200, 180}, {140, 180}, {140, 120},
+                                     {200, 120}, {200, 0},   {0, 0}};
+  constexpr double kRadius = 10.0, kStep = 0.05, kLane = 1.2, kSensorHeight = 1.73;
+  struct Sample {
+    Vec2 p;
+    double heading;
+    bool curve;
+  };
+  std::vector<Sample> centre;
+  auto straight = [&](const Vec2& a, const Vec2& b) {
+    const Vec2 d = b - a;
+    const double len = d.norm();
+    const double h = std::atan2(d.y(), d.x());
+    for (double s = 0; s < len; s += kStep) centre.push_back({a + d * (s / len), h, false});
+  };
+  Vec2 cursor = corners.front();
+  for (std::size_t i = 1; i + 1 < corners.size(); ++i) {
+    const Vec2 din = (corners[i] - corners[i - 1]).normalized(), dout = (corners[i + 1] - corners[i]).normalized();
+    const double turn = std::atan2(din.x() * dout.y() - din.y() * dout.x(), din.dot(dout));
+    if (std::abs(turn) < 1e-9) continue;  // straight on through the intersection
+    const double tl = kRadius * std::tan(std::abs(turn) / 2);
+    const Vec2 a = corners[i] - din * tl;
+    straight(cursor, a);
+    const double sgn = turn > 0 ? 1.0 : -1.0;
+    const Vec2 centre_pt = a + sgn * kRadius * Vec2(-din.y(), din.x());
+    const double h0 = std::atan2(din.y(), din.x());
+    const double arc = std::abs(turn) * kRadius;
+    for (double s = 0; s < arc; s += kStep) {
+      const double h = h0 + sgn * s / kRadius;
+      const Vec2 p = centre_pt + sgn * kRadius * Vec2(std::sin(h), -std::cos(h));
+      centre.push_back({p, h, true});
+    }
+    cursor = corners[i] + dout * tl;
+  }
+  straight(cursor, corners.back());
+
+  // Drive in the right-hand lane: offset the centreline to the right of the heading.
+  std::vector<Vec2> lane(centre.size());
+  std::vector<double> s(centre.size(), 0.0), speed(centre.size());
+  for (std::size_t k = 0; k < centre.size(); ++k) {
+    const double h = centre[k].heading;
+    lane[k] = centre[k].p + kLane * Vec2(std::sin(h), -std::cos(h));
+    if (k > 0) s[k] = s[k - 1] + (lane[k] - lane[k - 1]).norm();
+  }
+  // 9 m/s on straights, 5 m/s in bends, with ramps over +-15 m.
+  for (std::size_t k = 0; k < centre.size(); ++k) {
+    double v = 9.0;
+    for (std::size_t j = k; j-- > 0 && s[k] - s[j] < 15.0;)
+      if (centre[j].curve) v = std::min(v, 5.0 + 4.0 * (s[k] - s[j]) / 15.0);
+    for (std::size_t j = k; j < centre.size() && s[j] - s[k] < 15.0; ++j)
+      if (centre[j].curve) v = std::min(v, 5.0 + 4.0 * (s[j] - s[k]) / 15.0);
+    speed[k] = v;
+  }
+
+  Trajectory t;
+  t.frame_dt = 0.1;
+  t.source = "built-in loop route";
+  std::size_t k = 0;
+  double pos = 0.0;
+  std::vector<Mat4d> poses;
+  while (true) {
+    while (k + 1 < s.size() && s[k + 1] <= pos) ++k;
+    if (k + 1 >= s.size()) break;
+    const double u = (pos - s[k]) / std::max(1e-9, s[k + 1] - s[k]);
+    const Vec2 p = lane[k] * (1 - u) + lane[k + 1] * u;
+    const double h = std::atan2(lane[k + 1].y() - lane[k].y(), lane[k + 1].x() - lane[k].x());
+    const Vec2 fwd(std::cos(h), std::sin(h)), left(-std::sin(h), std::cos(h));
+    const Vec2 g = routeGroundGradient(p.x(), p.y());
+    const double pitch = std::atan(g.dot(fwd)), roll = std::atan(g.dot(left));
+    Mat4d T = Mat4d::Identity();
+    T.topLeftCorner<3, 3>() = (Eigen::AngleAxisd(h, Vec3d::UnitZ()) * Eigen::AngleAxisd(-pitch, Vec3d::UnitY()) *
+                               Eigen::AngleAxisd(roll, Vec3d::UnitX()))
+                                  .toRotationMatrix();
+    T.topRightCorner<3, 1>() = Vec3d(p.x(), p.y(), routeGround(p.x(), p.y()) + kSensorHeight);
+    poses.push_back(T);
+    pos += speed[k] * t.frame_dt;
+  }
+  // World = LiDAR frame of frame 0.
+  const Mat4d first_inv = poses.front().inverse();
+  for (auto& P : poses) t.poses.push_back(first_inv * P);
+  return t;
+}
+
+std::vector<int> parseFrameSelection(std::string_view spec, int num_frames) {
+  std::vector<int> frames;
+  auto trim = [](std::string_view v) {
+    while (!v.empty() && (v.front() == ' ' || v.front() == '\t')) v.remove_prefix(1);
+    while (!v.empty() && (v.back() == ' ' || v.back() == '\t')) v.remove_suffix(1);
+    return v;
+  };
+  spec = trim(spec);
+  if (spec.empty()) {
+    for (int i = 0; i < num_frames; ++i) frames.push_back(i);
+    return frames;
+  }
+  while (true) {
+    const std::size_t comma = spec.find(',');
+    const std::string_view item = trim(spec.substr(0, comma));
+    const std::string what = "frame selection item '" + std::string(item) + "'";
+    std::vector<std::string_view> parts;
+    std::size_t start = 0;
+    while (true) {
+      const std::size_t colon = item.find(':', start);
+      parts.push_back(trim(item.substr(start, colon == std::string_view::npos ? std::string_view::npos : colon - start)));
+      if (colon == std::string_view::npos) break;
+      start = colon + 1;
+    }
+    if (item.empty() || parts.size() > 3)
+      throw InputError(what + ": expected a, a:b or a:b:s (b exclusive)");
+    auto number = [&](std::string_view v, int fallback) {
+      if (v.empty()) return fallback;
+      int x = 0;
+      const auto [ptr, ec] = std::from_chars(v.data(), v.data() + v.size(), x);
+      if (ec != std::errc() || ptr != v.data() + v.size() || x < 0)
+        throw InputError(what + ": '" + std::string(v) + "' is not a non-negative integer");
+      return x;
+    };
+    int a, b, stride = 1;
+    if (parts.size() == 1) {
+      if (parts[0].empty()) throw InputError(what + ": empty");
+      a = number(parts[0], 0);
+      b = a + 1;
+    } else {
+      a = number(parts[0], 0);
+      b = number(parts[1], num_frames);
+      if (parts.size() == 3) {
+        if (parts[2].empty()) throw InputError(what + ": empty stride");
+        stride = number(parts[2], 1);
+        if (stride < 1) throw InputError(what + ": stride must be at least 1");
+      }
+    }
+    if (b <= a) throw InputError(what + ": the end must be greater than the start (b is exclusive)");
+    if (b > num_frames)
+      throw InputError(what + ": the trajectory has only " + std::to_string(num_frames) + " frames (0.." +
+                       std::to_string(num_frames - 1) + ")");
+    if (!frames.empty() && a <= frames.back())
+      throw InputError(what + ": items must be ascending and must not overlap (frame " + std::to_string(a) +
+                       " is not after " + std::to_string(frames.back()) + ")");
+    for (int i = a; i < b; i += stride) frames.push_back(i);
+    if (comma == std::string_view::npos) break;
+    spec = spec.substr(comma + 1);
+  }
+  return frames;
+}
+
+}  // namespace sglc::sim
