@@ -43,7 +43,7 @@ const std::vector<const char*> kMigrations = {
       id INTEGER PRIMARY KEY, robot_id INTEGER NOT NULL REFERENCES robots(id), name TEXT NOT NULL,
       created_at REAL NOT NULL, UNIQUE(robot_id, name));
     CREATE TABLE scans(
-      id INTEGER PRIMARY KEY, map_id INTEGER NOT NULL REFERENCES maps(id),
+      id INTEGER PRIMARY KEY AUTOINCREMENT, map_id INTEGER NOT NULL REFERENCES maps(id),
       robot_id INTEGER NOT NULL REFERENCES robots(id), session_id INTEGER NOT NULL REFERENCES sessions(id),
       seq INTEGER NOT NULL, stamp REAL, pose BLOB, descriptor BLOB NOT NULL,
       fingerprint_bytes INTEGER NOT NULL, has_raw INTEGER NOT NULL, created_at REAL NOT NULL,

@@ -268,6 +268,13 @@ TEST(MapStore, DeletesSessionsAndRobotsFromIndexAndDatabase) {
     EXPECT_EQ(store->deleteRobot("m", "r1"), 10);
     EXPECT_EQ(errorCode([&] { store->deleteRobot("m", "r1"); }), StorageError::Code::kNotFound);
     EXPECT_EQ(errorCode([&] { store->deleteSession("m", "r0", "zz"); }), StorageError::Code::kNotFound);
+    // Ids are never reused: a scan stored after the deletes gets a new one.
+    Fingerprint fp = randomFingerprint(777);
+    NewScan ns{.map = "m", .robot = "r9", .session = "s", .seq = 0, .fingerprint = &fp};
+    std::int64_t max_id = 0;
+    for (const auto& s : all) max_id = std::max(max_id, s.id);
+    EXPECT_GT(store->addScan(ns), max_id);
+    store->deleteRobot("m", "r9");
   }
   for (int pass = 0; pass < 2; ++pass) {
     auto store = MapStore::open(options(path));
