@@ -15,8 +15,21 @@
 #include <unistd.h>
 #include <fcntl.h>
 
+// Fortran BLAS (OpenBLAS when installed, see scripts/install-deps.sh): y = alpha * op(A) * x + beta * y.
+extern "C" void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a,
+                       const int* lda, const float* x, const int* incx, const float* beta, float* y, const int* incy);
+
 namespace sglc::storage {
 namespace {
+
+float squaredL2(const float* a, const float* b, int dim) {
+  float s = 0;
+  for (int j = 0; j < dim; ++j) {
+    const float d = a[j] - b[j];
+    s += d * d;
+  }
+  return s;
+}
 
 constexpr std::uint32_t kSnapshotMagic = 0x58494753;  // "SGIX"
 constexpr std::uint32_t kSnapshotVersion = 1;
@@ -72,6 +85,7 @@ void DescriptorIndex::build(std::vector<IndexEntry> entries, const std::vector<f
     quantizer_.reset();
     index_ = std::make_unique<faiss::IndexFlatL2>(dim_);
     if (n) index_->add(n, vectors.data());
+    computeNorms();
     return;
   }
   const int nlist = options_.ivf_nlist > 0
@@ -96,12 +110,32 @@ void DescriptorIndex::build(std::vector<IndexEntry> entries, const std::vector<f
   for (faiss::Index::idx_t i = 0; i < n; ++i) ids[static_cast<std::size_t>(i)] = i;
   ivf->add_with_ids(n, vectors.data(), ids.data());
   index_ = std::move(ivf);
+  norms_.clear();
+}
+
+void DescriptorIndex::computeNorms() {
+  norms_.clear();
+  if (ivf_) return;
+  const float* xb = static_cast<const faiss::IndexFlatL2&>(*index_).get_xb();
+  norms_.resize(entries_.size());
+  for (std::size_t i = 0; i < entries_.size(); ++i) {
+    const float* v = xb + i * static_cast<std::size_t>(dim_);
+    float s = 0;
+    for (int j = 0; j < dim_; ++j) s += v[j] * v[j];
+    norms_[i] = s;
+  }
 }
 
 void DescriptorIndex::add(const IndexEntry& entry, const float* vector) {
   const auto pos = static_cast<faiss::Index::idx_t>(entries_.size());
-  if (ivf_) index_->add_with_ids(1, vector, &pos);
-  else index_->add(1, vector);
+  if (ivf_) {
+    index_->add_with_ids(1, vector, &pos);
+  } else {
+    index_->add(1, vector);
+    float s = 0;
+    for (int j = 0; j < dim_; ++j) s += vector[j] * vector[j];
+    norms_.push_back(s);
+  }
   entries_.push_back(entry);
   ++live_;
 }
@@ -120,21 +154,15 @@ std::int64_t DescriptorIndex::remove(const std::unordered_set<std::int64_t>& sca
 std::vector<SearchHit> DescriptorIndex::search(const float* query, int k, const SearchFilter& filter) const {
   std::vector<SearchHit> hits;
   if (k <= 0 || live_ == 0) return hits;
+  if (!ivf_) return searchExact(query, k, filter);
   const auto kk = static_cast<faiss::Index::idx_t>(std::min<std::int64_t>(k, static_cast<std::int64_t>(entries_.size())));
   std::vector<float> dist(static_cast<std::size_t>(kk));
   std::vector<faiss::Index::idx_t> labels(static_cast<std::size_t>(kk), -1);
-  const bool filtered = filter.any() || hasTombstones();
   FilterSelector selector(entries_, filter);
-  if (ivf_) {
-    faiss::SearchParametersIVF params;
-    params.nprobe = static_cast<std::size_t>(options_.ivf_nprobe);
-    if (filtered) params.sel = &selector;
-    index_->search(1, query, kk, dist.data(), labels.data(), &params);
-  } else {
-    faiss::SearchParameters params;
-    if (filtered) params.sel = &selector;
-    index_->search(1, query, kk, dist.data(), labels.data(), filtered ? &params : nullptr);
-  }
+  faiss::SearchParametersIVF params;
+  params.nprobe = static_cast<std::size_t>(options_.ivf_nprobe);
+  if (filter.any() || hasTombstones()) params.sel = &selector;
+  index_->search(1, query, kk, dist.data(), labels.data(), &params);
   for (faiss::Index::idx_t i = 0; i < kk; ++i) {
     const auto l = labels[static_cast<std::size_t>(i)];
     if (l < 0) continue;
@@ -143,6 +171,48 @@ std::vector<SearchHit> DescriptorIndex::search(const float* query, int k, const 
   std::stable_sort(hits.begin(), hits.end(), [](const SearchHit& a, const SearchHit& b) {
     return a.distance != b.distance ? a.distance < b.distance : a.scan_id < b.scan_id;
   });
+  return hits;
+}
+
+// Exact search over the flat index's vectors. Debian's FAISS is built for plain SSE2 and scans one query with
+// scalar-width loops; one BLAS matrix-vector product (|x|^2 - 2 x.q) over the same storage is several times
+// faster. Candidates are then re-scored with the direct squared difference, so the reported distances and the
+// order do not depend on the BLAS; a margin of extra candidates absorbs the product's rounding.
+std::vector<SearchHit> DescriptorIndex::searchExact(const float* query, int k, const SearchFilter& filter) const {
+  const auto n = static_cast<int>(entries_.size());
+  const float* xb = static_cast<const faiss::IndexFlatL2&>(*index_).get_xb();
+  std::vector<float> score(norms_);  // becomes |x|^2 - 2 x.q
+  const char trans = 'T';
+  const int one = 1;
+  const float alpha = -2.0f, beta = 1.0f;
+  sgemv_(&trans, &dim_, &n, &alpha, xb, &dim_, query, &one, &beta, score.data(), &one);
+
+  const bool filtered = filter.any() || hasTombstones();
+  const std::size_t keep = static_cast<std::size_t>(k) + 16;
+  // Max-heap of (score, position) holding the best `keep` accepted entries; the filter runs only on entries
+  // that would enter the heap.
+  std::vector<std::pair<float, int>> heap;
+  heap.reserve(keep + 1);
+  for (int i = 0; i < n; ++i) {
+    const float s = score[static_cast<std::size_t>(i)];
+    if (heap.size() == keep && !(s < heap.front().first)) continue;
+    if (filtered && !filter.accepts(entries_[static_cast<std::size_t>(i)])) continue;
+    heap.emplace_back(s, i);
+    std::push_heap(heap.begin(), heap.end());
+    if (heap.size() > keep) {
+      std::pop_heap(heap.begin(), heap.end());
+      heap.pop_back();
+    }
+  }
+  std::vector<SearchHit> hits;
+  hits.reserve(heap.size());
+  for (const auto& [s, i] : heap)
+    hits.push_back({entries_[static_cast<std::size_t>(i)].scan_id,
+                    std::sqrt(squaredL2(xb + static_cast<std::size_t>(i) * dim_, query, dim_))});
+  std::sort(hits.begin(), hits.end(), [](const SearchHit& a, const SearchHit& b) {
+    return a.distance != b.distance ? a.distance < b.distance : a.scan_id < b.scan_id;
+  });
+  if (hits.size() > static_cast<std::size_t>(k)) hits.resize(static_cast<std::size_t>(k));
   return hits;
 }
 
@@ -220,6 +290,7 @@ bool DescriptorIndex::load(const std::string& path, std::int64_t generation) {
   ivf_ = ivf;
   entries_ = std::move(entries);
   live_ = static_cast<std::int64_t>(entries_.size());
+  computeNorms();
   return true;
 }
 

@@ -66,12 +66,16 @@ class DescriptorIndex {
   bool hasTombstones() const { return live_ != static_cast<std::int64_t>(entries_.size()); }
 
  private:
+  std::vector<SearchHit> searchExact(const float* query, int k, const SearchFilter& filter) const;
+  void computeNorms();
+
   int dim_;
   IndexOptions options_;
   bool ivf_ = false;
   std::unique_ptr<faiss::Index> quantizer_;
   std::unique_ptr<faiss::Index> index_;
   std::vector<IndexEntry> entries_;
+  std::vector<float> norms_;  // squared norms of the flat index's vectors (exact search only)
   std::int64_t live_ = 0;
 };
 

@@ -43,7 +43,7 @@ class StorageError : public std::runtime_error {
 struct IndexOptions {
   enum class Type { kExact, kIvf };
   Type type = Type::kExact;  // exact (flat L2) or approximate (IVF-flat) search
-  int ivf_nlist = 0;         // IVF cells; 0 = about 4 * sqrt(scans)
+  int ivf_nlist = 0;         // IVF cells; 0 = about sqrt(scans)
   int ivf_nprobe = 48;       // cells visited per search
   int ivf_min_scans = 20000; // below this many scans an IVF map is searched exactly (training needs data)
 };
