@@ -32,7 +32,8 @@ struct Settings {
   std::string db = "var/sglc.db";
   std::string listen = "127.0.0.1:50051";
   std::string config;
-  int threads = 8;
+  int threads = 0;       // compute threads; 0 = the machine's cores
+  int max_calls = 256;   // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
   double max_message_mb = 64;
   std::size_t max_points = 2'000'000;
   std::string tls_cert, tls_key, tokens, backup_dir;
@@ -85,6 +86,7 @@ void applyConfigFile(Settings& s, const std::string& path) {
         else if (key == "server.db") s.db = v.as<std::string>();
         else if (key == "server.listen") s.listen = v.as<std::string>();
         else if (key == "server.threads") s.threads = v.as<int>();
+        else if (key == "server.max_calls") s.max_calls = v.as<int>();
         else if (key == "server.max_message_mb") s.max_message_mb = v.as<double>();
         else if (key == "server.max_points") s.max_points = v.as<std::size_t>();
         else if (key == "server.tls_cert") s.tls_cert = v.as<std::string>();
@@ -111,7 +113,8 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path, "YAML file with sections engine, storage, server");
   auto* db_opt = app.add_option("--db", s.db, "map database (SQLite file; created if missing)");
   auto* listen_opt = app.add_option("--listen", s.listen, "address to serve on");
-  auto* threads_opt = app.add_option("--threads", s.threads, "maximum RPC worker threads");
+  auto* threads_opt = app.add_option("--threads", s.threads, "compute threads (0: the machine's cores)");
+  auto* calls_opt = app.add_option("--max-calls", s.max_calls, "calls served at once, open streams included");
   auto* tokens_opt = app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
   auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
   auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
@@ -136,18 +139,21 @@ int main(int argc, char** argv) {
     if (*db_opt) s.db = flags.db;
     if (*listen_opt) s.listen = flags.listen;
     if (*threads_opt) s.threads = flags.threads;
+    if (*calls_opt) s.max_calls = flags.max_calls;
     if (*tokens_opt) s.tokens = flags.tokens;
     if (*cert_opt) s.tls_cert = flags.tls_cert;
     if (*key_opt) s.tls_key = flags.tls_key;
     if (*msg_opt) s.max_message_mb = flags.max_message_mb;
     if (sync_normal) s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
-    if (s.threads < 1 || s.threads > 1024) throw std::runtime_error("--threads must be 1..1024");
+    if (s.threads < 0 || s.threads > 256) throw std::runtime_error("--threads must be 0..256");
+    if (s.threads == 0) s.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+    if (s.max_calls < 1 || s.max_calls > 4096) throw std::runtime_error("--max-calls must be 1..4096");
     if (!(s.max_message_mb > 0 && s.max_message_mb <= 2047)) throw std::runtime_error("--max-message-mb must be in (0, 2047]");
     if (s.tls_cert.empty() != s.tls_key.empty()) throw std::runtime_error("--tls-cert and --tls-key go together");
     s.store.path = s.db;
     if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();
 
-    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir};
+    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir, s.threads};
     state = std::make_unique<sglc::server::ServiceState>(sglc::Pipeline(s.engine),
                                                          sglc::server::TokenTable::load(s.tokens), limits);
     sglc::server::LoopClosureService loop_service(*state);
@@ -170,9 +176,10 @@ int main(int argc, char** argv) {
     builder.SetMaxReceiveMessageSize(max_bytes);
     builder.SetMaxSendMessageSize(max_bytes);
     grpc::ResourceQuota quota("sglc");
-    quota.SetMaxThreads(s.threads + 2);
+    // One gRPC thread per call in flight (the sync server); CPU work is bounded separately (ComputePool).
+    quota.SetMaxThreads(s.max_calls + 2);
     builder.SetResourceQuota(quota);
-    builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, std::max(2, s.threads / 2));
+    builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2);
 
     // SIGTERM / SIGINT are taken by a dedicated thread (blocked everywhere else).
     sigset_t signals;

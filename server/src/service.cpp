@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <optional>
 #include <nlohmann/json.hpp>
 
 #include "codec.hpp"
@@ -147,13 +148,17 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   };
   std::vector<Verified> results;
   t0 = Clock::now();
-  for (const auto& hit : hits) {
+  // Candidates are verified independently (in parallel when compute threads are idle) and kept in search order.
+  std::vector<std::optional<Verified>> verified(hits.size());
+  state.compute().parallelFor(hits.size(), [&](std::size_t i) {
     checkAlive(ctx);
-    auto fp = store.fingerprint(hit.scan_id);
-    if (!fp) continue;  // deleted meanwhile
+    auto fp = store.fingerprint(hits[i].scan_id);
+    if (!fp) return;  // deleted meanwhile
     auto r = state.pipeline().verify(query, *fp);
-    if (r.is_loop || opt.include_rejected()) results.push_back({hit, std::move(fp), std::move(r)});
-  }
+    if (r.is_loop || opt.include_rejected()) verified[i] = Verified{hits[i], std::move(fp), std::move(r)};
+  });
+  for (auto& v : verified)
+    if (v) results.push_back(std::move(*v));
   timing->set_verify_ms(msSince(t0));
   std::stable_sort(results.begin(), results.end(), [](const Verified& a, const Verified& b) {
     if (a.result.is_loop != b.result.is_loop) return a.result.is_loop;
@@ -164,11 +169,12 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
     std::erase_if(results, [&](const Verified& v) { return v.result.is_loop && v.result.score < opt.min_score(); });
   if (results.size() > top_k) results.resize(top_k);
   t0 = Clock::now();
-  for (auto& v : results) {
-    if (!refine || !v.result.is_loop) continue;
-    checkAlive(ctx);
-    state.pipeline().refine(query, *v.fp, v.result);
-  }
+  if (refine)
+    state.compute().parallelFor(results.size(), [&](std::size_t i) {
+      if (!results[i].result.is_loop) return;
+      checkAlive(ctx);
+      state.pipeline().refine(query, *results[i].fp, results[i].result);
+    });
   timing->set_refine_ms(msSince(t0));
   for (const auto& v : results) {
     auto* c = out->Add();
@@ -209,6 +215,8 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
   const auto scan = decodeScan(points, labels, state.limits().max_points);
   checkAlive(ctx);
 
+  // Engine work holds a compute slot; the database write below does not.
+  auto slot = state.compute().acquire(ctx);
   auto t0 = Clock::now();
   const auto fp = state.pipeline().fingerprint(scan);
   resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
@@ -217,6 +225,7 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
     if (req.has_stamp()) who.stamp = req.stamp();
     findLoops(state, ctx, fp, who, req.query_options(), resp->mutable_loops(), resp->mutable_timing());
   }
+  slot.release();
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
   storage::NewScan ns;
   ns.map = key.map();
@@ -309,6 +318,7 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     Asker who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
     if (req->has_stamp()) who.stamp = req->stamp();
     std::shared_ptr<const Fingerprint> fp;
+    auto slot = state_.compute().acquire(ctx);
     if (req->has_scan()) {
       const auto scan = decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
       const auto t0 = Clock::now();

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "auth.hpp"
+#include "compute_pool.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
@@ -16,13 +17,17 @@ namespace sglc::server {
 struct ServiceLimits {
   std::size_t max_points = 2'000'000;      // per scan
   std::string backup_dir;                  // Backup paths are resolved inside it
+  int compute_threads = 1;                 // engine work runs on at most this many threads at once
 };
 
 // State shared by both services. The store is attached once it is loaded; until then calls get UNAVAILABLE.
 class ServiceState {
  public:
   ServiceState(Pipeline pipeline, TokenTable tokens, ServiceLimits limits)
-      : pipeline_(std::move(pipeline)), tokens_(std::move(tokens)), limits_(std::move(limits)) {}
+      : pipeline_(std::move(pipeline)),
+        tokens_(std::move(tokens)),
+        limits_(std::move(limits)),
+        compute_(std::make_unique<ComputePool>(limits_.compute_threads)) {}
 
   void attach(storage::MapStore* store) { store_.store(store); }
   void detach() { store_.store(nullptr); }
@@ -31,11 +36,13 @@ class ServiceState {
   const Pipeline& pipeline() const { return pipeline_; }
   const TokenTable& tokens() const { return tokens_; }
   const ServiceLimits& limits() const { return limits_; }
+  ComputePool& compute() const { return *compute_; }
 
  private:
   Pipeline pipeline_;
   TokenTable tokens_;
   ServiceLimits limits_;
+  std::unique_ptr<ComputePool> compute_;
   std::atomic<storage::MapStore*> store_{nullptr};
 };
 
