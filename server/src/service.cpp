@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
+#include <unordered_set>
 #include <nlohmann/json.hpp>
 
 #include "codec.hpp"
@@ -138,7 +139,26 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   }
   auto& store = state.store();
   auto t0 = Clock::now();
-  const auto hits = store.search(req);
+  std::vector<storage::SearchHit> hits;
+  if (opt.verify_scan_ids_size() > 0) {
+    if (opt.verify_scan_ids_size() > 200) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids: at most 200");
+    std::unordered_set<std::int64_t> seen;
+    for (const auto id : opt.verify_scan_ids()) {
+      if (!seen.insert(id).second)
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids repeats scan " + std::to_string(id));
+      const auto info = store.scanInfo(id);
+      const auto fp = info && info->map == who.map ? store.fingerprint(id) : nullptr;
+      if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + who.map + "' has no scan " + std::to_string(id));
+      if (fp->descriptor.size() != query.descriptor.size())
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scan " + std::to_string(id) + " has another descriptor layout");
+      double d2 = 0;
+      for (std::size_t i = 0; i < query.descriptor.size(); ++i)
+        d2 += std::pow(double(query.descriptor[i]) - double(fp->descriptor[i]), 2);
+      hits.push_back({id, static_cast<float>(std::sqrt(d2))});
+    }
+  } else {
+    hits = store.search(req);
+  }
   timing->set_search_ms(msSince(t0));
 
   struct Verified {

@@ -148,6 +148,18 @@ def test_inter_robot_loop_and_restart(tmp):
         Tba = np.array(by_id.candidates[0].t_query_candidate.m).reshape(4, 4)
         dt, dr = pose_error(np.linalg.inv(Tba), reference_pose())
         assert dt < 0.10 and dr < 0.5, f"reverse query pose error {dt:.3f} m {dr:.3f} deg"
+        # Verifying a named scan gives the same loop as the search did; a scan of nowhere is NOT_FOUND.
+        named = s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
+                                             options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id])))
+        assert [c.scan_id for c in named.candidates] == [r_b.scan_id] and named.candidates[0].verified
+        assert list(named.candidates[0].t_query_candidate.m) == list(loop.t_query_candidate.m)
+        assert abs(named.candidates[0].descriptor_distance - loop.descriptor_distance) < 1e-5
+        expect_code(grpc.StatusCode.NOT_FOUND, lambda: s.loop.Query(pb.QueryRequest(
+            map="m", scan_id=r_a.scan_id, options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id + 100]))),
+            "verify an unknown scan")
+        expect_code(grpc.StatusCode.INVALID_ARGUMENT, lambda: s.loop.Query(pb.QueryRequest(
+            map="m", scan_id=r_a.scan_id, options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id, r_b.scan_id]))),
+            "verify a scan twice")
         # Relocalization: a scan sent in the call, nothing stored.
         # Scan 52 itself is stored as robot a: it comes first with an identity pose, then b's scan.
         reloc = s.loop.Query(pb.QueryRequest(map="m", scan=load_scan("000052")))
