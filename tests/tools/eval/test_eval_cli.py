@@ -1,0 +1,140 @@
+#!/usr/bin/env python3
+"""sglc-eval end to end on a short simulated sequence (the built-in route, every 6th frame).
+
+Usage: test_eval_cli.py SGLC_EVAL SGLC_SERVER
+Checks floors on the metrics (so an engine regression fails CI), that the in-process and the server back-ends
+give identical numbers, the pair and pose protocols on pairs taken from the run, the figures, and bad input.
+"""
+import csv
+import json
+import math
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+
+EVAL, SERVER = sys.argv[1], sys.argv[2]
+FRAMES = "::6"
+METRICS = ["f1max", "f1max_threshold", "ep", "auc", "recall_at_1", "recall_at_1pct", "queries_with_true_loop",
+           "top1_in_band", "rr", "registered", "rte_mean", "rre_mean", "at_f1max"]
+
+
+def run(args, expect=0):
+    p = subprocess.run([EVAL, *args], capture_output=True, text=True, timeout=600)
+    assert p.returncode == expect, f"sglc-eval {' '.join(args)} exited {p.returncode}:\n{p.stderr[-2000:]}"
+    return p
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def have_matplotlib():
+    return subprocess.run(["/usr/bin/python3", "-c", "import matplotlib, numpy"], capture_output=True).returncode == 0
+
+
+def main():
+    tmp = tempfile.mkdtemp(prefix="sglc-eval-test-")
+    server = None
+    try:
+        # 1. Sequence protocol in-process, with figures when matplotlib is there.
+        local = os.path.join(tmp, "local")
+        plots = have_matplotlib()
+        run(["--protocol", "sequence", "--sim", "--frames", FRAMES, "--out", local] + ([] if plots else ["--no-plots"]))
+        s = json.load(open(os.path.join(local, "summary.json")))
+        print(f"sequence: F1max {s['f1max']:.3f} EP {s['ep']:.3f} R@1 {s['recall_at_1']:.3f} RR {s['rr']:.3f} "
+              f"RTE {s['rte_mean']:.3f} m RRE {s['rre_mean']:.3f} deg ({s['registered']} poses)")
+        assert s["queries"] == 319 and s["queries_with_true_loop"] > 100, s
+        # Floors well below today's figures (0.73 / 0.79 / 100 % / 0.02 m / 0.06 deg on this run).
+        assert s["f1max"] >= 0.65 and s["ep"] >= 0.70, s
+        assert s["at_f1max"]["false_loops"] == 0, s
+        assert s["rr"] == 1.0 and s["registered"] >= 60, s
+        assert s["rte_mean"] < 0.05 and s["rre_mean"] < 0.2, s
+        for stage in ("fingerprint", "search", "verify", "refine", "total"):
+            assert s["timings"][stage]["n"] == 319 and s["timings"][stage]["median_ms"] >= 0, stage
+        if plots:
+            for png in ("pr_curve.png", "trajectory.png"):
+                assert os.path.getsize(os.path.join(local, png)) > 1000, png
+        else:
+            print("  figures not checked: /usr/bin/python3 has no matplotlib")
+
+        # 2. The same through a real server: identical numbers and files.
+        port = free_port()
+        log = open(os.path.join(tmp, "server.log"), "wb")
+        server = subprocess.Popen([SERVER, "--db", os.path.join(tmp, "s.db"), "--listen", f"127.0.0.1:{port}",
+                                   "--sync-normal"], stdout=log, stderr=subprocess.STDOUT)
+        remote = os.path.join(tmp, "remote")
+        for attempt in range(100):
+            p = subprocess.run([EVAL, "--protocol", "sequence", "--sim", "--frames", FRAMES, "--out", remote,
+                                "--no-plots", "--server", f"127.0.0.1:{port}"], capture_output=True, text=True,
+                               timeout=600)
+            if p.returncode == 0 or "UNAVAILABLE" not in p.stderr:
+                break
+            time.sleep(0.1)  # the server is still starting
+        assert p.returncode == 0, p.stderr[-2000:]
+        r = json.load(open(os.path.join(remote, "summary.json")))
+        assert r["backend"] == "server" and s["backend"] == "in-process"
+        for k in METRICS:
+            assert r[k] == s[k], f"{k}: server {r[k]} != in-process {s[k]}"
+        for f in ("pr.csv", "trajectory.csv"):
+            assert open(os.path.join(remote, f)).read() == open(os.path.join(local, f)).read(), f
+
+        # 3. Pose and pair protocols on pairs taken from the run: its true detections, and far-apart frames.
+        rows = list(csv.DictReader(open(os.path.join(local, "trajectory.csv"))))
+        pos = {int(x["frame"]): (float(x["x"]), float(x["y"])) for x in rows}
+        loops = [(int(x["frame"]), int(x["match_frame"])) for x in rows if x["detection"] == "1"]
+        frames = sorted(pos)
+        far = [(a, b) for a, b in zip(frames, frames[len(frames) // 2:]) if math.dist(pos[a], pos[b]) > 20][:len(loops)]
+        pairs = os.path.join(tmp, "pairs.txt")
+        with open(pairs, "w") as f:
+            f.write("# i j label\n")
+            f.writelines(f"{a} {b} 1\n" for a, b in loops)
+            f.writelines(f"{a} {b} 0\n" for a, b in far)
+        spec = ",".join(str(x) for x in sorted({x for p in loops + far for x in p}))
+        out = os.path.join(tmp, "pose")
+        run(["--protocol", "pose", "--sim", "--frames", spec, "--pairs", pairs, "--out", out] +
+            ([] if plots else ["--no-plots"]))
+        ps = json.load(open(os.path.join(out, "summary.json")))
+        print(f"pose: RR {ps['rr']:.3f} over {ps['pose_pairs']} pairs, RTE {ps['rte_mean']:.3f} m, "
+              f"RRE {ps['rre_mean']:.3f} deg")
+        assert ps["pose_pairs"] == len(loops) and ps["rr"] == 1.0 and ps["rte_mean"] < 0.05, ps
+        if plots:
+            assert os.path.getsize(os.path.join(out, "pose_errors.png")) > 1000
+        out = os.path.join(tmp, "pairs")
+        run(["--protocol", "pairs", "--sim", "--frames", spec, "--pairs", pairs, "--out", out, "--no-plots"])
+        pr = json.load(open(os.path.join(out, "summary.json")))
+        print(f"pairs: F1max {pr['f1max']:.3f} EP {pr['ep']:.3f} ({pr['positives']} + {pr['negatives']} pairs)")
+        assert pr["positives"] == len(loops) and pr["negatives"] == len(far) and len(far) > 20, pr
+        assert pr["f1max"] >= 0.95 and pr["ep"] >= 0.9, pr
+
+        # 4. Bad input: a clear message and exit 1 (CLI misuse: 106 from CLI11 for a missing required flag).
+        bad = os.path.join(tmp, "bad.txt")
+        with open(bad, "w") as f:
+            f.write("1 2 1\n3 x 0\n")
+        cases = [
+            (["--protocol", "pairs", "--sim", "--out", tmp], "needs --pairs"),
+            (["--protocol", "sequence", "--sim", "--data", tmp, "--out", tmp], "exactly one of --data"),
+            (["--protocol", "pairs", "--sim", "--pairs", bad, "--out", tmp], "bad.txt:2"),
+            (["--protocol", "pairs", "--sim", "--pairs", os.path.join(tmp, "none.txt"), "--out", tmp], "cannot read"),
+            (["--protocol", "sequence", "--data", os.path.join(tmp, "nodir"), "--out", tmp], "nodir"),
+            (["--protocol", "sequence", "--sim", "--frames", "5:1", "--out", tmp], "5:1"),
+        ]
+        for args, words in cases:
+            p = run(args, expect=1)
+            assert words in p.stderr, f"{args}: '{words}' not in: {p.stderr}"
+        print("ok")
+        return 0
+    finally:
+        if server:
+            server.terminate()
+            server.wait(timeout=30)
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,247 @@
+#include "backend.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <chrono>
+#include <filesystem>
+#include <map>
+#include <stdexcept>
+
+#include "sglc/client/client.hpp"
+#include "sglc/pipeline.hpp"
+#include "sglc/storage/map_store.hpp"
+
+namespace sglc::eval {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+const char* kRobot = "eval";
+const char* kSession = "run";
+const char* kMap = "eval";
+
+struct Ranked {
+  std::int64_t scan_id;
+  Candidate c;
+};
+class InProcess final : public Backend {
+ public:
+  InProcess(const Config& config, const std::string& dir) : pipeline_(config) {
+    std::filesystem::create_directories(dir);
+    storage::StoreOptions o;
+    o.path = (std::filesystem::path(dir) / "eval.db").string();
+    std::filesystem::remove(o.path);
+    std::filesystem::remove_all(o.path + ".index");
+    o.sync = storage::StoreOptions::Sync::kOff;
+    store_ = storage::MapStore::open(o);
+    store_->createMap(kMap, descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph,
+                                                config.descriptor).scanDim());
+  }
+  std::string name() const override { return "in-process"; }
+
+  void add(int frame, const LabelledScan& scan, StageTimes* t) override {
+    const auto t0 = Clock::now();
+    const auto fp = pipeline_.fingerprint(scan);
+    t->fingerprint = msSince(t0);
+    store(frame, fp, t);
+    t->total = msSince(t0);
+  }
+
+  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q,
+                                      StageTimes* t) override {
+    const auto t0 = Clock::now();
+    const auto fp = pipeline_.fingerprint(scan);
+    t->fingerprint = msSince(t0);
+    auto t1 = Clock::now();
+    storage::SearchRequest req;
+    req.map = kMap;
+    req.descriptor = fp.descriptor;
+    req.k = q.candidates;
+    req.self_robot = kRobot;
+    req.self_session = kSession;
+    req.self_seq = frame;
+    req.exclude_recent = q.exclude_recent;
+    std::vector<std::int64_t> ids;
+    for (const auto& h : store_->search(req)) ids.push_back(h.scan_id);
+    t->search = msSince(t1);
+    auto out = verifyIds(fp, ids, q.refine, t);
+    store(frame, fp, t);
+    t->total = msSince(t0);
+    return out;
+  }
+
+  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, bool refine, StageTimes* t) override {
+    const auto t0 = Clock::now();
+    const auto fp = store_->fingerprint(idOf(query));
+    std::vector<std::int64_t> ids;
+    for (int c : candidates) ids.push_back(idOf(c));
+    auto out = verifyIds(*fp, ids, refine, t);
+    t->total = msSince(t0);
+    return out;
+  }
+
+ private:
+  std::int64_t idOf(int frame) const {
+    const auto it = ids_.find(frame);
+    if (it == ids_.end()) throw std::logic_error("frame " + std::to_string(frame) + " is not stored");
+    return it->second;
+  }
+  void store(int frame, const Fingerprint& fp, StageTimes* t) {
+    const auto t0 = Clock::now();
+    storage::NewScan ns{.map = kMap, .robot = kRobot, .session = kSession, .seq = frame, .fingerprint = &fp};
+    const auto id = store_->addScan(ns);
+    ids_[frame] = id;
+    frames_[id] = frame;
+    t->store = msSince(t0);
+  }
+  std::vector<Candidate> verifyIds(const Fingerprint& query, const std::vector<std::int64_t>& ids, bool refine,
+                                   StageTimes* t) {
+    auto t0 = Clock::now();
+    std::vector<Ranked> ranked;
+    std::vector<std::shared_ptr<const Fingerprint>> fps;
+    std::vector<LoopResult> results;
+    for (const auto id : ids) {
+      auto fp = store_->fingerprint(id);
+      auto r = pipeline_.verify(query, *fp);
+      double d2 = 0;
+      for (std::size_t i = 0; i < query.descriptor.size(); ++i)
+        d2 += std::pow(double(query.descriptor[i]) - double(fp->descriptor[i]), 2);
+      Candidate c{frames_.at(id), r.score, r.is_loop, false, r.inliers, r.T, static_cast<float>(std::sqrt(d2))};
+      ranked.push_back({id, c});
+      fps.push_back(std::move(fp));
+      results.push_back(std::move(r));
+    }
+    t->verify = msSince(t0);
+    // Refine in the final order (the same results as the service, which refines after ordering).
+    std::vector<std::size_t> order(ranked.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      const auto& x = ranked[a];
+      const auto& y = ranked[b];
+      if (x.c.verified != y.c.verified) return x.c.verified;
+      if (x.c.score != y.c.score) return x.c.score > y.c.score;
+      return x.scan_id < y.scan_id;
+    });
+    t0 = Clock::now();
+    std::vector<Candidate> out;
+    for (const auto i : order) {
+      auto c = ranked[i].c;
+      if (refine && c.verified) {
+        pipeline_.refine(query, *fps[i], results[i]);
+        c.T = results[i].T;
+        c.refined = results[i].refined;
+      }
+      out.push_back(c);
+    }
+    t->refine = msSince(t0);
+    return out;
+  }
+
+  Pipeline pipeline_;
+  std::unique_ptr<storage::MapStore> store_;
+  std::map<int, std::int64_t> ids_;
+  std::map<std::int64_t, int> frames_;
+};
+
+class Remote final : public Backend {
+ public:
+  Remote(const std::string& address, const std::string& token, std::string map)
+      : client_(client::Client::connect(address, {.token = token, .default_deadline = std::chrono::minutes(5)})),
+        map_(std::move(map)) {
+    client_.createMap(map_);
+  }
+  std::string name() const override { return "server"; }
+
+  void add(int frame, const LabelledScan& scan, StageTimes* t) override {
+    const auto r = client_.ingest(client::makeKey(map_, kRobot, kSession, frame), scan);
+    record(frame, r.scan_id());
+    times(r.timing(), t);
+  }
+
+  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q,
+                                      StageTimes* t) override {
+    client::IngestOptions io;
+    io.query = true;
+    io.query_options = options(q.refine, q.candidates);
+    io.query_options.set_scope(v1::SCOPE_WHOLE_MAP);
+    io.query_options.set_exclude_recent(q.exclude_recent);
+    io.query_options.set_candidates(static_cast<std::uint32_t>(q.candidates));
+    const auto r = client_.ingest(client::makeKey(map_, kRobot, kSession, frame), scan, io);
+    record(frame, r.scan_id());
+    times(r.timing(), t);
+    return convert(r.loops());
+  }
+
+  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, bool refine, StageTimes* t) override {
+    std::vector<Candidate> out;
+    StageTimes sum;
+    for (std::size_t first = 0; first < candidates.size(); first += 100) {  // top_k is at most 100
+      const auto last = std::min(candidates.size(), first + 100);
+      auto o = options(refine, static_cast<int>(last - first));
+      for (auto i = first; i < last; ++i) o.add_verify_scan_ids(ids_.at(candidates[i]));
+      const auto r = client_.queryScanId(map_, ids_.at(query), o);
+      StageTimes part;
+      times(r.timing(), &part);
+      sum.search += part.search;
+      sum.verify += part.verify;
+      sum.refine += part.refine;
+      sum.total += part.total;
+      const auto c = convert(r.candidates());
+      out.insert(out.end(), c.begin(), c.end());
+    }
+    *t = sum;
+    return out;
+  }
+
+ private:
+  static v1::QueryOptions options(bool refine, int n) {
+    v1::QueryOptions o;
+    o.set_top_k(static_cast<std::uint32_t>(n));
+    o.set_include_rejected(true);
+    o.set_refine(refine);
+    o.set_refine_set(true);
+    return o;
+  }
+  static void times(const v1::Timing& in, StageTimes* t) {
+    t->fingerprint = in.fingerprint_ms();
+    t->search = in.search_ms();
+    t->verify = in.verify_ms();
+    t->refine = in.refine_ms();
+    t->store = in.store_ms();
+    t->total = in.total_ms();
+  }
+  void record(int frame, std::int64_t id) {
+    ids_[frame] = id;
+    frames_[id] = frame;
+  }
+  std::vector<Candidate> convert(const google::protobuf::RepeatedPtrField<v1::Candidate>& in) const {
+    std::vector<Candidate> out;
+    for (const auto& c : in) {
+      const auto it = frames_.find(c.scan_id());
+      if (it == frames_.end()) continue;  // not one of ours (the map is new, so this does not happen)
+      Candidate e{it->second, c.score(), c.verified(), c.refined(), c.inliers(), Mat4d::Identity(),
+                  c.descriptor_distance()};
+      for (int i = 0; i < 16 && i < c.t_query_candidate().m_size(); ++i) e.T(i / 4, i % 4) = c.t_query_candidate().m(i);
+      out.push_back(e);
+    }
+    return out;
+  }
+
+  client::Client client_;
+  std::string map_;
+  std::map<int, std::int64_t> ids_;
+  std::map<std::int64_t, int> frames_;
+};
+
+}  // namespace
+
+std::unique_ptr<Backend> inProcessBackend(const Config& config, const std::string& scratch_dir) {
+  return std::make_unique<InProcess>(config, scratch_dir);
+}
+
+std::unique_ptr<Backend> serverBackend(const std::string& address, const std::string& token, const std::string& map) {
+  return std::make_unique<Remote>(address, token, map);
+}
+
+}  // namespace sglc::eval

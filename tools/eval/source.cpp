@@ -1,0 +1,95 @@
+#include "source.hpp"
+
+#include <filesystem>
+#include <map>
+#include <sstream>
+
+#include "sglc/client/sequence.hpp"
+#include "sglc/io.hpp"
+#include "sim/simulator.hpp"
+
+namespace sglc::eval {
+namespace {
+
+namespace fs = std::filesystem;
+
+class SimSource final : public FrameSource {
+ public:
+  explicit SimSource(const SimSourceOptions& o) : sim_(trajectory(o), config(o)) {
+    frames_ = sim::parseFrameSelection(o.frames, sim_.numFrames());
+    std::ostringstream d;
+    d << sim_.trajectory().source << ", seed " << o.seed << ", label noise " << o.label_noise * 100 << " %";
+    describe_ = d.str();
+  }
+  const std::vector<int>& frames() const override { return frames_; }
+  bool hasPose(int f) const override { return f >= 0 && f < sim_.numFrames(); }
+  Mat4d pose(int f) const override { return sim_.trajectory().poses.at(static_cast<std::size_t>(f)); }
+  LabelledScan scan(int f) const override { return sim_.render(f).scan; }
+  std::string describe() const override { return "simulated: " + describe_; }
+
+ private:
+  static sim::Trajectory trajectory(const SimSourceOptions& o) {
+    if (o.poses.empty()) return sim::loopRoute();
+    if (o.calib.empty()) throw InputError("--poses needs --calib (the Tr line converts camera to LiDAR poses)");
+    return sim::loadKittiTrajectory(o.poses, o.calib);
+  }
+  static sim::SimConfig config(const SimSourceOptions& o) {
+    sim::SimConfig c;
+    c.seed = o.seed;
+    c.label_noise = sim::LabelNoise::fromRate(o.label_noise);
+    c.threads = 1;  // frames are rendered in parallel instead
+    return c;
+  }
+  sim::Simulator sim_;
+  std::vector<int> frames_;
+  std::string describe_;
+};
+
+class DirSource final : public FrameSource {
+ public:
+  DirSource(const std::string& dir, const std::string& spec) : dir_(dir) {
+    const auto seq = client::openSequence(dir);
+    const int max_frame = static_cast<int>(seq.frames.back().number);
+    const auto wanted = sim::parseFrameSelection(spec, max_frame + 1);
+    std::map<int, const client::SequenceFrame*> by_number;
+    for (const auto& f : seq.frames) by_number[static_cast<int>(f.number)] = &f;
+    Mat4d Tr = Mat4d::Identity();
+    const auto calib = fs::path(dir) / "calib.txt";
+    if (fs::exists(calib)) Tr = readCalibTr(calib.string());
+    const Mat4d Tr_inv = Tr.inverse();
+    for (const auto& f : seq.frames) {
+      files_[static_cast<int>(f.number)] = {f.bin_path, f.label_path};
+      if (f.pose) poses_[static_cast<int>(f.number)] = Tr_inv * *f.pose * Tr;
+    }
+    for (int w : wanted)
+      if (by_number.count(w)) frames_.push_back(w);
+    if (frames_.empty()) throw InputError(dir + ": no frame matches --frames '" + spec + "'");
+  }
+  const std::vector<int>& frames() const override { return frames_; }
+  bool hasPose(int f) const override { return poses_.count(f) > 0; }
+  Mat4d pose(int f) const override { return poses_.at(f); }
+  LabelledScan scan(int f) const override {
+    const auto it = files_.find(f);
+    if (it == files_.end()) throw InputError(dir_ + ": no frame " + std::to_string(f));
+    return readScan(it->second.first, it->second.second);
+  }
+  std::string describe() const override { return "sequence directory " + dir_; }
+
+ private:
+  std::string dir_;
+  std::vector<int> frames_;
+  std::map<int, std::pair<std::string, std::string>> files_;
+  std::map<int, Mat4d> poses_;
+};
+
+}  // namespace
+
+std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
+  return std::make_unique<SimSource>(options);
+}
+
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames) {
+  return std::make_unique<DirSource>(dir, frames);
+}
+
+}  // namespace sglc::eval

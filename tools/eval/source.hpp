@@ -1,0 +1,41 @@
+// Labelled frames for an evaluation: a SemanticKITTI-layout sequence on disk (real or written by sglc-sim),
+// or the simulator rendering in memory. Frames are addressed by their frame number (KITTI index).
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sglc/types.hpp"
+
+namespace sglc::eval {
+
+class FrameSource {
+ public:
+  virtual ~FrameSource() = default;
+  // Frame numbers selected for the run, ascending.
+  virtual const std::vector<int>& frames() const = 0;
+  // Every frame number with a ground-truth pose (the whole trajectory, also unselected frames).
+  virtual bool hasPose(int frame) const = 0;
+  // LiDAR -> world pose of a frame (hasPose must be true).
+  virtual Mat4d pose(int frame) const = 0;
+  // Loads or renders a frame. Thread-safe. Throws InputError for a frame it does not have.
+  virtual LabelledScan scan(int frame) const = 0;
+  virtual std::string describe() const = 0;
+};
+
+struct SimSourceOptions {
+  std::string poses;        // KITTI poses file; empty: the simulator's built-in route
+  std::string calib;        // KITTI calib.txt with the Tr line (needed with poses)
+  std::string frames;       // selection "a:b:s,..." (sglc-sim syntax); empty: all
+  std::uint64_t seed = 7;
+  double label_noise = 0;   // LabelNoise::fromRate
+};
+std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
+
+// dir: a sequence directory (velodyne/, labels/, optional poses.txt + calib.txt). poses.txt holds camera poses
+// (KITTI convention); with calib.txt they become LiDAR poses. `frames` selects by frame number.
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames);
+
+}  // namespace sglc::eval
