@@ -1,8 +1,11 @@
 // sglc-eval: loop-closure metrics computed the way the paper's protocols define them (../shared/docs/METHOD.md),
 // on a SemanticKITTI-layout sequence or on a simulated one, with the engine in-process or through a server.
 //
-//   sglc-eval --protocol pairs|sequence|pose [--data DIR | --sim [--poses P --calib C] [--seed N]
-//             [--label-noise X]] [--frames SPEC] [--pairs FILE] [--server ADDR] --out DIR
+//   sglc-eval --protocol pairs|sequence|pose|all [--data DIR | --sim [--poses P --calib C] [--seed N]
+//             [--label-noise X]] [--frames SPEC] [--pairs FILE] [--pose-pairs FILE] [--server ADDR] --out DIR
+//
+// "all" runs the sequence protocol, then the pair and pose protocols on the frames it stored (each frame is
+// rendered and fingerprinted once), into DIR/sequence, DIR/pairs and DIR/pose.
 //
 // Writes DIR/summary.json and, through tools/eval/plot.py, the figures (pr_curve.png, trajectory.png,
 // pose_errors.png) from the CSV files it writes beside them.
@@ -194,13 +197,18 @@ struct Run {
   const FrameSource& source;
   Backend& backend;
   int threads;
+  std::set<int>& stored;  // frames the back-end holds (shared by the protocols of one invocation)
   ordered_json summary;
   Timings timings;
   std::string out;
 };
 
-// Stores the given frames in order (loading ahead).
-void storeFrames(Run& run, const std::vector<int>& frames) {
+// Stores the given frames that are not stored yet, in order (loading ahead).
+void storeFrames(Run& run, const std::vector<int>& wanted) {
+  std::vector<int> frames;
+  for (int f : wanted)
+    if (run.stored.insert(f).second) frames.push_back(f);
+  if (frames.empty()) return;
   Prefetch pre(run.source, frames, run.threads);
   Progress bar("store", frames.size());
   std::size_t n = 0;
@@ -339,7 +347,9 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
   for (std::size_t q = 0; q < frames.size(); ++q) {
     auto [f, scan] = pre.next();
     StageTimes t;
+    if (run.stored.count(f)) throw std::logic_error("the sequence protocol must run first");
     const auto cands = run.backend.queryThenAdd(f, scan, query, &t);
+    run.stored.insert(f);
     run.timings.add(t);
     std::vector<bool> r;
     for (const auto& c : cands) r.push_back(isTrue(f, c.frame));
@@ -398,7 +408,9 @@ int main(int argc, char** argv) {
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
   int threads = 2;
   LoopQuery query;
-  app.add_option("--protocol", protocol, "pairs, sequence or pose")->required()->check(CLI::IsMember({"pairs", "sequence", "pose"}));
+  app.add_option("--protocol", protocol, "pairs, sequence, pose, or all (sequence, then pairs and pose on the same frames)")
+      ->required()
+      ->check(CLI::IsMember({"pairs", "sequence", "pose", "all"}));
   app.add_option("--data", data, "SemanticKITTI-layout sequence directory (velodyne/, labels/, poses.txt, calib.txt)");
   app.add_flag("--sim", sim, "render a simulated sequence in memory");
   app.add_option("--poses", poses, "with --sim: KITTI poses file to follow (default: the built-in route)");
@@ -407,6 +419,8 @@ int main(int argc, char** argv) {
   app.add_option("--label-noise", label_noise, "with --sim: label noise rate (0..1)")->check(CLI::Range(0.0, 1.0));
   app.add_option("--frames", frames, "frame selection 'a:b:s,...' (default: all)");
   app.add_option("--pairs", pairs, "pair file: 'i j label' (pairs), 'i j [T 3x4]' (pose)");
+  std::string pose_pairs;
+  app.add_option("--pose-pairs", pose_pairs, "with --protocol all: the pose protocol's pair file");
   app.add_option("--gt-list", gt_list, "sequence: true loops from this pair file instead of distances");
   app.add_flag("--gt-from-pairs", gt_from_file, "pose: ground truth from the pair file's T (maps i into j)");
   app.add_option("--positive-m", positive_m, "sequence: a true loop is closer than this (m)");
@@ -427,6 +441,7 @@ int main(int argc, char** argv) {
     if (!sim && (!poses.empty() || !calib.empty() || label_noise > 0))
       throw InputError("--poses, --calib and --label-noise belong to --sim");
     if (protocol != "sequence" && pairs.empty()) throw InputError("--protocol " + protocol + " needs --pairs FILE");
+    if (protocol == "all" && pose_pairs.empty()) throw InputError("--protocol all needs --pose-pairs FILE");
     if (query.exclude_recent < 0 || query.candidates < 1 || query.candidates > 100)
       throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
     Config config;
@@ -436,7 +451,7 @@ int main(int argc, char** argv) {
     std::unique_ptr<FrameSource> source;
     if (sim) source = simulatedSource({poses, calib, frames, seed, label_noise});
     else source = directorySource(data, frames);
-    if (protocol == "sequence") {
+    if (protocol == "sequence" || protocol == "all") {
       const auto n = static_cast<int>(std::ceil(0.01 * static_cast<double>(source->frames().size())));
       query.candidates = std::min(100, std::max(query.candidates, n));
     }
@@ -445,50 +460,70 @@ int main(int argc, char** argv) {
     if (server.empty()) backend = inProcessBackend(config, out + "/scratch");
     else backend = serverBackend(server, token, map_name);
 
-    Run run{*source, *backend, threads, {}, {}, out};
-    run.summary["protocol"] = protocol;
-    run.summary["title"] = title.empty() ? protocol + ": " + source->describe() : title;
-    run.summary["source"] = source->describe();
-    run.summary["backend"] = backend->name();
-    if (!server.empty()) run.summary["server_map"] = map_name;
-    run.summary["frames"] = source->frames().size();
-    if (protocol == "sequence") {
-      run.summary["exclude_recent"] = query.exclude_recent;
-      run.summary["candidates"] = query.candidates;
-      if (gt_list.empty()) {
-        run.summary["positive_m"] = positive_m;
-        run.summary["negative_m"] = negative_m;
+    std::set<int> stored;
+    // One invocation may run several protocols over the same stored frames ("all": sequence first, then
+    // pairs and pose on what it stored), each into its own directory.
+    const std::vector<std::string> protocols =
+        protocol == "all" ? std::vector<std::string>{"sequence", "pairs", "pose"} : std::vector<std::string>{protocol};
+    ordered_json combined;
+    int status = 0;
+    for (const auto& name : protocols) {
+      const std::string dir = protocol == "all" ? out + "/" + name : out;
+      fs::create_directories(dir);
+      Run run{*source, *backend, threads, stored, {}, {}, dir};
+      run.summary["protocol"] = name;
+      run.summary["title"] = (title.empty() ? name : title + " - " + name) + ": " + source->describe();
+      run.summary["source"] = source->describe();
+      run.summary["backend"] = backend->name();
+      if (!server.empty()) run.summary["server_map"] = map_name;
+      run.summary["frames"] = source->frames().size();
+      if (name == "sequence") {
+        run.summary["exclude_recent"] = query.exclude_recent;
+        run.summary["candidates"] = query.candidates;
+        if (gt_list.empty()) {
+          run.summary["positive_m"] = positive_m;
+          run.summary["negative_m"] = negative_m;
+        } else {
+          run.summary["gt_list"] = gt_list;
+        }
       }
-      else run.summary["gt_list"] = gt_list;
+      const auto t0 = Clock::now();
+      if (name == "pairs") {
+        run.summary["pairs_file"] = pairs;
+        pairProtocol(run, readPairs(pairs));
+      } else if (name == "pose") {
+        const auto& file = protocol == "all" ? pose_pairs : pairs;
+        run.summary["pairs_file"] = file;
+        poseProtocol(run, readPairs(file), gt_from_file);
+      } else {
+        std::vector<PairRow> list;
+        if (!gt_list.empty()) list = readPairs(gt_list);
+        if (!(negative_m >= positive_m)) throw InputError("--negative-m must be >= --positive-m");
+        sequenceProtocol(run, query, positive_m, negative_m, gt_list.empty() ? nullptr : &list);
+      }
+      run.summary["wall_s"] = seconds(t0);
+      run.summary["timings"] = run.timings.json();
+      {
+        std::ofstream js(dir + "/summary.json");
+        js << run.summary.dump(2) << "\n";
+        if (!js) throw std::runtime_error(dir + "/summary.json: write failed");
+      }
+      combined[name] = run.summary;
+      if (!no_plots) {
+        const std::string cmd = "/usr/bin/python3 '" + std::string(SGLC_EVAL_PLOT_SCRIPT) + "' '" + dir + "' 1>&2";
+        if (std::system(cmd.c_str()) != 0) {
+          std::cerr << "sglc-eval: plotting failed (" << cmd << "); summary.json and the CSV files are written\n";
+          status = 3;
+        }
+      }
     }
-    const auto t0 = Clock::now();
-    if (protocol == "pairs") {
-      pairProtocol(run, readPairs(pairs));
-    } else if (protocol == "pose") {
-      poseProtocol(run, readPairs(pairs), gt_from_file);
-    } else {
-      std::vector<PairRow> list;
-      if (!gt_list.empty()) list = readPairs(gt_list);
-      if (!(negative_m >= positive_m)) throw InputError("--negative-m must be >= --positive-m");
-      sequenceProtocol(run, query, positive_m, negative_m, gt_list.empty() ? nullptr : &list);
-    }
-    run.summary["wall_s"] = seconds(t0);
-    run.summary["timings"] = run.timings.json();
     if (server.empty()) fs::remove_all(out + "/scratch");
-    {
+    if (protocol == "all") {
       std::ofstream js(out + "/summary.json");
-      js << run.summary.dump(2) << "\n";
-      if (!js) throw std::runtime_error(out + "/summary.json: write failed");
+      js << combined.dump(2) << "\n";
     }
-    std::cout << run.summary.dump(2) << std::endl;
-    if (!no_plots) {
-      const std::string cmd = "/usr/bin/python3 '" + std::string(SGLC_EVAL_PLOT_SCRIPT) + "' '" + out + "' 1>&2";
-      if (std::system(cmd.c_str()) != 0) {
-        std::cerr << "sglc-eval: plotting failed (" << cmd << "); summary.json and the CSV files are written\n";
-        return 3;
-      }
-    }
-    return 0;
+    std::cout << (protocol == "all" ? combined : combined[protocol]).dump(2) << std::endl;
+    return status;
   } catch (const std::exception& e) {
     std::cerr << "sglc-eval: error: " << e.what() << std::endl;
     return 1;

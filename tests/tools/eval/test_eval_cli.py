@@ -112,6 +112,19 @@ def main():
         assert pr["positives"] == len(loops) and pr["negatives"] == len(far) and len(far) > 20, pr
         assert pr["f1max"] >= 0.95 and pr["ep"] >= 0.9, pr
 
+        # 3b. "all": the three protocols over one set of stored frames give the same numbers as separate runs.
+        out = os.path.join(tmp, "all")
+        run(["--protocol", "all", "--sim", "--frames", FRAMES, "--pairs", pairs, "--pose-pairs", pairs, "--out", out,
+             "--no-plots"])
+        combined = json.load(open(os.path.join(out, "summary.json")))
+        for k in METRICS:
+            assert combined["sequence"][k] == s[k], f"all/sequence {k}"
+        for k in ("f1max", "ep", "auc", "positives", "negatives"):
+            assert combined["pairs"][k] == pr[k], f"all/pairs {k}"
+        for k in ("rr", "rte_mean", "rre_mean", "pose_pairs"):
+            assert combined["pose"][k] == ps[k], f"all/pose {k}"
+        run(["--protocol", "all", "--sim", "--frames", FRAMES, "--pairs", pairs, "--out", out], expect=1)
+
         # 4. Bad input: a clear message and exit 1 (CLI misuse: 106 from CLI11 for a missing required flag).
         bad = os.path.join(tmp, "bad.txt")
         with open(bad, "w") as f:

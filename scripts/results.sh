@@ -1,0 +1,62 @@
+#!/bin/bash
+# Regenerates docs/RESULTS.md with build/bin/sglc-eval: simulated sequences along KITTI 00, 05 and 08 at 0, 5
+# and 15 % label noise (sequence, pair and pose protocols), the real pairs of ../shared/data, and ablations.
+# Summaries, CSV files and figures go to docs/results/ (generated, not committed).
+#   scripts/results.sh                    # everything (about 25 minutes on 2 cores)
+#   SEQS=00 NOISES=0.05 scripts/results.sh   # a subset
+set -euo pipefail
+cd "$(dirname "$0")/.."
+DATA=${DATA:-../shared/data}
+EVAL=build/bin/sglc-eval
+OUT=docs/results
+SEQS=${SEQS:-"00 05 08"}
+NOISES=${NOISES:-"0 0.05 0.15"}
+[ -x "$EVAL" ] || { echo "results.sh: $EVAL missing: run scripts/build.sh first" >&2; exit 1; }
+[ -d "$DATA/kitti_odometry_gt_poses" ] || { echo "results.sh: $DATA (KITTI poses, pair lists) is absent" >&2; exit 1; }
+mkdir -p "$OUT"
+# Only sequence 00's calibration is available: its Tr converts the camera poses of every sequence (the
+# simulated world is built along the converted path, so the data stays self-consistent).
+CALIB=$DATA/semantickitti_scans/sequences/00/calib.txt
+
+for seq in $SEQS; do
+  for noise in $NOISES; do
+    dir=$OUT/sim-$seq-noise$noise
+    echo "== simulated $seq, label noise $noise -> $dir" >&2
+    "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$CALIB" \
+      --label-noise "$noise" --pairs "$DATA/ssc_pairs/neg_1/$seq.txt" \
+      --pose-pairs "$DATA/loop_gt_lcrnet/loop_distance4/$seq.txt" \
+      --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null
+  done
+done
+
+# The real SemanticKITTI scans: every listed pair scored, and the loop's pose against its reference.
+real=$OUT/real
+mkdir -p "$real"
+grep -v '^#' "$DATA/semantickitti_scans/pairs.txt" | awk '{print $2+0, $3+0, $4}' > "$real/pairs.txt"
+# pairs.txt's T_a_b maps b into a; sglc-eval's pose rows "i j T" map i into j, so the loop is written "b a T".
+grep -v '^#' "$DATA/semantickitti_scans/pairs.txt" | awk '$4 == 1 {printf "%d %d", $3, $2; for (k = 8; k <= 19; k++) printf " %s", $k; print ""}' > "$real/loops.txt"
+"$EVAL" --protocol pairs --data "$DATA/semantickitti_scans/sequences/00" --pairs "$real/pairs.txt" \
+  --out "$real/pairs" --no-plots > /dev/null
+"$EVAL" --protocol pose --data "$DATA/semantickitti_scans/sequences/00" --pairs "$real/loops.txt" --gt-from-pairs \
+  --out "$real/pose" --no-plots > /dev/null
+
+# Ablations on the built-in route (every 3rd frame), sequence protocol.
+abl=$OUT/ablation
+mkdir -p "$abl"
+declare -A CONFIGS=(
+  [default]=""
+  [prune-always]="match: {prune_min_matches: 0}"
+  [no-pruning]="match: {prune_min_matches: 1000000}"
+  [no-fine-icp]="fine: {enabled: false}"
+  [no-plane-refine]="refine: {enabled: false}"
+  [coarse-only]=$'fine: {enabled: false}\nrefine: {enabled: false}'
+)
+for name in default prune-always no-pruning no-fine-icp no-plane-refine coarse-only; do
+  echo "== ablation $name" >&2
+  printf '%s\n' "${CONFIGS[$name]}" > "$abl/$name.yaml"
+  "$EVAL" --protocol sequence --sim --frames ::3 --config "$abl/$name.yaml" --title "ablation: $name" \
+    --out "$abl/$name" --no-plots > /dev/null
+done
+
+/usr/bin/python3 tools/eval/results_md.py "$OUT" > docs/RESULTS.md
+echo "wrote docs/RESULTS.md" >&2
