@@ -53,6 +53,20 @@ const std::vector<const char*> kMigrations = {
     CREATE TABLE scan_blobs(
       scan_id INTEGER PRIMARY KEY REFERENCES scans(id), fingerprint BLOB NOT NULL, raw BLOB);
     )sql",
+    // 1 -> 2: the pose graph (verified loops, optimised poses, session frames).
+    R"sql(
+    CREATE TABLE loops(
+      id INTEGER PRIMARY KEY AUTOINCREMENT, map_id INTEGER NOT NULL REFERENCES maps(id),
+      query_scan INTEGER NOT NULL REFERENCES scans(id), candidate_scan INTEGER NOT NULL REFERENCES scans(id),
+      t BLOB NOT NULL, score REAL NOT NULL, inliers INTEGER NOT NULL, fitness REAL NOT NULL, rmse REAL NOT NULL,
+      created_at REAL NOT NULL, UNIQUE(query_scan, candidate_scan));
+    CREATE INDEX loops_by_map ON loops(map_id, id);
+    CREATE INDEX loops_by_candidate ON loops(candidate_scan);
+    CREATE TABLE optimised_poses(scan_id INTEGER PRIMARY KEY REFERENCES scans(id), pose BLOB NOT NULL);
+    CREATE TABLE session_frames(
+      session_id INTEGER PRIMARY KEY REFERENCES sessions(id), t BLOB NOT NULL, connected INTEGER NOT NULL);
+    ALTER TABLE maps ADD COLUMN graph_version INTEGER NOT NULL DEFAULT 0;
+    )sql",
 };
 
 std::vector<std::uint8_t> poseBlob(const Mat4d& T) {
@@ -440,6 +454,182 @@ class SqliteMapStore final : public MapStore {
     st.run();
   }
 
+  // ---- Pose graph
+  std::int64_t addLoop(const std::string& map, const LoopRecord& loop) override {
+    if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse))
+      throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
+    if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
+    std::lock_guard write(write_mutex_);
+    std::int64_t map_id;
+    {
+      std::shared_lock lock(state_mutex_);
+      map_id = mapLocked(map).id;
+    }
+    sql::Transaction tx(writer_);
+    for (const auto scan : {loop.query_scan, loop.candidate_scan}) {
+      sql::Stmt st(writer_, "SELECT 1 FROM scans WHERE id = ? AND map_id = ?");
+      st.bind(1, scan).bind(2, map_id);
+      if (!st.step()) throw StorageError(Code::kNotFound, "map '" + map + "' has no scan " + std::to_string(scan));
+    }
+    const auto t = poseBlob(loop.T);
+    sql::Stmt(writer_, "DELETE FROM loops WHERE query_scan = ? AND candidate_scan = ?")
+        .bind(1, loop.query_scan)
+        .bind(2, loop.candidate_scan)
+        .run();
+    sql::Stmt st(writer_,
+                 "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, created_at)"
+                 " VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?)");
+    st.bind(1, map_id).bind(2, loop.query_scan).bind(3, loop.candidate_scan).bindBlob(4, t).bind(5, loop.score);
+    st.bind(6, static_cast<std::int64_t>(loop.inliers)).bind(7, loop.fitness).bind(8, loop.rmse).bind(9, nowSeconds());
+    st.run();
+    const auto id = sqlite3_last_insert_rowid(writer_.get());
+    tx.commit();
+    return id;
+  }
+
+  std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader,
+                 "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse FROM loops"
+                 " WHERE map_id = ? AND id > ? ORDER BY id");
+    st.bind(1, map_id).bind(2, after_id);
+    std::vector<LoopRecord> out;
+    while (st.step()) {
+      LoopRecord r;
+      r.id = st.i64(0);
+      r.query_scan = st.i64(1);
+      r.candidate_scan = st.i64(2);
+      const auto T = poseFrom(st.blob(3));
+      if (!T) throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged transform");
+      r.T = *T;
+      r.score = st.f64(4);
+      r.inliers = static_cast<int>(st.i64(5));
+      r.fitness = st.f64(6);
+      r.rmse = st.f64(7);
+      out.push_back(r);
+    }
+    return out;
+  }
+
+  std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader,
+                 "SELECT s.id, s.session_id, r.name, e.name, s.seq, s.stamp, s.pose FROM scans s"
+                 " JOIN sessions e ON e.id = s.session_id JOIN robots r ON r.id = s.robot_id"
+                 " WHERE s.map_id = ? AND s.id > ? ORDER BY s.id");
+    st.bind(1, map_id).bind(2, after_scan);
+    std::vector<GraphNodeRecord> out;
+    while (st.step()) {
+      GraphNodeRecord n;
+      n.scan_id = st.i64(0);
+      n.session_id = st.i64(1);
+      n.robot = st.text(2);
+      n.session = st.text(3);
+      n.seq = st.i64(4);
+      if (!st.isNull(5)) n.stamp = st.f64(5);
+      if (!st.isNull(6)) n.odometry_pose = poseFrom(st.blob(6));
+      out.push_back(std::move(n));
+    }
+    return out;
+  }
+
+  std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
+                             const std::vector<SessionFrame>& frames) override {
+    for (const auto& p : poses)
+      if (!p.pose.allFinite()) throw StorageError(Code::kInvalidArgument, "optimised pose is not finite");
+    for (const auto& f : frames)
+      if (!f.T_map_session.allFinite()) throw StorageError(Code::kInvalidArgument, "session frame is not finite");
+    std::lock_guard write(write_mutex_);
+    std::int64_t map_id;
+    {
+      std::shared_lock lock(state_mutex_);
+      map_id = mapLocked(map).id;
+    }
+    sql::Transaction tx(writer_);
+    {
+      sql::Stmt st(writer_,
+                   "INSERT OR REPLACE INTO optimised_poses(scan_id, pose)"
+                   " SELECT ?1, ?2 WHERE EXISTS(SELECT 1 FROM scans WHERE id = ?1 AND map_id = ?3)");
+      for (const auto& p : poses) {
+        const auto blob = poseBlob(p.pose);
+        st.bind(1, p.scan_id).bindBlob(2, blob).bind(3, map_id);
+        st.run();
+        st.reset();
+      }
+    }
+    {
+      sql::Stmt st(writer_,
+                   "INSERT OR REPLACE INTO session_frames(session_id, t, connected)"
+                   " SELECT ?1, ?2, ?3 WHERE EXISTS(SELECT 1 FROM sessions e JOIN robots r ON r.id = e.robot_id"
+                   " WHERE e.id = ?1 AND r.map_id = ?4)");
+      for (const auto& f : frames) {
+        const auto blob = poseBlob(f.T_map_session);
+        st.bind(1, f.session_id).bindBlob(2, blob).bind(3, static_cast<std::int64_t>(f.connected)).bind(4, map_id);
+        st.run();
+        st.reset();
+      }
+    }
+    sql::Stmt(writer_, "UPDATE maps SET graph_version = graph_version + 1 WHERE id = ?").bind(1, map_id).run();
+    sql::Stmt v(writer_, "SELECT graph_version FROM maps WHERE id = ?");
+    v.bind(1, map_id);
+    const std::int64_t version = v.step() ? v.i64(0) : 0;
+    v.reset();
+    tx.commit();
+    return version;
+  }
+
+  std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot, const std::string& session,
+                                            std::int64_t after_scan, std::int64_t limit) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader,
+                 "SELECT o.scan_id, o.pose FROM optimised_poses o JOIN scans s ON s.id = o.scan_id"
+                 " JOIN sessions e ON e.id = s.session_id JOIN robots r ON r.id = s.robot_id"
+                 " WHERE s.map_id = ?1 AND o.scan_id > ?2 AND (?3 = '' OR r.name = ?3) AND (?4 = '' OR e.name = ?4)"
+                 " ORDER BY o.scan_id LIMIT ?5");
+    st.bind(1, map_id).bind(2, after_scan).bind(3, robot).bind(4, session).bind(5, limit);
+    std::vector<OptimisedPose> out;
+    while (st.step()) {
+      const auto T = poseFrom(st.blob(1));
+      if (!T) throw StorageError(Code::kCorrupt, "scan " + std::to_string(st.i64(0)) + " has a damaged optimised pose");
+      out.push_back({st.i64(0), *T});
+    }
+    return out;
+  }
+
+  std::vector<SessionFrame> sessionFrames(const std::string& map) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader,
+                 "SELECT f.session_id, r.name, e.name, f.t, f.connected FROM session_frames f"
+                 " JOIN sessions e ON e.id = f.session_id JOIN robots r ON r.id = e.robot_id"
+                 " WHERE r.map_id = ? ORDER BY f.session_id");
+    st.bind(1, map_id);
+    std::vector<SessionFrame> out;
+    while (st.step()) {
+      SessionFrame f;
+      f.session_id = st.i64(0);
+      f.robot = st.text(1);
+      f.session = st.text(2);
+      const auto T = poseFrom(st.blob(3));
+      if (!T) throw StorageError(Code::kCorrupt, "session " + std::to_string(f.session_id) + " has a damaged frame");
+      f.T_map_session = *T;
+      f.connected = st.i64(4) != 0;
+      out.push_back(std::move(f));
+    }
+    return out;
+  }
+
+  std::int64_t graphVersion(const std::string& map) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader, "SELECT graph_version FROM maps WHERE id = ?");
+    st.bind(1, map_id);
+    return st.step() ? st.i64(0) : 0;
+  }
+
   std::string integrityCheck() const override {
     auto reader = acquireReader();
     sql::Stmt st(*reader, "PRAGMA integrity_check");
@@ -668,6 +858,18 @@ class SqliteMapStore final : public MapStore {
         .bind(1, m.id)
         .bind(2, id)
         .run();
+    // Pose-graph rows of the removed scans and sessions (?1 = map, ?2 = the id in `where`).
+    std::string where2 = where;
+    where2.replace(where2.find('?'), 1, "?2");
+    for (const char* graph_rows :
+         {"DELETE FROM loops WHERE query_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND %) OR"
+          " candidate_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND %)",
+          "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND %)",
+          "DELETE FROM session_frames WHERE session_id IN (SELECT session_id FROM scans WHERE map_id = ?1 AND %)"}) {
+      std::string text = graph_rows;
+      for (auto at = text.find('%'); at != std::string::npos; at = text.find('%')) text.replace(at, 1, where2);
+      sql::Stmt(writer_, text.c_str()).bind(1, m.id).bind(2, id).run();
+    }
     sql::Stmt(writer_, (std::string("DELETE FROM scans WHERE map_id = ? AND ") + where).c_str()).bind(1, m.id).bind(2, id).run();
     // Parent rows (session, or sessions and robot): one statement each, all bound to the same id.
     std::size_t start = 0;
@@ -686,6 +888,11 @@ class SqliteMapStore final : public MapStore {
     update();
     for (auto sid : ids) cache_.erase(sid);
     return removed;
+  }
+
+  std::int64_t mapId(const std::string& map) const {
+    std::shared_lock lock(state_mutex_);
+    return mapLocked(map).id;
   }
 
   MapInfo infoLocked(const MapState& m) const {

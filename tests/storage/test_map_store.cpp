@@ -470,3 +470,106 @@ TEST(MapStore, ApproximateIndexAgreesWithExactSearch) {
 
 }  // namespace
 }  // namespace sglc::storage
+
+namespace sglc::storage {
+namespace {
+
+Mat4d rigid(double yaw, double x, double y) {
+  Mat4d T = Mat4d::Identity();
+  T.block<3, 3>(0, 0) = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T(0, 3) = x;
+  T(1, 3) = y;
+  return T;
+}
+
+TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));
+    all = fill(*store, 2, 1, 3);  // r0/s0: all[0..2], r1/s0: all[3..5]
+    EXPECT_EQ(store->graphVersion("m"), 0);
+    const LoopRecord a{0, all[2].id, all[0].id, rigid(0.1, 1, 2), 0.8, 0.9, 0.05, 12};
+    const LoopRecord b{0, all[4].id, all[1].id, rigid(-0.2, 3, 0), 0.6, 0.7, 0.08, 7};
+    const auto id_a = store->addLoop("m", a);
+    store->addLoop("m", b);
+    auto again = a;
+    again.score = 0.9;
+    const auto id_a2 = store->addLoop("m", again);  // replaces the first
+    EXPECT_GT(id_a2, id_a);
+    EXPECT_EQ(errorCode([&] { store->addLoop("m", {0, all[0].id, 999999, Mat4d::Identity(), 0, 0, 0, 0}); }),
+              StorageError::Code::kNotFound);
+    auto bad = a;
+    bad.T(0, 3) = std::nan("");
+    EXPECT_EQ(errorCode([&] { store->addLoop("m", bad); }), StorageError::Code::kInvalidArgument);
+    EXPECT_EQ(errorCode([&] { store->addLoop("nomap", a); }), StorageError::Code::kNotFound);
+
+    std::vector<OptimisedPose> poses;
+    for (const auto& s : all) poses.push_back({s.id, rigid(0.01 * static_cast<double>(s.id), 1.0 * s.seq, 0)});
+    const auto nodes = store->graphNodes("m");
+    ASSERT_EQ(nodes.size(), all.size());
+    EXPECT_EQ(nodes[3].robot, "r1");
+    EXPECT_EQ(nodes[3].seq, 0);
+    std::vector<SessionFrame> frames{{nodes[0].session_id, "", "", Mat4d::Identity(), true},
+                                     {nodes[3].session_id, "", "", rigid(0.5, 10, -4), true}};
+    EXPECT_EQ(store->saveOptimised("m", poses, frames), 1);
+    EXPECT_EQ(store->saveOptimised("m", poses, frames), 2);
+  }
+  {
+    auto store = MapStore::open(options(path));  // everything survives a reopen
+    EXPECT_EQ(store->graphVersion("m"), 2);
+    const auto loops = store->loops("m");
+    ASSERT_EQ(loops.size(), 2u);
+    EXPECT_EQ(loops[1].query_scan, all[2].id);
+    EXPECT_DOUBLE_EQ(loops[1].score, 0.9);
+    EXPECT_TRUE(loops[1].T.isApprox(rigid(0.1, 1, 2), 1e-15));
+    EXPECT_EQ(store->loops("m", loops[0].id).size(), 1u);
+    const auto r1 = store->optimisedPoses("m", "r1", "", 0, 100);
+    ASSERT_EQ(r1.size(), 3u);
+    EXPECT_EQ(r1[0].scan_id, all[3].id);
+    EXPECT_TRUE(r1[2].pose.isApprox(rigid(0.01 * static_cast<double>(all[5].id), 2, 0), 1e-15));
+    EXPECT_EQ(store->optimisedPoses("m", "", "", all[1].id, 2).size(), 2u);  // paging
+    const auto frames = store->sessionFrames("m");
+    ASSERT_EQ(frames.size(), 2u);
+    EXPECT_EQ(frames[1].robot, "r1");
+    EXPECT_TRUE(frames[1].T_map_session.isApprox(rigid(0.5, 10, -4), 1e-15));
+    // Deleting robot r1 takes its loop, poses and session frame along.
+    store->deleteRobot("m", "r1");
+    EXPECT_EQ(store->loops("m").size(), 1u);
+    EXPECT_EQ(store->optimisedPoses("m", "", "", 0, 100).size(), 3u);
+    EXPECT_EQ(store->sessionFrames("m").size(), 1u);
+    EXPECT_EQ(store->integrityCheck(), "ok");
+  }
+}
+
+TEST(MapStore, MigratesAVersion1FileForward) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));
+    all = fill(*store, 1, 1, 4);
+  }
+  {  // Turn it back into a version-1 file: no pose-graph tables, no graph_version column.
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(db,
+                           "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
+                           " ALTER TABLE maps DROP COLUMN graph_version; PRAGMA user_version=1;",
+                           nullptr, nullptr, nullptr),
+              SQLITE_OK)
+        << sqlite3_errmsg(db);
+    sqlite3_close(db);
+  }
+  auto store = MapStore::open(options(path));
+  EXPECT_EQ(store->stats("m").scans, 4);
+  EXPECT_EQ(store->graphVersion("m"), 0);
+  store->addLoop("m", {0, all[3].id, all[0].id, Mat4d::Identity(), 0.5, 0.5, 0.1, 5});
+  EXPECT_EQ(store->loops("m").size(), 1u);
+  for (const auto& s : all) EXPECT_EQ(serialize(*store->fingerprint(s.id)), serialize(s.fp));
+  EXPECT_EQ(store->integrityCheck(), "ok");
+}
+
+}  // namespace
+}  // namespace sglc::storage

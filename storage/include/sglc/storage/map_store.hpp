@@ -130,6 +130,39 @@ struct SearchHit {
   float distance = 0;  // L2 distance between descriptors
 };
 
+// A verified loop kept for the pose graph. T maps the candidate scan's points into the query scan's frame.
+struct LoopRecord {
+  std::int64_t id = 0;  // assigned by addLoop
+  std::int64_t query_scan = 0;
+  std::int64_t candidate_scan = 0;
+  Mat4d T = Mat4d::Identity();
+  double score = 0, fitness = 0, rmse = 0;
+  int inliers = 0;
+};
+
+// A scan as a pose-graph node.
+struct GraphNodeRecord {
+  std::int64_t scan_id = 0;
+  std::int64_t session_id = 0;
+  std::string robot, session;
+  std::int64_t seq = 0;
+  std::optional<double> stamp;
+  std::optional<Mat4d> odometry_pose;
+};
+
+// Where a session's odometry frame sits in the map frame (after optimisation).
+struct SessionFrame {
+  std::int64_t session_id = 0;
+  std::string robot, session;
+  Mat4d T_map_session = Mat4d::Identity();
+  bool connected = false;  // linked to the map frame by loops (else T is its own frame: identity)
+};
+
+struct OptimisedPose {
+  std::int64_t scan_id = 0;
+  Mat4d pose = Mat4d::Identity();  // scan (LiDAR) -> map frame
+};
+
 struct Stats {
   std::int64_t maps = 0, robots = 0, sessions = 0, scans = 0;
   std::int64_t index_entries = 0;
@@ -177,9 +210,30 @@ class MapStore {
   virtual Stats stats(const std::string& map = "") const = 0;
   // Writes index snapshots now (also done on destruction when enabled).
   virtual void snapshot() = 0;
+
+  // ---- Pose graph (loops, optimised poses, session frames), kept with the map.
+  // Records a loop between two scans of the map; a second loop for the same (query, candidate) replaces the
+  // first. Returns its id. kNotFound for a scan that is not in the map, kInvalidArgument for a non-finite T.
+  virtual std::int64_t addLoop(const std::string& map, const LoopRecord& loop) = 0;
+  // Loops with id > after_id, in id order.
+  virtual std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id = 0) const = 0;
+  // Scans with id > after_scan, in id order.
+  virtual std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan = 0) const = 0;
+  // Replaces the optimised poses of the given scans and the given sessions' frames in one transaction and
+  // bumps the map's graph version, which it returns. Scans or sessions deleted meanwhile are skipped.
+  virtual std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
+                                     const std::vector<SessionFrame>& frames) = 0;
+  // Optimised poses in scan-id order: of one robot (and session) or the whole map (empty names), scan ids
+  // > after_scan, at most `limit`.
+  virtual std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot,
+                                                    const std::string& session, std::int64_t after_scan,
+                                                    std::int64_t limit) const = 0;
+  virtual std::vector<SessionFrame> sessionFrames(const std::string& map) const = 0;
+  // 0 until the first saveOptimised; survives restarts.
+  virtual std::int64_t graphVersion(const std::string& map) const = 0;
 };
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 1;
+inline constexpr int kSchemaVersion = 2;
 
 }  // namespace sglc::storage
