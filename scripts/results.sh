@@ -10,24 +10,13 @@ DATA=${DATA:-../shared/data}
 EVAL=build/bin/sglc-eval
 OUT=docs/results
 SEQS=${SEQS:-"00 05 08"}
-NOISES=${NOISES:-"0 0.05 0.15"}
+NOISES=${NOISES:-"0.05 0 0.15"}  # the target noise first
 [ -x "$EVAL" ] || { echo "results.sh: $EVAL missing: run scripts/build.sh first" >&2; exit 1; }
 [ -d "$DATA/kitti_odometry_gt_poses" ] || { echo "results.sh: $DATA (KITTI poses, pair lists) is absent" >&2; exit 1; }
 mkdir -p "$OUT"
 # Only sequence 00's calibration is available: its Tr converts the camera poses of every sequence (the
 # simulated world is built along the converted path, so the data stays self-consistent).
 CALIB=$DATA/semantickitti_scans/sequences/00/calib.txt
-
-for seq in $SEQS; do
-  for noise in $NOISES; do
-    dir=$OUT/sim-$seq-noise$noise
-    echo "== simulated $seq, label noise $noise -> $dir" >&2
-    "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$CALIB" \
-      --label-noise "$noise" --pairs "$DATA/ssc_pairs/neg_1/$seq.txt" \
-      --pose-pairs "$DATA/loop_gt_lcrnet/loop_distance4/$seq.txt" \
-      --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null
-  done
-done
 
 # The real SemanticKITTI scans: every listed pair scored, and the loop's pose against its reference.
 real=$OUT/real
@@ -56,6 +45,17 @@ for name in default prune-always no-pruning no-fine-icp no-plane-refine coarse-o
   printf '%s\n' "${CONFIGS[$name]}" > "$abl/$name.yaml"
   "$EVAL" --protocol sequence --sim --frames ::3 --config "$abl/$name.yaml" --title "ablation: $name" \
     --out "$abl/$name" --no-plots > /dev/null
+done
+
+for seq in $SEQS; do
+  for noise in $NOISES; do
+    dir=$OUT/sim-$seq-noise$noise
+    echo "== simulated $seq, label noise $noise -> $dir" >&2
+    "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$CALIB" \
+      --label-noise "$noise" --pairs "$DATA/ssc_pairs/neg_1/$seq.txt" \
+      --pose-pairs "$DATA/loop_gt_lcrnet/loop_distance4/$seq.txt" \
+      --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null
+  done
 done
 
 /usr/bin/python3 tools/eval/results_md.py "$OUT" > docs/RESULTS.md
