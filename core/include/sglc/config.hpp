@@ -68,7 +68,7 @@ struct VerifyConfig {
   double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
   double t_b = 0.5;               // background agreement threshold
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
-  double bev_cell_m = 1.0;        // background agreement grid cell (m)
+  double bev_cell_m = 2.0;        // background agreement grid cell (m); 1 m loses loops under label noise
   double bev_radius_m = 50.0;     // background agreement grid half-size (m)
 };
 
