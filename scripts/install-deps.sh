@@ -11,6 +11,8 @@ PACKAGES=(
   libsqlite3-dev libfaiss-dev libopenblas0-pthread
   # service
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
+  # pose-graph optimisation
+  libceres-dev
   # tests, benchmarks, Python clients and plots
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib

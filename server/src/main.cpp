@@ -172,6 +172,8 @@ int main(int argc, char** argv) {
     builder.AddListeningPort(s.listen, creds, &port);
     builder.RegisterService(&loop_service);
     builder.RegisterService(&admin_service);
+    sglc::server::PoseGraphService graph_service(*state);
+    builder.RegisterService(&graph_service);
     const int max_bytes = static_cast<int>(s.max_message_mb * 1024 * 1024);
     builder.SetMaxReceiveMessageSize(max_bytes);
     builder.SetMaxSendMessageSize(max_bytes);
@@ -206,7 +208,8 @@ int main(int argc, char** argv) {
       throw;
     }
     const auto st = store->stats();
-    state->attach(store.get());
+    auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, sglc::server::GraphOptimiserOptions{});
+    state->attach(store.get(), graph.get());
     health->SetServingStatus(true);
     spdlog::info("{{\"event\":\"serving\",\"db\":\"{}\",\"maps\":{},\"scans\":{},\"load_ms\":{:.1f}}}", s.db, st.maps,
                  st.scans, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
@@ -215,11 +218,13 @@ int main(int argc, char** argv) {
     sigwait(&signals, &sig);
     spdlog::info("{{\"event\":\"shutdown\",\"signal\":{}}}", sig);
     health->SetServingStatus(false);
+    graph->stop();  // ends WatchMap streams; loops recorded from now on are optimised after the next start
     // Refuse new calls, let in-flight ones finish (up to the grace period), then close the database cleanly.
     server->Shutdown(std::chrono::system_clock::now() +
                      std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));
     server->Wait();
     state->detach();
+    graph.reset();
     store.reset();
     spdlog::info("{}", R"({"event":"stopped"})");
     return 0;

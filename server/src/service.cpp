@@ -259,6 +259,28 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
   t0 = Clock::now();
   resp->set_scan_id(state.store().addScan(ns));
   resp->mutable_timing()->set_store_ms(msSince(t0));
+  // Verified loops join the map's pose graph (the scan is stored: a failure here must not fail the call).
+  if (auto* graph = state.graph(); graph && pose) {
+    bool added = false;
+    for (const auto& loop : resp->loops()) {
+      if (!loop.verified()) continue;
+      storage::LoopRecord r;
+      r.query_scan = resp->scan_id();
+      r.candidate_scan = loop.scan_id();
+      r.T = decodeTransform(loop.t_query_candidate(), "loop");
+      r.score = loop.score();
+      r.inliers = loop.inliers();
+      r.fitness = loop.fitness();
+      r.rmse = loop.rmse();
+      try {
+        state.store().addLoop(key.map(), r);
+        added = true;
+      } catch (const std::exception& e) {
+        spdlog::warn("{{\"event\":\"loop_not_recorded\",\"scan\":{},\"error\":\"{}\"}}", resp->scan_id(), e.what());
+      }
+    }
+    if (added) graph->loopsAdded(key.map());
+  }
   resp->set_seq(key.seq());
   resp->mutable_timing()->set_total_ms(msSince(t_start));
 }
@@ -509,6 +531,128 @@ grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupR
     state_.store().backup(dest);
     resp->set_path(dest);
     resp->set_bytes(static_cast<std::int64_t>(fs::file_size(dest, ec)));
+  });
+}
+
+}  // namespace sglc::server
+
+// ------------------------------------------------------------------------------------------------ PoseGraph
+
+namespace sglc::server {
+namespace {
+
+GraphOptimiser& graphOf(const ServiceState& state) {
+  auto* g = state.graph();
+  if (!g) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is shutting down");
+  return *g;
+}
+
+void requireMap(const ServiceState& state, const grpc::ServerContext* ctx, const std::string& map) {
+  checkName("map", map);
+  TokenTable::require(state.tokens().authenticate(*ctx), map);
+  if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
+}
+
+}  // namespace
+
+grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
+                                        v1::GetPosesResponse* resp) {
+  return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    if (!req->session().empty() && req->robot().empty())
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
+    if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
+    const std::int64_t page = req->page_size() ? req->page_size() : 1000;
+    if (page > 10000) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_size must be at most 10000");
+    auto& store = state_.store();
+    if (!req->robot().empty()) {
+      bool found = false;
+      for (const auto& s : store.listSessions(req->map(), req->robot()))
+        found = found || req->session().empty() || s.name == req->session();
+      if (!found)
+        throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + req->robot() + "'" +
+                                                        (req->session().empty() ? "" : " with session '" + req->session() + "'"));
+    }
+    const auto version = store.graphVersion(req->map());
+    std::map<std::int64_t, storage::SessionFrame> frames;
+    for (auto& f : store.sessionFrames(req->map())) frames[f.session_id] = f;
+    std::int64_t last = 0;
+    std::vector<storage::GraphNodeRecord> nodes;
+    for (auto& n : store.graphNodes(req->map(), req->page_token())) {
+      if (!n.odometry_pose) continue;
+      if (!req->robot().empty() && n.robot != req->robot()) continue;
+      if (!req->session().empty() && n.session != req->session()) continue;
+      if (static_cast<std::int64_t>(nodes.size()) == page) {
+        resp->set_next_page_token(last);
+        break;
+      }
+      last = n.scan_id;
+      nodes.push_back(std::move(n));
+    }
+    std::map<std::int64_t, Mat4d> optimised;
+    if (!nodes.empty())
+      for (const auto& p : store.optimisedPoses(req->map(), req->robot(), req->session(), req->page_token(), page))
+        optimised[p.scan_id] = p.pose;
+    for (const auto& n : nodes) {
+      auto* o = resp->add_poses();
+      o->set_scan_id(n.scan_id);
+      o->set_robot(n.robot);
+      o->set_session(n.session);
+      o->set_seq(n.seq);
+      const auto f = frames.find(n.session_id);
+      const bool connected = f != frames.end() && f->second.connected;
+      o->set_connected(connected);
+      if (const auto p = optimised.find(n.scan_id); p != optimised.end()) {
+        o->set_optimised(true);
+        encodeTransform(p->second, o->mutable_t_map_scan());
+      } else {
+        // Not optimised yet: its odometry through the session's last known frame.
+        encodeTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
+                        o->mutable_t_map_scan());
+      }
+    }
+    resp->set_graph_version(version);
+  });
+}
+
+grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
+                                                v1::GetSessionFramesResponse* resp) {
+  return run(ctx, {"GetSessionFrames", req->map(), ""}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    auto& store = state_.store();
+    resp->set_graph_version(store.graphVersion(req->map()));
+    std::map<std::pair<std::string, std::string>, storage::SessionFrame> frames;
+    for (auto& f : store.sessionFrames(req->map())) frames[{f.robot, f.session}] = f;
+    for (const auto& s : store.listSessions(req->map())) {
+      auto* o = resp->add_sessions();
+      o->set_robot(s.robot);
+      o->set_session(s.name);
+      const auto f = frames.find({s.robot, s.name});
+      o->set_connected(f != frames.end() && f->second.connected);
+      encodeTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
+    }
+  });
+}
+
+grpc::Status PoseGraphService::WatchMap(grpc::ServerContext* ctx, const v1::WatchMapRequest* req,
+                                        grpc::ServerWriter<v1::MapEvent>* writer) {
+  return run(ctx, {"WatchMap", req->map(), ""}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    std::int64_t after = req->after_version();
+    while (!ctx->IsCancelled()) {
+      auto& graph = graphOf(state_);
+      if (graph.stopping()) return;
+      const auto event = graph.waitForVersion(req->map(), after, std::chrono::milliseconds(500));
+      if (!event) continue;
+      v1::MapEvent e;
+      e.set_graph_version(event->graph_version);
+      e.set_loops(event->loops);
+      e.set_nodes(event->nodes);
+      e.set_rejected_loops(event->rejected_loops);
+      e.set_optimise_ms(event->optimise_ms);
+      if (!writer->Write(e)) return;  // the client went away
+      after = event->graph_version;
+    }
   });
 }
 

@@ -8,6 +8,7 @@
 
 #include "auth.hpp"
 #include "compute_pool.hpp"
+#include "graph_optimiser.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
@@ -29,14 +30,21 @@ class ServiceState {
         limits_(std::move(limits)),
         compute_(std::make_unique<ComputePool>(limits_.compute_threads)) {}
 
-  void attach(storage::MapStore* store) { store_.store(store); }
-  void detach() { store_.store(nullptr); }
+  void attach(storage::MapStore* store, GraphOptimiser* graph = nullptr) {
+    graph_.store(graph);
+    store_.store(store);
+  }
+  void detach() {
+    store_.store(nullptr);
+    graph_.store(nullptr);
+  }
   storage::MapStore& store() const;  // throws RpcError(UNAVAILABLE) while loading
 
   const Pipeline& pipeline() const { return pipeline_; }
   const TokenTable& tokens() const { return tokens_; }
   const ServiceLimits& limits() const { return limits_; }
   ComputePool& compute() const { return *compute_; }
+  GraphOptimiser* graph() const { return graph_.load(); }  // null: no pose graph (tests, loading)
 
  private:
   Pipeline pipeline_;
@@ -44,6 +52,7 @@ class ServiceState {
   ServiceLimits limits_;
   std::unique_ptr<ComputePool> compute_;
   std::atomic<storage::MapStore*> store_{nullptr};
+  std::atomic<GraphOptimiser*> graph_{nullptr};
 };
 
 class LoopClosureService final : public v1::LoopClosure::Service {
@@ -76,6 +85,19 @@ class MapAdminService final : public v1::MapAdmin::Service {
                            v1::DeleteResponse* resp) override;
   grpc::Status GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req, v1::GetStatsResponse* resp) override;
   grpc::Status Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) override;
+
+ private:
+  ServiceState& state_;
+};
+
+class PoseGraphService final : public v1::PoseGraph::Service {
+ public:
+  explicit PoseGraphService(ServiceState& state) : state_(state) {}
+  grpc::Status GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req, v1::GetPosesResponse* resp) override;
+  grpc::Status GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
+                                v1::GetSessionFramesResponse* resp) override;
+  grpc::Status WatchMap(grpc::ServerContext* ctx, const v1::WatchMapRequest* req,
+                        grpc::ServerWriter<v1::MapEvent>* writer) override;
 
  private:
   ServiceState& state_;

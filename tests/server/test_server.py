@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """End-to-end tests of build/bin/sglc-server on loopback, through the generated sglc.v1 stubs.
 
-Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR
+Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR SIM_BINARY
 Starts real servers on free loopback ports with temporary databases. Exit 77 when grpcio/numpy are missing.
 """
 import os
@@ -28,7 +28,7 @@ except ImportError:
         print(f"SKIP: {e} (needs Debian's python3-grpcio and python3-numpy; run with /usr/bin/python3)")
         sys.exit(77)
 
-SERVER, STUBS, DATA = sys.argv[1], sys.argv[2], sys.argv[3]
+SERVER, STUBS, DATA, SIM = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
 sys.path.insert(0, STUBS)
 from sglc.v1 import sglc_pb2 as pb  # noqa: E402
 from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
@@ -54,6 +54,7 @@ class Server:
         grpc.channel_ready_future(self.channel).result(timeout=30)
         self.admin = rpc.MapAdminStub(self.channel)
         self.loop = rpc.LoopClosureStub(self.channel)
+        self.graph = rpc.PoseGraphStub(self.channel)
         # Serving once the database is loaded.
         for _ in range(300):
             try:
@@ -313,8 +314,129 @@ def test_concurrent_clients(tmp):
         assert s.stop() == 0
 
 
+
+def read_kitti_poses(path, Tr):
+    rows = np.loadtxt(path).reshape(-1, 3, 4)
+    out = []
+    for r in rows:
+        P = np.eye(4)
+        P[:3, :] = r
+        out.append(np.linalg.inv(Tr) @ P @ Tr)
+    return out
+
+
+def ate(est, gt):
+    """RMSE of positions after the best rigid alignment of est onto gt (Horn/Umeyama, no scale)."""
+    a = np.array([T[:3, 3] for T in est])
+    b = np.array([T[:3, 3] for T in gt])
+    ma, mb = a.mean(0), b.mean(0)
+    U, _, Vt = np.linalg.svd((b - mb).T @ (a - ma))
+    D = np.diag([1, 1, np.sign(np.linalg.det(U @ Vt))])
+    R = U @ D @ Vt
+    return float(np.sqrt(np.mean(np.sum((b - (a - ma) @ R.T - mb) ** 2, axis=1))))
+
+
+def test_pose_graph(tmp):
+    # A drive of the built-in route (every 8th frame) with 2 % odometry drift, as two robots: "a" drives it
+    # all, "b" the second half with its odometry in an unrelated frame. Loops correct both.
+    seq = os.path.join(tmp, "seq")
+    subprocess.run([SIM, "--route", "loop", "--frames", "::8", "--odom-noise", "0.02", "--out", seq], check=True,
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=300)
+    Tr = np.eye(4)
+    for line in open(os.path.join(seq, "calib.txt")):
+        if line.startswith("Tr:"):
+            Tr[:3, :] = np.array([float(v) for v in line.split()[1:13]]).reshape(3, 4)
+    gt = read_kitti_poses(os.path.join(seq, "poses.txt"), Tr)
+    odom = read_kitti_poses(os.path.join(seq, "odometry.txt"), Tr)
+    n = len(gt)
+    offset = np.eye(4)
+    c, s_ = np.cos(1.0), np.sin(1.0)
+    offset[:3, :3] = [[c, -s_, 0], [s_, c, 0], [0, 0, 1]]
+    offset[:3, 3] = [50.0, -20.0, 3.0]
+
+    def scan(i):
+        name = f"{i:06d}"
+        pts = np.fromfile(os.path.join(seq, "velodyne", name + ".bin"), dtype="<f4").reshape(-1, 4)[:, :3]
+        lab = np.fromfile(os.path.join(seq, "labels", name + ".label"), dtype="<u4")
+        return pb.Scan(points=np.ascontiguousarray(pts).tobytes(), labels=lab.tobytes())
+
+    def tf(T):
+        return pb.Transform(m=[float(v) for v in T.reshape(-1)])
+
+    db = os.path.join(tmp, "graph.db")
+    s = Server(db)
+    try:
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        C = grpc.StatusCode
+        expect_code(C.NOT_FOUND, lambda: s.graph.GetPoses(pb.GetPosesRequest(map="nomap")), "poses of an unknown map")
+        expect_code(C.INVALID_ARGUMENT, lambda: s.graph.GetPoses(pb.GetPosesRequest(map="m", session="x")),
+                    "session without robot")
+        expect_code(C.INVALID_ARGUMENT, lambda: s.graph.GetPoses(pb.GetPosesRequest(map="m", page_size=20000)),
+                    "page too large")
+        expect_code(C.NOT_FOUND, lambda: s.graph.GetPoses(pb.GetPosesRequest(map="m", robot="ghost")), "unknown robot")
+        opts = pb.QueryOptions(exclude_recent=12, top_k=3)
+        reqs = [pb.IngestRequest(key=key("a", i), scan=scan(i), odometry_pose=tf(odom[i]), query=True,
+                                 query_options=opts) for i in range(n)]
+        half = n // 2
+        reqs += [pb.IngestRequest(key=key("b", i), scan=scan(i), odometry_pose=tf(offset @ odom[i]), query=True,
+                                  query_options=opts) for i in range(half, n)]
+        loops = sum(len(r.loops) for r in s.loop.IngestStream(iter(reqs), timeout=600))
+        assert loops > 20, f"only {loops} loops"
+        # The optimiser runs off the request path: wait until the version stops moving.
+        last, stable = -1, 0
+        events = s.graph.WatchMap(pb.WatchMapRequest(map="m"), timeout=120)
+        first = next(events)
+        assert first.graph_version >= 1 and first.nodes > 0
+        events.cancel()
+        for _ in range(600):
+            v = s.graph.GetSessionFrames(pb.GetSessionFramesRequest(map="m")).graph_version
+            stable = stable + 1 if v == last else 0
+            last = v
+            if stable >= 10:
+                break
+            time.sleep(0.1)
+        poses, token = [], 0
+        while True:  # paged
+            r = s.graph.GetPoses(pb.GetPosesRequest(map="m", robot="a", page_token=token, page_size=50))
+            poses += r.poses
+            token = r.next_page_token
+            if not token:
+                break
+        assert [p.seq for p in poses] == list(range(n)), "one pose per scan of robot a, in order"
+        assert all(p.optimised and p.connected for p in poses)
+        est = [np.array(p.t_map_scan.m).reshape(4, 4) for p in poses]
+        ate_odom, ate_opt = ate(odom, gt), ate(est, gt)
+        print(f"  robot a: ATE odometry {ate_odom:.3f} m -> optimised {ate_opt:.3f} m over {n} scans, {loops} loops")
+        assert ate_opt < ate_odom / 3, f"ATE {ate_odom:.3f} -> {ate_opt:.3f}"
+        frames = {(f.robot, f.session): f for f in s.graph.GetSessionFrames(pb.GetSessionFramesRequest(map="m")).sessions}
+        fb = frames[("b", "run")]
+        assert fb.connected, "robot b was linked to the map by inter-robot loops"
+        # b's frame undoes the offset: its first scan lands where it truly is (up to a's remaining error).
+        T = np.array(fb.t_map_session.m).reshape(4, 4)
+        dt, dr = pose_error(T @ offset @ odom[half], gt[half])
+        b_poses = [np.array(p.t_map_scan.m).reshape(4, 4)
+                   for p in s.graph.GetPoses(pb.GetPosesRequest(map="m", robot="b")).poses]
+        ate_b = ate(b_poses, gt[half:])
+        # Both robots drove frames half..n: in one common frame their poses there must coincide.
+        gap = np.mean([pose_error(pb_, est[half + k])[0] for k, pb_ in enumerate(b_poses)])
+        print(f"  robot b: first scan placed {dt:.3f} m / {dr:.3f} deg from the truth, ATE {ate_b:.3f} m, "
+              f"mean gap to robot a on the same frames {gap:.3f} m")
+        assert dt < 2.5 and dr < 3.0 and ate_b < ate_odom / 2 and gap < 0.3, (dt, dr, ate_b, gap)
+        before = [(p.scan_id, tuple(p.t_map_scan.m)) for p in s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses]
+    finally:
+        s.stop(signal.SIGKILL)
+    s = Server(db)
+    try:
+        after = [(p.scan_id, tuple(p.t_map_scan.m)) for p in s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses]
+        assert len(after) == len(before), "poses lost on restart"
+        a_before = dict(before)
+        moved = max(np.abs(np.array(m) - np.array(a_before[i])).max() for i, m in after)
+        assert moved < 0.05, f"poses moved by {moved} across a restart"
+    finally:
+        assert s.stop() == 0
+
 def main():
-    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients]
+    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients, test_pose_graph]
     passed = failed = 0
     for t in tests:
         tmp = tempfile.mkdtemp(prefix="sglc-server-test-")

@@ -1,0 +1,350 @@
+#include "graph_optimiser.hpp"
+
+#include <ceres/ceres.h>
+#include <ceres/rotation.h>
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <limits>
+#include <unordered_map>
+#include <vector>
+
+namespace sglc::server {
+
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+// Odometry between consecutive scans of a session: trusted, no robust loss. Loop edges get their sigma from
+// the refinement's residual (rmse) with a floor; both are per-axis, whitened in the residual.
+constexpr double kOdomSigmaT = 0.10, kOdomSigmaR = 0.01;  // m, rad per step
+constexpr double kLoopSigmaTFloor = 0.05;
+
+struct Pose {
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  static Pose of(const Mat4d& T) {
+    Pose p;
+    p.q = Eigen::Quaterniond(T.block<3, 3>(0, 0)).normalized();
+    p.t = T.block<3, 1>(0, 3);
+    return p;
+  }
+  Mat4d matrix() const {
+    Mat4d T = Mat4d::Identity();
+    T.block<3, 3>(0, 0) = q.normalized().toRotationMatrix();
+    T.block<3, 1>(0, 3) = t;
+    return T;
+  }
+};
+
+// Residual of a relative-pose measurement T_ab (maps b's points into a's frame) between poses a and b (both
+// scan -> map): translation and rotation error of inv(T_ab) * inv(T_a) * T_b, scaled by 1 / sigma.
+struct RelativePoseError {
+  Eigen::Quaterniond q_ab;
+  Eigen::Vector3d t_ab;
+  double inv_sigma_t, inv_sigma_r;
+  template <typename T>
+  bool operator()(const T* qa_p, const T* ta_p, const T* qb_p, const T* tb_p, T* r) const {
+    Eigen::Map<const Eigen::Quaternion<T>> qa(qa_p), qb(qb_p);
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> ta(ta_p), tb(tb_p);
+    const Eigen::Quaternion<T> qa_inv = qa.conjugate();
+    const Eigen::Quaternion<T> q_pred = qa_inv * qb;
+    const Eigen::Matrix<T, 3, 1> t_pred = qa_inv * (tb - ta);
+    const Eigen::Quaternion<T> dq = q_ab.template cast<T>().conjugate() * q_pred;
+    const Eigen::Matrix<T, 3, 1> dt = q_ab.template cast<T>().conjugate() * (t_pred - t_ab.template cast<T>());
+    for (int i = 0; i < 3; ++i) {
+      r[i] = dt[i] * T(inv_sigma_t);
+      r[3 + i] = T(2.0) * dq.vec()[i] * T(inv_sigma_r);
+    }
+    return true;
+  }
+};
+
+}  // namespace
+
+struct GraphOptimiser::MapGraph {
+  struct Node {
+    std::int64_t scan_id;
+    std::int64_t session_id;
+    std::int64_t seq;
+    Mat4d odometry;
+    Pose pose;
+    bool initialised = false;
+  };
+  struct Loop {
+    std::int64_t id, a, b;  // a = query scan, b = candidate scan; T maps b into a
+    Mat4d T;
+    double rmse, fitness;
+  };
+  std::vector<Node> nodes;
+  std::unordered_map<std::int64_t, std::size_t> index;  // scan id -> node
+  std::vector<Loop> loops;
+  std::int64_t last_scan = 0, last_loop = 0;
+  std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
+};
+
+GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
+    : store_(store), options_(options) {
+  const auto now = Clock::now();
+  for (const auto& m : store_.listMaps())
+    if (!store_.loops(m.name).empty()) due_[m.name] = now;
+  worker_ = std::thread([this] { run(); });
+}
+
+GraphOptimiser::~GraphOptimiser() {
+  stop();
+  if (worker_.joinable()) worker_.join();
+}
+
+void GraphOptimiser::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  changed_.notify_all();
+}
+
+bool GraphOptimiser::stopping() const {
+  std::lock_guard lock(mutex_);
+  return stop_;
+}
+
+void GraphOptimiser::loopsAdded(const std::string& map) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+  }
+  wake_.notify_all();
+}
+
+std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map, std::int64_t after,
+                                                         std::chrono::milliseconds timeout) {
+  std::unique_lock lock(mutex_);
+  const bool ready = changed_.wait_for(lock, timeout, [&] {
+    if (stop_) return true;
+    const auto it = latest_.find(map);
+    return it != latest_.end() && it->second.graph_version > after;
+  });
+  const auto it = latest_.find(map);
+  if (!ready || stop_ || it == latest_.end() || it->second.graph_version <= after) return std::nullopt;
+  return it->second;
+}
+
+void GraphOptimiser::run() {
+  std::unique_lock lock(mutex_);
+  while (!stop_) {
+    if (due_.empty()) {
+      wake_.wait(lock);
+      continue;
+    }
+    auto next = std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+    if (next->second > Clock::now()) {
+      wake_.wait_until(lock, next->second);
+      continue;
+    }
+    const std::string map = next->first;
+    due_.erase(next);
+    lock.unlock();
+    try {
+      optimise(map);
+    } catch (const std::exception& e) {
+      spdlog::warn("{{\"event\":\"optimise_failed\",\"map\":\"{}\",\"error\":\"{}\"}}", map, e.what());
+    }
+    lock.lock();
+  }
+}
+
+GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise(map); }
+
+GraphEvent GraphOptimiser::optimise(const std::string& map) {
+  std::lock_guard one(optimise_mutex_);
+  const auto t0 = Clock::now();
+  auto& slot = graphs_[map];
+  if (!slot) slot = std::make_unique<MapGraph>();
+  MapGraph& g = *slot;
+
+  // New rows since the last optimisation. Scans deleted meanwhile make the whole graph stale: rebuild.
+  auto nodes = store_.graphNodes(map, g.last_scan);
+  auto loops = store_.loops(map, g.last_loop);
+  // A fresh graph (server start) starts from the poses kept in the database, so a restart continues
+  // from where the last run stopped.
+  std::unordered_map<std::int64_t, Mat4d> kept;
+  if (g.nodes.empty())
+    for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
+      kept[p.scan_id] = p.pose;
+  for (const auto& n : nodes) {
+    g.last_scan = std::max(g.last_scan, n.scan_id);
+    if (!n.odometry_pose) continue;
+    g.index[n.scan_id] = g.nodes.size();
+    const auto k = kept.find(n.scan_id);
+    g.nodes.push_back({n.scan_id, n.session_id, n.seq, *n.odometry_pose,
+                       Pose::of(k != kept.end() ? k->second : *n.odometry_pose), k != kept.end()});
+    g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
+  }
+  for (const auto& l : loops) {
+    g.last_loop = std::max(g.last_loop, l.id);
+    if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
+    g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness});
+  }
+
+  // Sessions and their scans in sequence order; initial guesses for new nodes.
+  std::map<std::int64_t, std::vector<std::size_t>> sessions;
+  for (std::size_t i = 0; i < g.nodes.size(); ++i) sessions[g.nodes[i].session_id].push_back(i);
+  for (auto& [sid, idx] : sessions)
+    std::stable_sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) { return g.nodes[a].seq < g.nodes[b].seq; });
+
+  // Components: sessions linked by loops (union-find); the map frame's component is "connected".
+  std::map<std::int64_t, std::int64_t> parent;
+  for (const auto& [sid, idx] : sessions) parent[sid] = sid;
+  auto find = [&](std::int64_t s) {
+    while (parent[s] != s) s = parent[s] = parent[parent[s]];
+    return s;
+  };
+  for (const auto& l : g.loops) {
+    const auto a = find(g.nodes[g.index[l.a]].session_id), b = find(g.nodes[g.index[l.b]].session_id);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);  // the smaller session id is the root
+  }
+
+  // Initialise sessions: the map session and each component's root in their own odometry frames; other
+  // sessions through their first loop to an initialised session; nodes by chaining odometry.
+  auto initSession = [&](std::int64_t sid, const Mat4d& T_frame) {
+    for (auto i : sessions[sid]) {
+      auto& n = g.nodes[i];
+      if (n.initialised) continue;
+      // Chain from the previous initialised node of the session, else place by the session frame.
+      const auto& idx = sessions[sid];
+      const auto pos = std::find(idx.begin(), idx.end(), i) - idx.begin();
+      if (pos > 0 && g.nodes[idx[static_cast<std::size_t>(pos - 1)]].initialised) {
+        const auto& prev = g.nodes[idx[static_cast<std::size_t>(pos - 1)]];
+        n.pose = Pose::of(prev.pose.matrix() * prev.odometry.inverse() * n.odometry);
+      } else {
+        n.pose = Pose::of(T_frame * n.odometry);
+      }
+      n.initialised = true;
+    }
+  };
+  std::set<std::int64_t> placed;
+  for (const auto& [sid, idx] : sessions) {
+    const bool any = std::any_of(idx.begin(), idx.end(), [&](std::size_t i) { return g.nodes[i].initialised; });
+    if (any || find(sid) == sid) {
+      const auto& first = g.nodes[idx.front()];
+      initSession(sid, any ? Mat4d(first.pose.matrix() * first.odometry.inverse()) : Mat4d::Identity());
+      placed.insert(sid);
+    }
+  }
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (const auto& l : g.loops) {
+      const auto& na = g.nodes[g.index[l.a]];
+      const auto& nb = g.nodes[g.index[l.b]];
+      const bool pa = placed.count(na.session_id), pb = placed.count(nb.session_id);
+      if (pa == pb) continue;
+      // T_map_b = T_map_a * T_ab (or the inverse way round); the unplaced session's frame follows.
+      if (pa) {
+        const Mat4d T_map_b = na.pose.matrix() * l.T;
+        initSession(nb.session_id, T_map_b * nb.odometry.inverse());
+        placed.insert(nb.session_id);
+      } else {
+        const Mat4d T_map_a = nb.pose.matrix() * l.T.inverse();
+        initSession(na.session_id, T_map_a * na.odometry.inverse());
+        placed.insert(na.session_id);
+      }
+      progress = true;
+    }
+  }
+  for (const auto& [sid, idx] : sessions) initSession(sid, Mat4d::Identity());
+
+  // The problem: odometry edges within sessions, robust loop edges, one fixed node per component.
+  ceres::Problem problem;
+  std::vector<std::array<double, 4>> q(g.nodes.size());
+  std::vector<std::array<double, 3>> t(g.nodes.size());
+  for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+    const auto& p = g.nodes[i].pose;
+    q[i] = {p.q.x(), p.q.y(), p.q.z(), p.q.w()};
+    t[i] = {p.t.x(), p.t.y(), p.t.z()};
+  }
+  auto addEdge = [&](std::size_t a, std::size_t b, const Mat4d& T_ab, double sigma_t, double sigma_r,
+                     ceres::LossFunction* loss) {
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 4, 3, 4, 3>(new RelativePoseError{
+        Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), 1.0 / sigma_t, 1.0 / sigma_r});
+    problem.AddResidualBlock(cost, loss, q[a].data(), t[a].data(), q[b].data(), t[b].data());
+  };
+  for (const auto& [sid, idx] : sessions)
+    for (std::size_t k = 1; k < idx.size(); ++k) {
+      const auto& a = g.nodes[idx[k - 1]];
+      const auto& b = g.nodes[idx[k]];
+      addEdge(idx[k - 1], idx[k], a.odometry.inverse() * b.odometry, kOdomSigmaT, kOdomSigmaR, nullptr);
+    }
+  std::vector<double> loop_sigma;
+  for (const auto& l : g.loops) {
+    const double st = std::max(kLoopSigmaTFloor, l.rmse);
+    loop_sigma.push_back(st);
+    addEdge(g.index[l.a], g.index[l.b], l.T, st, st / 10.0, new ceres::CauchyLoss(options_.loss_scale));
+  }
+  for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+    problem.AddParameterBlock(q[i].data(), 4, new ceres::EigenQuaternionManifold());
+    problem.AddParameterBlock(t[i].data(), 3);
+  }
+  std::set<std::int64_t> fixed_roots;
+  for (const auto& [sid, idx] : sessions)
+    if (fixed_roots.insert(find(sid)).second) {
+      // The root session's first node anchors its component (the map frame for the map session's).
+      const auto first = sessions[find(sid)].front();
+      problem.SetParameterBlockConstant(q[first].data());
+      problem.SetParameterBlockConstant(t[first].data());
+    }
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = options_.max_iterations;
+  so.max_solver_time_in_seconds = options_.max_seconds;
+  so.num_threads = 1;  // deterministic
+  so.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  if (!g.nodes.empty()) ceres::Solve(so, &problem, &summary);
+  for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+    g.nodes[i].pose.q = Eigen::Quaterniond(q[i][3], q[i][0], q[i][1], q[i][2]).normalized();
+    g.nodes[i].pose.t = Eigen::Vector3d(t[i][0], t[i][1], t[i][2]);
+  }
+
+  // Loops the robust loss discounted: whitened translation error beyond 3 loss scales.
+  int rejected = 0;
+  for (std::size_t k = 0; k < g.loops.size(); ++k) {
+    const auto& l = g.loops[k];
+    const Mat4d pred = g.nodes[g.index[l.a]].pose.matrix().inverse() * g.nodes[g.index[l.b]].pose.matrix();
+    const double err = (pred.block<3, 1>(0, 3) - l.T.block<3, 1>(0, 3)).norm() / loop_sigma[k];
+    rejected += err > 3.0 * options_.loss_scale;
+  }
+
+  std::vector<storage::OptimisedPose> poses;
+  for (const auto& n : g.nodes) poses.push_back({n.scan_id, n.pose.matrix()});
+  std::vector<storage::SessionFrame> frames;
+  const auto map_root = g.map_session < 0 ? -1 : find(g.map_session);
+  for (const auto& [sid, idx] : sessions) {
+    const auto& first = g.nodes[idx.front()];
+    storage::SessionFrame f;
+    f.session_id = sid;
+    f.connected = find(sid) == map_root;
+    f.T_map_session = f.connected ? Mat4d(first.pose.matrix() * first.odometry.inverse()) : Mat4d::Identity();
+    frames.push_back(f);
+  }
+  GraphEvent event;
+  event.graph_version = store_.saveOptimised(map, poses, frames);
+  event.loops = static_cast<std::int64_t>(g.loops.size());
+  event.nodes = static_cast<std::int64_t>(g.nodes.size());
+  event.rejected_loops = rejected;
+  event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  spdlog::info("{{\"event\":\"optimised\",\"map\":\"{}\",\"version\":{},\"nodes\":{},\"loops\":{},\"rejected\":{},"
+               "\"iterations\":{},\"ms\":{:.1f}}}",
+               map, event.graph_version, event.nodes, event.loops, rejected, summary.iterations.size(), event.optimise_ms);
+  {
+    std::lock_guard lock(mutex_);
+    latest_[map] = event;
+  }
+  changed_.notify_all();
+  return event;
+}
+
+}  // namespace sglc::server

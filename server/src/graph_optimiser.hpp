@@ -1,0 +1,77 @@
+// Keeps each map's pose graph optimised, off the request path.
+//
+// Ingest records verified loops in the map database and calls loopsAdded(); a worker thread then reads the
+// new graph rows (scans with odometry poses, loops), optimises the map's pose graph warm-started from its last
+// solution, and writes the poses and session frames back to the database in one transaction. Bursts of loops
+// are batched (one optimisation per `debounce`). On start every map that has loops is optimised once, so a
+// restarted server serves the same poses and picks up loops recorded just before a crash.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <thread>
+
+#include "sglc/storage/map_store.hpp"
+
+namespace sglc::server {
+
+struct GraphEvent {
+  std::int64_t graph_version = 0;
+  std::int64_t loops = 0;
+  std::int64_t nodes = 0;
+  int rejected_loops = 0;
+  double optimise_ms = 0;
+};
+
+struct GraphOptimiserOptions {
+  std::chrono::milliseconds debounce{200};  // wait this long after a loop for more before optimising
+  double max_seconds = 5.0;                 // per optimisation
+  int max_iterations = 100;
+  double loss_scale = 1.0;                  // Cauchy loss scale on whitened loop residuals
+};
+
+class GraphOptimiser {
+ public:
+  GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options);
+  ~GraphOptimiser();  // stops the worker (an optimisation in progress finishes first)
+  GraphOptimiser(const GraphOptimiser&) = delete;
+  GraphOptimiser& operator=(const GraphOptimiser&) = delete;
+
+  // New loops (or scans) in `map`: optimise soon.
+  void loopsAdded(const std::string& map);
+  // The latest event of the map once its graph version exceeds `after`, waiting at most `timeout`; nullopt on
+  // timeout or when stopping.
+  std::optional<GraphEvent> waitForVersion(const std::string& map, std::int64_t after,
+                                           std::chrono::milliseconds timeout);
+  // Optimises now on the calling thread (tests, tools); returns the event.
+  GraphEvent optimiseNow(const std::string& map);
+  // Ends waits and the worker.
+  void stop();
+  bool stopping() const;
+
+ private:
+  struct MapGraph;
+  void run();
+  GraphEvent optimise(const std::string& map);
+
+  storage::MapStore& store_;
+  GraphOptimiserOptions options_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;     // the worker
+  std::condition_variable changed_;  // watchers
+  std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
+  std::map<std::string, GraphEvent> latest_;
+  std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
+  std::mutex optimise_mutex_;  // one optimisation at a time
+  bool stop_ = false;
+  std::thread worker_;
+};
+
+}  // namespace sglc::server
