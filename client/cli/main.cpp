@@ -495,6 +495,33 @@ int runScan(const Common& common, std::int64_t id, bool graph) {
   return 0;
 }
 
+// KITTI-format poses (12 numbers per line, row-major 3x4) of a robot's optimised trajectory.
+int runTrajectory(const Common& common, const std::string& map, const std::string& robot, const std::string& session,
+                  const std::string& out_path) {
+  const auto poses = connectClient(common).getPoses(map, robot, session);
+  if (poses.empty()) throw sglc::InputError("robot '" + robot + "' of map '" + map + "' has no scan with an odometry pose");
+  std::ofstream out(out_path);
+  if (!out) throw sglc::InputError(out_path + ": cannot write");
+  out << std::setprecision(9);
+  std::int64_t optimised = 0, connected = 0;
+  for (const auto& p : poses) {
+    for (int k = 0; k < 12; ++k) out << (k ? " " : "") << p.t_map_scan().m(k);
+    out << "\n";
+    optimised += p.optimised();
+    connected += p.connected();
+  }
+  if (!out.flush()) throw sglc::InputError(out_path + ": write failed");
+  if (common.json) {
+    std::cout << json{{"map", map}, {"robot", robot}, {"poses", poses.size()}, {"optimised", optimised},
+                      {"connected", connected}, {"out", out_path}}.dump()
+              << std::endl;
+  } else {
+    std::cout << poses.size() << " poses of " << robot << " (" << optimised << " optimised, " << connected
+              << " in the map frame) -> " << out_path << "\n";
+  }
+  return 0;
+}
+
 int runStats(const Common& common, const std::string& map) {
   const auto s = connectClient(common).getStats(map);
   if (common.json) {
@@ -627,6 +654,13 @@ int main(int argc, char** argv) {
   c_scan->add_flag("--graph", scan_graph, "Include the semantic graph nodes and the scan descriptor");
 
   std::string stats_map;
+  std::string traj_map, traj_robot, traj_session, traj_out;
+  auto* c_traj = app.add_subcommand("trajectory", "Write a robot's optimised poses (KITTI format)");
+  addCommon(c_traj, common);
+  c_traj->add_option("--map", traj_map, "Map")->required();
+  c_traj->add_option("--robot", traj_robot, "Robot")->required();
+  c_traj->add_option("--session", traj_session, "Only this session");
+  c_traj->add_option("--out", traj_out, "Output file (one 3x4 row-major pose per line, map frame)")->required();
   auto* c_stats = app.add_subcommand("stats", "Database or map statistics");
   addCommon(c_stats, common);
   c_stats->add_option("--map", stats_map, "Only this map");
@@ -689,6 +723,7 @@ int main(int argc, char** argv) {
     if (*c_sessions) return runSessions(common, sessions_map, sessions_robot);
     if (*c_scan) return runScan(common, scan_id, scan_graph);
     if (*c_stats) return runStats(common, stats_map);
+    if (*c_traj) return runTrajectory(common, traj_map, traj_robot, traj_session, traj_out);
     if (*c_delete) return runDelete(common, del_map, del_robot, del_session);
     if (*c_backup) return runBackup(common, backup_path);
     if (*c_create) return runCreateMap(common, create_name);

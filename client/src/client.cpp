@@ -95,6 +95,7 @@ struct ClientCore {
   std::shared_ptr<grpc::Channel> channel;
   std::unique_ptr<v1::LoopClosure::Stub> loop;
   std::unique_ptr<v1::MapAdmin::Stub> admin;
+  std::unique_ptr<v1::PoseGraph::Stub> graph;
 
   void prepare(grpc::ClientContext* context, const CallOptions& call, bool stream) const {
     const auto deadline = call.deadline.value_or(stream ? std::chrono::milliseconds(0) : options.default_deadline);
@@ -158,6 +159,7 @@ Client::Client(std::shared_ptr<grpc::Channel> channel, ConnectOptions options) {
   core->channel = std::move(channel);
   core->loop = v1::LoopClosure::NewStub(core->channel);
   core->admin = v1::MapAdmin::NewStub(core->channel);
+  core->graph = v1::PoseGraph::NewStub(core->channel);
   core_ = std::move(core);
 }
 
@@ -272,6 +274,29 @@ v1::GetStatsResponse Client::getStats(const std::string& map, const CallOptions&
   v1::GetStatsRequest request;
   request.set_map(map);
   return core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::GetStats, "MapAdmin.GetStats", request, call);
+}
+
+std::vector<v1::ScanPose> Client::getPoses(const std::string& map, const std::string& robot, const std::string& session,
+                                           const CallOptions& call) const {
+  std::vector<v1::ScanPose> out;
+  v1::GetPosesRequest request;
+  request.set_map(map);
+  request.set_robot(robot);
+  request.set_session(session);
+  request.set_page_size(5000);
+  do {
+    auto page = core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetPoses, "PoseGraph.GetPoses", request, call);
+    for (auto& p : *page.mutable_poses()) out.push_back(std::move(p));
+    request.set_page_token(page.next_page_token());
+  } while (request.page_token() != 0);
+  return out;
+}
+
+v1::GetSessionFramesResponse Client::getSessionFrames(const std::string& map, const CallOptions& call) const {
+  v1::GetSessionFramesRequest request;
+  request.set_map(map);
+  return core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetSessionFrames, "PoseGraph.GetSessionFrames",
+                      request, call);
 }
 
 v1::BackupResponse Client::backup(const std::string& path, const CallOptions& call) const {

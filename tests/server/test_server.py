@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """End-to-end tests of build/bin/sglc-server on loopback, through the generated sglc.v1 stubs.
 
-Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR SIM_BINARY
+Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR SIM_BINARY SGLC_CLI
 Starts real servers on free loopback ports with temporary databases. Exit 77 when grpcio/numpy are missing.
 """
 import os
@@ -28,7 +28,7 @@ except ImportError:
         print(f"SKIP: {e} (needs Debian's python3-grpcio and python3-numpy; run with /usr/bin/python3)")
         sys.exit(77)
 
-SERVER, STUBS, DATA, SIM = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
+SERVER, STUBS, DATA, SIM, CLI = sys.argv[1:6]
 sys.path.insert(0, STUBS)
 from sglc.v1 import sglc_pb2 as pb  # noqa: E402
 from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
@@ -423,6 +423,12 @@ def test_pose_graph(tmp):
               f"mean gap to robot a on the same frames {gap:.3f} m")
         assert dt < 2.5 and dr < 3.0 and ate_b < ate_odom / 2 and gap < 0.3, (dt, dr, ate_b, gap)
         before = [(p.scan_id, tuple(p.t_map_scan.m)) for p in s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses]
+        # The command line writes the same trajectory in KITTI format.
+        out = os.path.join(tmp, "a.txt")
+        subprocess.run([CLI, "trajectory", "--server", s.addr, "--map", "m", "--robot", "a", "--out", out], check=True,
+                       stdout=subprocess.DEVNULL, timeout=60)
+        rows = np.loadtxt(out).reshape(-1, 3, 4)
+        assert len(rows) == n and np.allclose(rows, np.array([T[:3, :] for T in est]), atol=1e-6)
     finally:
         s.stop(signal.SIGKILL)
     s = Server(db)

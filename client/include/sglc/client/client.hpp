@@ -1,5 +1,5 @@
-// C++ client of the SGLC loop-closure service (both gRPC services of proto/sglc/v1/sglc.proto:
-// LoopClosure and MapAdmin).
+// C++ client of the SGLC loop-closure service (the gRPC services of proto/sglc/v1/sglc.proto:
+// LoopClosure, MapAdmin and PoseGraph; WatchMap is not wrapped: use the stub on channel()).
 //
 //   auto client = sglc::client::Client::connect("127.0.0.1:50051", {.token = "secret"});
 //   client.createMap("campus");
@@ -189,6 +189,13 @@ class Client {
   v1::GetStatsResponse getStats(const std::string& map = "", const CallOptions& call = {}) const;
   // `path` is on the server's filesystem and must not exist yet.
   v1::BackupResponse backup(const std::string& path, const CallOptions& call = {}) const;
+
+  // ---- PoseGraph
+  // Every optimised (or odometry-chained) scan pose of a robot / session / the whole map (empty names), all
+  // pages, in scan-id order.
+  std::vector<v1::ScanPose> getPoses(const std::string& map, const std::string& robot = "",
+                                     const std::string& session = "", const CallOptions& call = {}) const;
+  v1::GetSessionFramesResponse getSessionFrames(const std::string& map, const CallOptions& call = {}) const;
 
  private:
   std::shared_ptr<const detail::ClientCore> core_;
