@@ -25,10 +25,13 @@
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include "backend.hpp"
 #include "metrics.hpp"
 #include "sglc/config.hpp"
+#include "sglc/client/client.hpp"
+#include "sim/ground_truth.hpp"
 #include "source.hpp"
 
 #ifndef SGLC_EVAL_PLOT_SCRIPT
@@ -398,6 +401,141 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
   run.summary["at_f1max"] = {{"true_loops", tp}, {"false_loops", fp}};
 }
 
+// SLAM protocol: the frames go to a running server as one or two robots with drifting odometry and loop
+// queries; the server's pose graph corrects them. Two robots: the first drives the first 60 % of the frames,
+// the second the last 60 %, with its odometry in an unrelated frame.
+struct SlamOptions {
+  double odom_noise = 0.01;
+  int robots = 1;
+  std::uint64_t seed = 7;
+};
+
+void slamProtocol(Run& run, const std::string& server, const std::string& token, const std::string& map,
+                  const SlamOptions& o, int exclude_recent) {
+  const auto& frames = run.source.frames();
+  for (int f : frames)
+    if (!run.source.hasPose(f)) throw InputError("frame " + std::to_string(f) + " has no ground-truth pose");
+  const std::size_t n = frames.size();
+  struct Robot {
+    std::string name;
+    std::vector<int> frames;
+    std::vector<Mat4d> gt, odom;
+  };
+  std::vector<Robot> robots;
+  const sim::OdometryNoise noise{o.odom_noise, 0.5 * o.odom_noise};  // as sglc-sim --odom-noise
+  auto makeRobot = [&](const std::string& name, std::size_t first, std::size_t last, const Mat4d& frame) {
+    Robot r{name, {}, {}, {}};
+    for (auto k = first; k < last; ++k) {
+      r.frames.push_back(frames[k]);
+      r.gt.push_back(run.source.pose(frames[k]));
+    }
+    const auto drift = sim::driftingOdometry(r.gt, r.frames, noise, o.seed + robots.size());
+    const Mat4d to_frame = frame * drift.front().inverse();
+    for (const auto& T : drift) r.odom.push_back(to_frame * T);
+    robots.push_back(std::move(r));
+  };
+  if (o.robots == 1) {
+    makeRobot("r0", 0, n, run.source.pose(frames.front()));
+  } else {
+    makeRobot("r0", 0, n * 6 / 10, run.source.pose(frames.front()));
+    Mat4d unrelated = Mat4d::Identity();
+    unrelated.block<3, 3>(0, 0) = Eigen::AngleAxisd(1.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    unrelated.block<3, 1>(0, 3) = Eigen::Vector3d(50, -20, 3);
+    makeRobot("r1", n * 4 / 10, n, unrelated);
+  }
+  const auto cl = client::Client::connect(server, {.token = token, .default_deadline = std::chrono::minutes(5)});
+  cl.createMap(map);
+  std::size_t loops = 0, done = 0, total = 0;
+  for (const auto& r : robots) total += r.frames.size();
+  Progress bar("ingest", total);
+  for (const auto& r : robots) {
+    Prefetch pre(run.source, r.frames, run.threads);
+    for (std::size_t k = 0; k < r.frames.size(); ++k) {
+      auto [f, scan] = pre.next();
+      client::IngestOptions io;
+      io.odometry_pose = r.odom[k];
+      io.query = true;
+      io.query_options.set_exclude_recent(exclude_recent);
+      io.query_options.set_top_k(3);
+      const auto resp = cl.ingest(client::makeKey(map, r.name, "run", f), scan, io);
+      for (const auto& c : resp.loops()) loops += c.verified();
+      StageTimes t;
+      t.fingerprint = resp.timing().fingerprint_ms();
+      t.search = resp.timing().search_ms();
+      t.verify = resp.timing().verify_ms();
+      t.refine = resp.timing().refine_ms();
+      t.store = resp.timing().store_ms();
+      t.total = resp.timing().total_ms();
+      run.timings.add(t);
+      bar.step(++done);
+    }
+  }
+  // The server optimises off the request path: wait until its graph version stops moving.
+  const auto t_wait = Clock::now();
+  std::int64_t version = -1;
+  for (auto stable_since = Clock::now(); seconds(t_wait) < 300;) {
+    const auto v = cl.getSessionFrames(map).graph_version();
+    if (v != version) {
+      version = v;
+      stable_since = Clock::now();
+    } else if (v > 0 && seconds(stable_since) > 3.0) {
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  }
+  run.summary["loops_reported"] = loops;
+  run.summary["graph_version"] = version;
+  run.summary["odom_noise"] = o.odom_noise;
+  run.summary["robots"] = o.robots;
+
+  std::vector<Mat4d> all_opt, all_gt;
+  double odom_sq = 0;
+  std::ofstream csv(run.out + "/slam.csv");
+  csv << "frame,robot,gt_x,gt_y,odom_x,odom_y,opt_x,opt_y\n" << std::setprecision(9);
+  ordered_json per_robot = ordered_json::array();
+  for (const auto& r : robots) {
+    std::map<std::int64_t, Mat4d> opt;
+    for (const auto& p : cl.getPoses(map, r.name)) {
+      Mat4d T = Mat4d::Identity();
+      for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = p.t_map_scan().m(k);
+      opt[p.seq()] = T;
+    }
+    std::vector<Mat4d> est;
+    for (int f : r.frames) {
+      if (!opt.count(f)) throw std::runtime_error("the server has no pose for " + r.name + " frame " + std::to_string(f));
+      est.push_back(opt[f]);
+    }
+    std::vector<Eigen::Vector3d> odom_aligned;
+    const double ate_odom = absoluteTrajectoryError(r.odom, r.gt, &odom_aligned);
+    odom_sq += ate_odom * ate_odom * static_cast<double>(r.frames.size());
+    per_robot.push_back({{"robot", r.name}, {"frames", r.frames.size()}, {"ate_odometry", ate_odom},
+                         {"ate_optimised", absoluteTrajectoryError(est, r.gt)}});
+    for (std::size_t k = 0; k < r.frames.size(); ++k)
+      csv << r.frames[k] << "," << r.name << "," << r.gt[k](0, 3) << "," << r.gt[k](1, 3) << "," << odom_aligned[k].x()
+          << "," << odom_aligned[k].y() << "," << est[k](0, 3) << "," << est[k](1, 3) << "\n";
+    all_opt.insert(all_opt.end(), est.begin(), est.end());
+    all_gt.insert(all_gt.end(), r.gt.begin(), r.gt.end());
+  }
+  // Odometry: each robot aligned on its own (its best case); optimised: all robots with one alignment, so a
+  // robot left in the wrong frame counts.
+  run.summary["ate_odometry"] = std::sqrt(odom_sq / static_cast<double>(all_gt.size()));
+  run.summary["ate_optimised"] = absoluteTrajectoryError(all_opt, all_gt);
+  run.summary["per_robot"] = per_robot;
+  if (robots.size() == 2) {
+    // The map frame is r0's odometry frame, which starts at r0's true first pose (the world frame): r1's frame
+    // truly sits at gt(first) * inverse(odom(first)).
+    const auto frames_resp = cl.getSessionFrames(map);
+    for (const auto& s : frames_resp.sessions()) {
+      if (s.robot() != "r1") continue;
+      Mat4d T = Mat4d::Identity();
+      for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = s.t_map_session().m(k);
+      const Mat4d truth = robots[1].gt.front() * robots[1].odom.front().inverse();
+      const auto e = poseError(T, truth);
+      run.summary["frame_alignment_error"] = {{"m", e.rte_m}, {"deg", e.rre_deg}, {"connected", s.connected()}};
+    }
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -410,7 +548,7 @@ int main(int argc, char** argv) {
   LoopQuery query;
   app.add_option("--protocol", protocol, "pairs, sequence, pose, or all (sequence, then pairs and pose on the same frames)")
       ->required()
-      ->check(CLI::IsMember({"pairs", "sequence", "pose", "all"}));
+      ->check(CLI::IsMember({"pairs", "sequence", "pose", "all", "slam"}));
   app.add_option("--data", data, "SemanticKITTI-layout sequence directory (velodyne/, labels/, poses.txt, calib.txt)");
   app.add_flag("--sim", sim, "render a simulated sequence in memory");
   app.add_option("--poses", poses, "with --sim: KITTI poses file to follow (default: the built-in route)");
@@ -427,6 +565,11 @@ int main(int argc, char** argv) {
   app.add_option("--negative-m", negative_m, "sequence: a false loop is farther than this (m); between: ignored");
   app.add_option("--exclude-recent", query.exclude_recent, "sequence: skip this many most recent frames");
   app.add_option("--candidates", query.candidates, "sequence: descriptor neighbours verified per query (at least 1% of frames)");
+  SlamOptions slam;
+  app.add_option("--odom-noise", slam.odom_noise, "slam: odometry drift (translation sigma per metre; 0.01 = 1 %)")
+      ->check(CLI::Range(0.0, 0.2));
+  app.add_option("--robots", slam.robots, "slam: 1, or 2 robots on overlapping parts of the path")
+      ->check(CLI::IsMember({1, 2}));
   app.add_option("--server", server, "measure a running sglc-server instead of the in-process engine");
   app.add_option("--token", token, "bearer token for --server");
   app.add_option("--config", config_path, "engine configuration (YAML, as sglc-pair --config)");
@@ -440,7 +583,9 @@ int main(int argc, char** argv) {
     if (sim == !data.empty()) throw InputError("give exactly one of --data DIR and --sim");
     if (!sim && (!poses.empty() || !calib.empty() || label_noise > 0))
       throw InputError("--poses, --calib and --label-noise belong to --sim");
-    if (protocol != "sequence" && pairs.empty()) throw InputError("--protocol " + protocol + " needs --pairs FILE");
+    if (protocol == "slam" && server.empty())
+      throw InputError("--protocol slam measures a server's pose graph: give --server ADDR");
+    if (protocol != "sequence" && protocol != "slam" && pairs.empty()) throw InputError("--protocol " + protocol + " needs --pairs FILE");
     if (protocol == "all" && pose_pairs.empty()) throw InputError("--protocol all needs --pose-pairs FILE");
     if (query.exclude_recent < 0 || query.candidates < 1 || query.candidates > 100)
       throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
@@ -488,7 +633,10 @@ int main(int argc, char** argv) {
         }
       }
       const auto t0 = Clock::now();
-      if (name == "pairs") {
+      if (name == "slam") {
+        slam.seed = seed;
+        slamProtocol(run, server, token, map_name + "-slam", slam, query.exclude_recent);
+      } else if (name == "pairs") {
         run.summary["pairs_file"] = pairs;
         pairProtocol(run, readPairs(pairs));
       } else if (name == "pose") {

@@ -1,5 +1,6 @@
 #include "metrics.hpp"
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -154,6 +155,30 @@ RegistrationSummary registrationRecall(const std::vector<RegistrationResult>& re
   s.rte_median = median(std::move(rte));
   s.rre_median = median(std::move(rre));
   return s;
+}
+
+}  // namespace sglc::eval
+
+namespace sglc::eval {
+
+double absoluteTrajectoryError(const std::vector<Mat4d>& estimate, const std::vector<Mat4d>& ground_truth,
+                               std::vector<Eigen::Vector3d>* aligned) {
+  if (estimate.empty() || estimate.size() != ground_truth.size())
+    throw InputError("trajectory error needs two non-empty trajectories of the same length (got " +
+                     std::to_string(estimate.size()) + " and " + std::to_string(ground_truth.size()) + ")");
+  const auto n = static_cast<Eigen::Index>(estimate.size());
+  Eigen::Matrix3Xd a(3, n), b(3, n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    a.col(i) = estimate[static_cast<std::size_t>(i)].block<3, 1>(0, 3);
+    b.col(i) = ground_truth[static_cast<std::size_t>(i)].block<3, 1>(0, 3);
+  }
+  const Eigen::Matrix4d T = n >= 3 ? Eigen::Matrix4d(Eigen::umeyama(a, b, false)) : Eigen::Matrix4d::Identity();
+  const Eigen::Matrix3Xd moved = (T.block<3, 3>(0, 0) * a).colwise() + T.block<3, 1>(0, 3);
+  if (aligned) {
+    aligned->clear();
+    for (Eigen::Index i = 0; i < n; ++i) aligned->push_back(moved.col(i));
+  }
+  return std::sqrt((moved - b).colwise().squaredNorm().mean());
 }
 
 }  // namespace sglc::eval

@@ -79,3 +79,13 @@ RegistrationSummary registrationRecall(const std::vector<RegistrationResult>& re
                                        double max_rre_deg = 5.0);
 
 }  // namespace sglc::eval
+
+namespace sglc::eval {
+
+// Absolute trajectory error: RMSE of positions after the best rigid alignment (rotation + translation, no
+// scale; Umeyama) of the estimate onto ground truth. `aligned`, if given, receives the aligned estimate
+// positions. Throws InputError on empty or different-size inputs.
+double absoluteTrajectoryError(const std::vector<Mat4d>& estimate, const std::vector<Mat4d>& ground_truth,
+                               std::vector<Eigen::Vector3d>* aligned = nullptr);
+
+}  // namespace sglc::eval

@@ -173,6 +173,32 @@ def plot_pose_errors(out_dir):
     return save(fig, out_dir, "pose_errors.png")
 
 
+def plot_slam(out_dir, summary):
+    path = os.path.join(out_dir, "slam.csv")
+    rows = read_csv(path, ["frame", "robot", "gt_x", "gt_y", "odom_x", "odom_y", "opt_x", "opt_y"],
+                    [int, str, float, float, float, float, float, float])
+    fig, ax = plt.subplots(figsize=(7.5, 7.5))
+    robots = sorted({r[1] for r in rows})
+    gt = np.array([[r[2], r[3]] for r in rows]) if rows else np.zeros((0, 2))
+    ax.plot(gt[:, 0], gt[:, 1], ".", color="black", ms=2, label="ground truth")
+    colours = ["tab:blue", "tab:green", "tab:purple", "tab:brown"]
+    for k, robot in enumerate(robots):
+        rr = np.array([[r[4], r[5], r[6], r[7]] for r in rows if r[1] == robot])
+        c = colours[k % len(colours)]
+        ax.plot(rr[:, 0], rr[:, 1], "--", color=c, lw=0.8, alpha=0.6, label=f"{robot} odometry (aligned)")
+        ax.plot(rr[:, 2], rr[:, 3], "-", color=c, lw=1.2, label=f"{robot} optimised")
+    title = "pose graph"
+    if "ate_odometry" in summary and "ate_optimised" in summary:
+        title += f": ATE {summary['ate_odometry']:.2f} m -> {summary['ate_optimised']:.2f} m"
+    ax.set_title(title)
+    ax.set(xlabel="x (m)", ylabel="y (m)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return save(fig, out_dir, "slam.png")
+
+
 def save(fig, out_dir, name):
     path = os.path.join(out_dir, name)
     fig.savefig(path, dpi=150)
@@ -190,7 +216,8 @@ def main(argv):
         return 2
     figures = (("pr.csv", lambda: plot_pr(out_dir, read_summary(out_dir))),
                ("trajectory.csv", lambda: plot_trajectory(out_dir)),
-               ("pose_errors.csv", lambda: plot_pose_errors(out_dir)))
+               ("pose_errors.csv", lambda: plot_pose_errors(out_dir)),
+               ("slam.csv", lambda: plot_slam(out_dir, read_summary(out_dir))))
     try:
         for source, plot in figures:
             if os.path.exists(os.path.join(out_dir, source)):

@@ -84,6 +84,19 @@ def main():
         for f in ("pr.csv", "trajectory.csv"):
             assert open(os.path.join(remote, f)).read() == open(os.path.join(local, f)).read(), f
 
+        # 2b. SLAM through the server's pose graph: two robots with 2 % drift, the second in an unrelated frame.
+        slam = os.path.join(tmp, "slam")
+        run(["--protocol", "slam", "--sim", "--frames", "::8", "--odom-noise", "0.02", "--robots", "2",
+             "--server", f"127.0.0.1:{port}", "--out", slam] + ([] if plots else ["--no-plots"]))
+        sl = json.load(open(os.path.join(slam, "summary.json")))
+        fa = sl["frame_alignment_error"]
+        print(f"slam: ATE {sl['ate_odometry']:.3f} -> {sl['ate_optimised']:.3f} m, second robot's frame "
+              f"{fa['m']:.3f} m / {fa['deg']:.3f} deg")
+        assert sl["ate_optimised"] < sl["ate_odometry"] / 2 and fa["connected"] and fa["m"] < 1.0 and fa["deg"] < 2.0, sl
+        if plots:
+            assert os.path.getsize(os.path.join(slam, "slam.png")) > 1000
+        run(["--protocol", "slam", "--sim", "--out", slam], expect=1)  # needs --server
+
         # 3. Pose and pair protocols on pairs taken from the run: its true detections, and far-apart frames.
         rows = list(csv.DictReader(open(os.path.join(local, "trajectory.csv"))))
         pos = {int(x["frame"]): (float(x["x"]), float(x["y"])) for x in rows}

@@ -358,3 +358,43 @@ TEST(RegistrationRecall, NoPairsNoSuccessesAndNan) {
 
 }  // namespace
 }  // namespace sglc::eval
+
+namespace sglc::eval {
+namespace {
+
+Mat4d at(double x, double y, double z) {
+  Mat4d T = Mat4d::Identity();
+  T(0, 3) = x;
+  T(1, 3) = y;
+  T(2, 3) = z;
+  return T;
+}
+
+TEST(TrajectoryError, RigidMotionIsFreeAndOffsetsCount) {
+  std::vector<Mat4d> gt;
+  for (int i = 0; i < 20; ++i) gt.push_back(at(i, 0.1 * i * i, 0));
+  EXPECT_NEAR(absoluteTrajectoryError(gt, gt), 0.0, 1e-12);
+  Mat4d M = Mat4d::Identity();
+  M.block<3, 3>(0, 0) = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  M.block<3, 1>(0, 3) = Eigen::Vector3d(5, -3, 2);
+  std::vector<Mat4d> moved;
+  for (const auto& T : gt) moved.push_back(M * T);
+  EXPECT_NEAR(absoluteTrajectoryError(moved, gt), 0.0, 1e-9);  // the alignment removes a rigid motion
+  // On a line along x, +-0.1 m up and down in the pattern + - - + + - - + is uncorrelated with x: no rigid
+  // motion reduces it, RMSE 0.1 m.
+  std::vector<Mat4d> line, wobble;
+  for (int i = 0; i < 8; ++i) {
+    line.push_back(at(i, 0, 0));
+    wobble.push_back(at(i, 0, (i % 4 == 0 || i % 4 == 3) ? 0.1 : -0.1));
+  }
+  EXPECT_NEAR(absoluteTrajectoryError(wobble, line), 0.1, 1e-9);
+  std::vector<Eigen::Vector3d> aligned;
+  absoluteTrajectoryError(moved, gt, &aligned);
+  ASSERT_EQ(aligned.size(), gt.size());
+  EXPECT_LT((aligned[7] - gt[7].block<3, 1>(0, 3)).norm(), 1e-9);
+  EXPECT_THROW(absoluteTrajectoryError({}, {}), InputError);
+  EXPECT_THROW(absoluteTrajectoryError(gt, line), InputError);  // 20 vs 8 poses
+}
+
+}  // namespace
+}  // namespace sglc::eval
