@@ -18,6 +18,8 @@ mkdir -p "$OUT"
 # simulated world is built along the converted path, so the data stays self-consistent).
 CALIB=$DATA/semantickitti_scans/sequences/00/calib.txt
 
+# SIM_ONLY=1 skips the real pairs and the ablations (they are quick, and run first otherwise).
+if [ "${SIM_ONLY:-0}" != 1 ]; then
 # The real SemanticKITTI scans: every listed pair scored, and the loop's pose against its reference.
 real=$OUT/real
 mkdir -p "$real"
@@ -46,6 +48,8 @@ for name in default prune-always no-pruning no-fine-icp no-plane-refine coarse-o
   "$EVAL" --protocol sequence --sim --frames ::3 --config "$abl/$name.yaml" --title "ablation: $name" \
     --out "$abl/$name" --no-plots > /dev/null
 done
+
+fi
 
 for seq in $SEQS; do
   for noise in $NOISES; do
