@@ -9,8 +9,8 @@ cd "$(dirname "$0")/.."
 DATA=${DATA:-../shared/data}
 EVAL=build/bin/sglc-eval
 OUT=docs/results
-SEQS=${SEQS:-"00 05 08"}
-NOISES=${NOISES:-"0.05 0 0.15"}  # the target noise first
+SEQS=${SEQS-"00 05 08"}
+NOISES=${NOISES-"0.05 0 0.15"}  # the target noise first
 [ -x "$EVAL" ] || { echo "results.sh: $EVAL missing: run scripts/build.sh first" >&2; exit 1; }
 [ -d "$DATA/kitti_odometry_gt_poses" ] || { echo "results.sh: $DATA (KITTI poses, pair lists) is absent" >&2; exit 1; }
 mkdir -p "$OUT"
@@ -61,6 +61,26 @@ for seq in $SEQS; do
       --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null
   done
 done
+
+# Pose graph (SLAM protocol) through a server: KITTI 00's path with 1 % odometry drift, one and two robots.
+if [ "${SLAM:-1}" = 1 ]; then
+  srv=$OUT/slam-server
+  rm -rf "$srv" && mkdir -p "$srv"
+  port=$((50000 + RANDOM % 10000))
+  build/bin/sglc-server --db "$srv/map.db" --listen "127.0.0.1:$port" --sync-normal > "$srv/server.log" 2>&1 &
+  server_pid=$!
+  trap 'kill $server_pid 2>/dev/null || true' EXIT
+  sleep 2
+  for robots in 1 2; do
+    echo "== slam, KITTI 00 path, $robots robot(s)" >&2
+    "$EVAL" --protocol slam --sim --poses "$DATA/kitti_odometry_gt_poses/poses/00.txt" --calib "$CALIB" \
+      --odom-noise 0.01 --robots "$robots" --server "127.0.0.1:$port" \
+      --title "KITTI 00 path, 1 % drift, $robots robot(s)" --out "$OUT/slam-00-robots$robots" > /dev/null
+  done
+  kill $server_pid
+  wait $server_pid || true
+  trap - EXIT
+fi
 
 /usr/bin/python3 tools/eval/results_md.py "$OUT" > docs/RESULTS.md
 echo "wrote docs/RESULTS.md" >&2

@@ -17,9 +17,11 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// Odometry between consecutive scans of a session: trusted, no robust loss. Loop edges get their sigma from
-// the refinement's residual (rmse) with a floor; both are per-axis, whitened in the residual.
-constexpr double kOdomSigmaT = 0.10, kOdomSigmaR = 0.01;  // m, rad per step
+// Odometry between consecutive scans of a session: trusted, no robust loss, with a sigma that grows with the
+// distance driven (LiDAR odometry drifts about 1-2 % of it). Loop edges get their sigma from the refinement's
+// residual (rmse) with a floor; both are per-axis, whitened in the residual.
+constexpr double kOdomSigmaT0 = 0.01, kOdomSigmaTPerM = 0.02;     // m, m per m driven
+constexpr double kOdomSigmaR0 = 0.0005, kOdomSigmaRPerM = 0.0005;  // rad, rad per m driven
 constexpr double kLoopSigmaTFloor = 0.05;
 
 struct Pose {
@@ -276,7 +278,9 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     for (std::size_t k = 1; k < idx.size(); ++k) {
       const auto& a = g.nodes[idx[k - 1]];
       const auto& b = g.nodes[idx[k]];
-      addEdge(idx[k - 1], idx[k], a.odometry.inverse() * b.odometry, kOdomSigmaT, kOdomSigmaR, nullptr);
+      const Mat4d step = a.odometry.inverse() * b.odometry;
+      const double d = step.block<3, 1>(0, 3).norm();
+      addEdge(idx[k - 1], idx[k], step, kOdomSigmaT0 + kOdomSigmaTPerM * d, kOdomSigmaR0 + kOdomSigmaRPerM * d, nullptr);
     }
   std::vector<double> loop_sigma;
   for (const auto& l : g.loops) {

@@ -409,8 +409,10 @@ grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::Crea
 grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest*,
                                        v1::ListMapsResponse* resp) {
   return run(ctx, {"ListMaps", "", ""}, [&](CallLog&) {
+    // UNAVAILABLE while loading comes before authentication: clients probe readiness with ListMaps.
+    auto& store = state_.store();
     const auto grant = state_.tokens().authenticate(*ctx);
-    for (const auto& m : state_.store().listMaps())
+    for (const auto& m : store.listMaps())
       if (grant.allows(m.name)) fillMap(m, resp->add_maps());
   });
 }
