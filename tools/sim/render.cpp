@@ -209,6 +209,13 @@ inline float fastAtan2(float y, float x) {
 Simulator::Simulator(Trajectory trajectory, SimConfig config)
     : trajectory_(std::move(trajectory)), config_(std::move(config)),
       world_(trajectory_.poses, config_.seed, config_.world) {
+  // The vehicle drives on the simulated ground. KITTI's GPS/INS heights disagree by up to several metres
+  // where a street is driven twice (08: 4 m), and the ground takes a blend of the passes; rendering from the
+  // recorded heights would put the sensor metres above or below the road. So every pose keeps its x, y and
+  // orientation and gets the nominal sensor height over the ground below it; these are the poses the frames
+  // are rendered from and that trajectory() reports as ground truth.
+  for (auto& P : trajectory_.poses)
+    P(2, 3) = world_.groundHeight(P(0, 3), P(1, 3)) + config_.world.sensor_height;
   const auto& s = config_.sensor;
   if (s.elevation_deg.empty()) throw InputError("sensor: no beams");
   if (s.elevation_deg.size() > 65535 || s.columns < 8 || s.columns > 65535)
