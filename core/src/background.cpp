@@ -11,6 +11,29 @@
 #include "sglc/voxel_map.hpp"
 
 namespace sglc {
+namespace {
+
+// Votes of the background classes falling in one BEV cell. The cell's class is the structure class (fence,
+// building, vegetation) with most votes, ties going to the higher priority, and road only where no structure
+// is seen: a wall's cell also holds road at its foot. A majority rather than "any point of the highest
+// priority" (the published code) keeps a cell's class when a segmentation network mislabels some of its
+// points (a blob of fence on a facade, vegetation on a fence). Counts saturate at 255.
+struct ClassVotes {
+  std::array<std::uint8_t, 5> n{0, 0, 0, 0, 0};  // indexed by Background
+  void add(Background b) {
+    auto& v = n[static_cast<int>(b)];
+    if (v < 0xFF) ++v;
+  }
+  std::uint8_t winner() const {
+    int best = 0;
+    for (int cls = static_cast<int>(Background::kFence); cls >= static_cast<int>(Background::kVegetation); --cls)
+      if (n[cls] > (best ? n[best] : 0)) best = cls;
+    if (best == 0 && n[static_cast<int>(Background::kRoad)] > 0) best = static_cast<int>(Background::kRoad);
+    return static_cast<std::uint8_t>(best);
+  }
+};
+
+}  // namespace
 
 std::vector<float> ringKey(const Points& points, const std::vector<Background>& point_bg,
                            const DescriptorConfig& config) {
@@ -52,19 +75,18 @@ std::vector<BevCell> bevCells(const Points& points, const std::vector<Background
   const float r2 = static_cast<float>(max_range * max_range);
   const int half = static_cast<int>(std::ceil(max_range / cell)) + 1;
   const int side = 2 * half;
-  std::vector<std::uint8_t> grid(static_cast<std::size_t>(side) * side, 0);
+  std::vector<ClassVotes> grid(static_cast<std::size_t>(side) * side);
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (point_bg[i] == Background::kNone) continue;
     const Vec3f& p = points[i];
     if (p.x() * p.x() + p.y() * p.y() > r2) continue;
     const int ix = detail::floorInt(p.x() * inv) + half, iy = detail::floorInt(p.y() * inv) + half;
-    auto& v = grid[static_cast<std::size_t>(iy) * side + ix];
-    v = std::max(v, static_cast<std::uint8_t>(point_bg[i]));
+    grid[static_cast<std::size_t>(iy) * side + ix].add(point_bg[i]);
   }
   std::vector<BevCell> cells;
   for (int iy = 0; iy < side; ++iy)
     for (int ix = 0; ix < side; ++ix) {
-      const auto v = grid[static_cast<std::size_t>(iy) * side + ix];
+      const auto v = grid[static_cast<std::size_t>(iy) * side + ix].winner();
       if (v) cells.push_back({static_cast<std::int16_t>(ix - half), static_cast<std::int16_t>(iy - half), v});
     }
   return cells;
@@ -160,12 +182,11 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
                     const Mat4d& T_q_c, double grid_cell, double radius) {
   const int g = static_cast<int>(std::ceil(2.0 * radius / grid_cell));
   const double inv = 1.0 / grid_cell;
-  std::vector<std::uint8_t> q(static_cast<std::size_t>(g) * g, 0), c(q.size(), 0);
-  auto put = [&](std::vector<std::uint8_t>& grid, double x, double y, std::uint8_t cls) {
+  std::vector<ClassVotes> q(static_cast<std::size_t>(g) * g), c(q.size());
+  auto put = [&](std::vector<ClassVotes>& grid, double x, double y, std::uint8_t cls) {
     const int gx = detail::floorInt((x + radius) * inv), gy = detail::floorInt((y + radius) * inv);
-    if (gx < 0 || gy < 0 || gx >= g || gy >= g) return;
-    auto& v = grid[static_cast<std::size_t>(gy) * g + gx];
-    v = std::max(v, cls);
+    if (gx < 0 || gy < 0 || gx >= g || gy >= g || cls == 0 || cls > 4) return;
+    grid[static_cast<std::size_t>(gy) * g + gx].add(static_cast<Background>(cls));
   };
   for (const auto& cell : query)
     put(q, (cell.ix + 0.5) * stored_cell, (cell.iy + 0.5) * stored_cell, cell.cls);
@@ -177,9 +198,10 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
   }
   std::size_t same = 0, either = 0;
   for (std::size_t i = 0; i < q.size(); ++i) {
-    if (q[i] == 0 && c[i] == 0) continue;
+    const std::uint8_t a = q[i].winner(), b = c[i].winner();
+    if (a == 0 && b == 0) continue;
     ++either;
-    if (q[i] == c[i]) ++same;
+    if (a == b) ++same;
   }
   return either == 0 ? 0.0 : static_cast<double>(same) / static_cast<double>(either);
 }

@@ -32,6 +32,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"cluster.max_range_m", &c.cluster.max_range_m},
       {"graph.d_max", &c.graph.d_max},
       {"graph.max_nodes", &c.graph.max_nodes},
+      {"graph.min_extent_m", &c.graph.min_extent_m},
       {"descriptor.d_i", &c.descriptor.d_i},
       {"descriptor.k_eigen", &c.descriptor.k_eigen},
       {"descriptor.rings", &c.descriptor.rings},
@@ -44,6 +45,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"match.triangle_tol", &c.match.triangle_tol},
       {"match.t_m", &c.match.t_m},
       {"match.prune_min_matches", &c.match.prune_min_matches},
+      {"match.prune_min_kept", &c.match.prune_min_kept},
       {"ransac.inlier_threshold", &c.ransac.inlier_threshold},
       {"ransac.max_iterations", &c.ransac.max_iterations},
       {"ransac.seed", &c.ransac.seed},
@@ -73,6 +75,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"refine.min_normal_cosine", &c.refine.min_normal_cosine},
       {"refine.cauchy_m", &c.refine.cauchy_m},
       {"refine.instance_weight", &c.refine.instance_weight},
+      {"refine.min_information", &c.refine.min_information},
       {"refine.converged_m", &c.refine.converged_m},
   };
 }
@@ -98,6 +101,7 @@ void validateConfig(const Config& config) {
   require(c.cluster.max_range_m > 0 && c.cluster.max_range_m < 1000, "cluster.max_range_m", "in (0, 1000)");
   require(c.graph.d_max > 0 && c.graph.d_max < 1000, "graph.d_max", "in (0, 1000)");
   require(c.graph.max_nodes >= 3 && c.graph.max_nodes <= 2000, "graph.max_nodes", "in [3, 2000]");
+  require(c.graph.min_extent_m >= 0 && c.graph.min_extent_m <= 100, "graph.min_extent_m", "in [0, 100]");
   require(c.descriptor.d_i > 0 && c.graph.d_max / c.descriptor.d_i <= 1000, "descriptor.d_i",
           "> 0 with d_max / d_i <= 1000");
   require(c.descriptor.k_eigen >= 1 && c.descriptor.k_eigen <= 1000, "descriptor.k_eigen", "in [1, 1000]");
@@ -111,6 +115,7 @@ void validateConfig(const Config& config) {
   require(c.match.triangle_tol >= 0, "match.triangle_tol", ">= 0");
   require(c.match.t_m >= 0, "match.t_m", ">= 0");
   require(c.match.prune_min_matches >= 0, "match.prune_min_matches", ">= 0");
+  require(c.match.prune_min_kept >= 0, "match.prune_min_kept", ">= 0");
   require(c.ransac.inlier_threshold > 0, "ransac.inlier_threshold", "> 0");
   require(c.ransac.max_iterations >= 1 && c.ransac.max_iterations <= 1000000, "ransac.max_iterations",
           "in [1, 1e6]");
@@ -143,6 +148,7 @@ void validateConfig(const Config& config) {
           "in [0, 1]");
   require(c.refine.cauchy_m > 0, "refine.cauchy_m", "> 0");
   require(c.refine.instance_weight >= 0, "refine.instance_weight", ">= 0");
+  require(c.refine.min_information >= 0, "refine.min_information", ">= 0");
 }
 
 Config parseConfig(const std::string& yaml_text) {

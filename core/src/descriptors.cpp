@@ -45,6 +45,10 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
       f(i, nodes[j].cls * layout.bins + bin) += 1.0f;  // neighbour's class (the reference used its own)
       f(j, nodes[i].cls * layout.bins + bin) += 1.0f;
     }
+  // Square roots of the counts (ours; the reference normalises raw counts): a crowd of neighbours in one bin
+  // (a row of parked cars, a mislabelled hedge broken into pieces) no longer swamps the rest of the histogram,
+  // which keeps true node pairs above the cosine floor under label noise.
+  f.leftCols(local) = f.leftCols(local).cwiseSqrt();
   for (int i = 0; i < n; ++i) l2normalise(f.row(i).head(local));
 
   // Spectral part: eigenvectors of the k largest eigenvalues of A, row i, absolute values, L1-normalised.

@@ -49,9 +49,15 @@ Node makeNode(const Points& points, const Cluster& cluster) {
 
 std::vector<Node> buildNodes(const Points& points, const std::vector<Cluster>& clusters, const GraphConfig& config,
                              std::vector<int>* kept_clusters) {
-  std::vector<int> order(clusters.size());
-  std::iota(order.begin(), order.end(), 0);
-  if (static_cast<int>(clusters.size()) > config.max_nodes) {
+  // Fragments first go; then, if there are still too many, the clusters with most points stay.
+  std::vector<int> order;
+  std::vector<Node> all(clusters.size());
+  const float min_extent = static_cast<float>(config.min_extent_m);
+  for (std::size_t i = 0; i < clusters.size(); ++i) {
+    all[i] = makeNode(points, clusters[i]);
+    if (std::max(all[i].size.x(), all[i].size.z()) >= min_extent) order.push_back(static_cast<int>(i));
+  }
+  if (static_cast<int>(order.size()) > config.max_nodes) {
     std::stable_sort(order.begin(), order.end(),
                      [&](int a, int b) { return clusters[a].points.size() > clusters[b].points.size(); });
     order.resize(config.max_nodes);
@@ -59,7 +65,7 @@ std::vector<Node> buildNodes(const Points& points, const std::vector<Cluster>& c
   }
   std::vector<Node> nodes;
   nodes.reserve(order.size());
-  for (int i : order) nodes.push_back(makeNode(points, clusters[i]));
+  for (int i : order) nodes.push_back(all[i]);
   if (kept_clusters) *kept_clusters = order;
   return nodes;
 }

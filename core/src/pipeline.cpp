@@ -111,7 +111,9 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   const auto& c = config_;
   LoopResult r;
   auto matches = matchNodes(query.nodes, query.node_descriptors, candidate.nodes, candidate.node_descriptors, c.match);
-  matches = pruneMatches(query.nodes, candidate.nodes, matches, c.match);
+  if (auto pruned = pruneMatches(query.nodes, candidate.nodes, matches, c.match);
+      static_cast<int>(pruned.size()) >= c.match.prune_min_kept)
+    matches = std::move(pruned);
   r.matches = static_cast<int>(matches.size());
   if (r.matches < 3) {
     r.reason = "fewer than 3 node matches";

@@ -1,6 +1,7 @@
 #include "sglc/registration.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
@@ -330,6 +331,11 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     return count;
   };
   const double s2 = config.cauchy_m * config.cauchy_m;
+  // Rotations are scaled by a lever arm so that eigenvalues of rotation and translation directions compare
+  // (a rotation of 1/L rad moves a point L metres away by 1 m).
+  constexpr double kLever = 10.0;
+  Vec6 scale;
+  scale << 1.0 / kLever, 1.0 / kLever, 1.0 / kLever, 1.0, 1.0, 1.0;
   for (int it = 0; it < config.max_iterations; ++it) {
     if (associate(result.T) < 6) break;
     const Mat3d R = result.T.topLeftCorner<3, 3>();
@@ -349,7 +355,9 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       g += w * J * r;
     }
     const double wa = config.instance_weight;
-    if (wa > 0) {
+    if (wa > 0 && !anchor_pairs.empty()) {
+      Mat6 Ha = Mat6::Zero();
+      Vec6 ga = Vec6::Zero();
       for (const auto& [qp, cp] : anchor_pairs) {
         const Vec3d x = R * cp.cast<double>() + t;
         const Vec3d r = x - qp.cast<double>();
@@ -357,8 +365,22 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
         // d(R x + t)/d(omega, v) for a left perturbation: [-[x]_x | I].
         J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;
         J.rightCols<3>().setIdentity();
-        H += wa * J.transpose() * J;
-        g += wa * J.transpose() * r;
+        Ha += wa * J.transpose() * J;
+        ga += wa * J.transpose() * r;
+      }
+      // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
+      const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
+      const Eigen::SelfAdjointEigenSolver<Mat6> eig(Hs);
+      Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
+      for (int k = 0; k < 6; ++k)
+        if (eig.eigenvalues()[k] < config.min_information) P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
+      if (!P.isZero()) {
+        const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
+        const Vec6 gas = scale.asDiagonal() * ga;
+        // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
+        const Vec6 inv = scale.cwiseInverse();
+        H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
+        g += inv.asDiagonal() * (P * gas);
       }
     }
     H.diagonal().array() += 1e-9 * (1.0 + H.trace());

@@ -128,6 +128,36 @@ TEST(BevCells, PriorityInSharedCell) {
   }
 }
 
+TEST(BevCells, MajorityOfStructureClassesWins) {
+  BgCloud c;
+  // Cell (2, 2): a facade with one point mislabelled fence -> building (the highest priority present would
+  // be fence); road at its foot does not count while any structure is seen.
+  for (int k = 0; k < 5; ++k) c.add(Vec3f(1.1f + 0.05f * k, 1.1f, 0.5f * k), Background::kBuilding);
+  c.add(Vec3f(1.3f, 1.2f, 2.0f), Background::kFence);
+  for (int k = 0; k < 9; ++k) c.add(Vec3f(1.05f + 0.04f * k, 1.4f, -1.7f), Background::kRoad);
+  // Cell (-3, 2): vegetation 2, fence 2 -> a tie goes to the higher priority (fence).
+  c.add(Vec3f(-1.4f, 1.2f, 1.0f), Background::kVegetation);
+  c.add(Vec3f(-1.3f, 1.3f, 1.2f), Background::kVegetation);
+  c.add(Vec3f(-1.2f, 1.3f, 0.4f), Background::kFence);
+  c.add(Vec3f(-1.3f, 1.4f, 0.6f), Background::kFence);
+  const auto cells = bevCells(c.points, c.bg, 0.5, 50.0);
+  ASSERT_EQ(cells.size(), 2u);
+  EXPECT_EQ(cells[0].ix, -3);
+  EXPECT_EQ(cells[0].cls, static_cast<std::uint8_t>(Background::kFence));
+  EXPECT_EQ(cells[1].ix, 2);
+  EXPECT_EQ(cells[1].cls, static_cast<std::uint8_t>(Background::kBuilding));
+}
+
+TEST(BevAgreement, GridCellsTakeTheMajorityOfTheirStoredCells) {
+  // One 2 m grid cell holds four stored 0.5 m cells: building x3 + fence x1 in one cloud, building x4 in the
+  // other -> the same class (building), full agreement. With road x3 + vegetation x1 the cell is vegetation.
+  const std::vector<BevCell> a{{0, 0, 3}, {1, 0, 3}, {0, 1, 3}, {1, 1, 4}}, b{{0, 0, 3}, {1, 0, 3}, {2, 1, 3}, {3, 3, 3}};
+  EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 2.0, 10.0), 1.0);
+  const std::vector<BevCell> road{{0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 2}}, veg{{2, 2, 2}};
+  EXPECT_DOUBLE_EQ(bevAgreement(road, veg, 0.5, Mat4d::Identity(), 2.0, 10.0), 1.0);
+  EXPECT_DOUBLE_EQ(bevAgreement(a, veg, 0.5, Mat4d::Identity(), 2.0, 10.0), 0.0);
+}
+
 // An asymmetric place: a road, two building blocks, a vegetation patch and a fenced yard, all large compared
 // with the grid (the stored 0.5 m cells are re-binned into the 1 m agreement grid, so only region borders can
 // disagree after a motion).
@@ -139,6 +169,23 @@ BgCloud street() {
   c.add(test::makeFloor(5, 30, 10, 25, 0.0, 0.25), Background::kVegetation);
   c.add(test::makeFloor(-30, -8, -25, -10, 0.0, 0.25), Background::kFence);
   return c;
+}
+
+TEST(BevAgreement, RobustToScatteredLabelNoise) {
+  // The street relabelled at random: 10 % of building points become fence or vegetation, 10 % of
+  // vegetation becomes building. Agreement with the clean street stays high on the 2 m grid.
+  const BgCloud clean = street();
+  BgCloud noisy = clean;
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (auto& b : noisy.bg) {
+    const double x = u(rng);
+    if (b == Background::kBuilding && x < 0.1) b = x < 0.05 ? Background::kFence : Background::kVegetation;
+    else if (b == Background::kVegetation && x < 0.1) b = Background::kBuilding;
+  }
+  const auto q = bevCells(clean.points, clean.bg, 0.5, 50.0);
+  const auto c = bevCells(noisy.points, noisy.bg, 0.5, 50.0);
+  EXPECT_GT(bevAgreement(q, c, 0.5, Mat4d::Identity(), 2.0, 25.0), 0.95);
 }
 
 TEST(BevAgreement, SelfAndMoved) {

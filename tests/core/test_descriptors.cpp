@@ -86,6 +86,19 @@ TEST(Descriptors, LocalPartCountsNeighbourClass) {
   EXPECT_TRUE(f.leftCols(90).isApprox(expected, 1e-6f)) << f.leftCols(90);
 }
 
+// A crowd in one bin: node 0 has four neighbours of class 1 at 5 m (bin 2) and one of class 2 at 13 m (bin 6).
+// Counts 4 and 1 enter as their square roots 2 and 1, so the crowd weighs 2/sqrt(5) and the loner 1/sqrt(5)
+// (raw counts would give 4/sqrt(17) and 1/sqrt(17)).
+TEST(Descriptors, LocalPartDampsCrowdedBins) {
+  std::vector<Node> nodes{node(0, 0, 0, 0)};
+  for (int k = 0; k < 4; ++k) nodes.push_back(node(5.0 * std::cos(0.3 * k), 5.0 * std::sin(0.3 * k), 0, 1));
+  nodes.push_back(node(0, -13, 0, 2));
+  const Eigen::MatrixXf f = nodeDescriptors(nodes, layoutFor(3, 60.0), 60.0, 2.0);
+  EXPECT_NEAR(f(0, 1 * 30 + 2), 2.0 / std::sqrt(5.0), 1e-6);
+  EXPECT_NEAR(f(0, 2 * 30 + 6), 1.0 / std::sqrt(5.0), 1e-6);
+  EXPECT_NEAR(f.row(0).head(90).norm(), 1.0, 1e-6);
+}
+
 TEST(Descriptors, LocalPartDistanceCapAndLastBin) {
   // d = 59 -> last bin (29); d = 61 >= d_max -> no entry.
   const std::vector<Node> nodes{node(0, 0, 0, 0), node(59, 0, 0, 0), node(-61, 0, 0, 0)};

@@ -127,7 +127,7 @@ TEST(Graph, BuildNodesKeepsLargestClusters) {
     c.cls = k % 3;
     for (int i = 0; i < counts[k]; ++i) {
       c.points.push_back(static_cast<std::uint32_t>(pts.size()));
-      pts.emplace_back(10.0f * k, 5.0f, 0.1f * i);
+      pts.emplace_back(10.0f * k, 5.0f, 0.3f * i);
     }
     clusters.push_back(c);
   }
@@ -148,6 +148,35 @@ TEST(Graph, BuildNodesKeepsLargestClusters) {
   EXPECT_EQ(all_nodes.size(), 5u);
   // kept_clusters is optional.
   EXPECT_EQ(buildNodes(pts, clusters, cfg, nullptr).size(), 5u);
+}
+
+TEST(Graph, BuildNodesDropsFragments) {
+  // A pole 2 m tall, a flat 0.3 m blob, and a car 4 m long but only 0.4 m high.
+  Points pts;
+  std::vector<Cluster> clusters(3);
+  auto add = [&](int k, float x, float y, float z) {
+    clusters[k].points.push_back(static_cast<std::uint32_t>(pts.size()));
+    pts.emplace_back(x, y, z);
+  };
+  clusters[0].cls = 2;
+  clusters[1].cls = 1;
+  clusters[2].cls = 0;
+  for (int i = 0; i <= 20; ++i) add(0, 5.0f, 3.0f, -1.5f + 0.1f * i);
+  for (int i = 0; i <= 12; ++i) add(1, 8.0f + 0.025f * i, -2.0f, -1.0f + 0.01f * (i % 3));
+  for (int i = 0; i <= 40; ++i) add(2, -10.0f + 0.1f * i, 4.0f + 0.02f * (i % 5), -1.2f + 0.01f * (i % 40));
+  GraphConfig cfg;  // min_extent_m 0.5
+  std::vector<int> kept;
+  const auto nodes = buildNodes(pts, clusters, cfg, &kept);
+  EXPECT_EQ(kept, (std::vector<int>{0, 2}));
+  ASSERT_EQ(nodes.size(), 2u);
+  EXPECT_NEAR(nodes[0].size.z(), 2.0, 1e-4);
+  EXPECT_NEAR(nodes[1].size.x(), 4.0, 1e-4);
+  // The fragment counts neither against max_nodes nor as a node.
+  cfg.max_nodes = 3;
+  EXPECT_EQ(buildNodes(pts, clusters, cfg, nullptr).size(), 2u);
+  cfg.min_extent_m = 0;
+  EXPECT_EQ(buildNodes(pts, clusters, cfg, &kept).size(), 3u);
+  EXPECT_EQ(kept, (std::vector<int>{0, 1, 2}));
   EXPECT_TRUE(buildNodes(pts, {}, cfg, &kept).empty());
   EXPECT_TRUE(kept.empty());
 }

@@ -290,6 +290,48 @@ TEST(SyntheticPipeline, TwoViewsOfTheSameStreet) {
     EXPECT_LT((test::apply(T_a_b, b.nodes[j].center) - a.nodes[i].center).norm(), 0.3) << i << "," << j;
 }
 
+// A street with 22 poles; `jitter` moves each pole by that much in a seeded direction, as a segmentation
+// network's errors move cluster centres between two visits.
+LabelledScan poleStreet(double jitter) {
+  LabelledScan w;
+  std::mt19937 rng(11), shift(99);
+  std::uniform_real_distribution<double> u(-1.0, 1.0), angle(0.0, 2.0 * std::numbers::pi);
+  test::addPoints(w, test::makeFloor(-45, 45, -7, 7, -1.7, 0.4), test::kRoad);
+  test::addPoints(w, test::makeWall(-45, 9, 45, 9, -1.7, 6, 0.4), test::kBuilding);
+  test::addPoints(w, test::makeWall(-45, -12, 45, -12, -1.7, 6, 0.4), test::kBuilding);
+  test::addPoints(w, test::makeWall(-20, -30, -20, 30, -1.7, 6, 0.4), test::kFence);
+  for (int k = 0; k < 22; ++k) {
+    const double a = angle(shift);
+    const double x = -40 + k * 3.9 + 1.0 * u(rng) + jitter * std::cos(a);
+    const double y = (k % 2 ? 7.0 : -7.5) + 0.8 * u(rng) + jitter * std::sin(a);
+    test::addPoints(w, test::makePole(x, y, -1.7, 3.0 + u(rng)), test::kPole);
+  }
+  return w;
+}
+
+// When triangle pruning rejects every match of a true loop (here each landmark moved by 0.3 m between the
+// visits and a triangle tolerance of 3 cm, so hardly any local triangle agrees), RANSAC gets the unpruned matches
+// (match.prune_min_kept).
+TEST(SyntheticPipeline, PruningThatKeepsTooFewFallsBackToAllMatches) {
+  const Mat4d T_a_b = test::makeT(2.0, 3.0, 0.5, 0.0);
+  const LabelledScan a_scan = poleStreet(0.0);
+  const LabelledScan b_scan = test::viewFrom(poleStreet(0.3), T_a_b);
+  Config fallback;
+  fallback.match.triangle_tol = 0.03;
+  Config strict = fallback;
+  strict.match.prune_min_kept = 0;  // the reference: whatever pruning keeps
+  const Pipeline p_strict(strict), p(fallback);
+  const Fingerprint a = p.fingerprint(a_scan), b = p.fingerprint(b_scan);
+  const LoopResult rs = p_strict.verify(a, b);
+  ASSERT_LT(rs.matches, 3) << "pruning should reject the jittered matches";
+  EXPECT_FALSE(rs.is_loop);
+  const LoopResult r = p.match(a, b);
+  EXPECT_GE(r.matches, 15);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_LT(translationError(r.T, T_a_b), 0.05) << r.T;
+  EXPECT_LT(rotationErrorDeg(r.T, T_a_b), 0.3) << r.T;
+}
+
 LabelledScan emptyScan() { return {}; }
 
 LabelledScan noLandmarks() {

@@ -247,6 +247,65 @@ TEST(RefinePlanes, BoxRoomConverges) {
   EXPECT_EQ(r.correspondences, static_cast<int>(std::lround(r.fitness * candidate.size())));
 }
 
+// Instance correspondences (query point, candidate point) around the sensor, consistent with T up to `bias`
+// added to the query side.
+std::vector<std::pair<Vec3f, Vec3f>> anchorPairs(const Mat4d& T, const Vec3d& bias) {
+  std::vector<std::pair<Vec3f, Vec3f>> pairs;
+  for (int k = 0; k < 60; ++k) {
+    const Vec3f c(static_cast<float>(-12 + 0.4 * k), static_cast<float>(k % 2 ? 5.0 : -5.0),
+                  static_cast<float>(-1.5 + 0.05 * (k % 40)));
+    pairs.emplace_back((test::apply(T, c).cast<double>() + bias).cast<float>(), c);
+  }
+  return pairs;
+}
+
+TEST(RefinePlanes, BiasedAnchorDoesNotMoveAConstrainedPose) {
+  // The room's planes fix all six directions: instance pairs biased by 5 cm (views of the same trunks from
+  // other sides) must not pull the pose.
+  const Mat4d T = makeT(2.0, 0.25, -0.15, 0.05, 0.5, -0.3);
+  const auto query = roomPlanes();
+  const auto candidate = movedPlanes(query, T.inverse());
+  const PlaneIndex index(query, 1.0);
+  const auto anchor = anchorPairs(T, Vec3d(0.05, 0.0, 0.0));
+  const RefineResult r = refinePlanes(query, index, candidate, anchor, Mat4d::Identity(), RefineConfig{});
+  EXPECT_LT(test::translationError(r.T, T), 2e-3) << r.T;
+  EXPECT_LT(test::rotationErrorDeg(r.T, T), 0.01);
+  // An anchor acting in every direction (min_information above any eigenvalue) is pulled by the bias.
+  RefineConfig everywhere;
+  everywhere.min_information = 1e12;
+  const RefineResult pulled = refinePlanes(query, index, candidate, anchor, Mat4d::Identity(), everywhere);
+  EXPECT_GT(test::translationError(pulled.T, T), 0.01) << pulled.T;
+}
+
+TEST(RefinePlanes, CorridorTakesTheFreeDirectionFromTheAnchor) {
+  // A straight corridor: road and two facades along x. Planes say nothing about x; the anchor does.
+  std::vector<Plane> query;
+  auto add = [&](Vec3f c, Vec3f n) {
+    Plane p;
+    p.centroid = c;
+    p.normal = n;
+    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
+    query.push_back(p);
+  };
+  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
+    for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
+    for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
+      add({x, 8.0f, z}, {0, -1, 0});
+      add({x, -8.0f, z}, {0, 1, 0});
+    }
+  }
+  const Mat4d T = makeT(1.0, 1.3, 0.2, 0.0);
+  const auto candidate = movedPlanes(query, T.inverse());
+  const PlaneIndex index(query, 1.0);
+  const Mat4d T0 = makeT(1.0, 1.0, 0.2, 0.0);  // 0.3 m short along the corridor
+  const RefineResult r = refinePlanes(query, index, candidate, anchorPairs(T, Vec3d::Zero()), T0, RefineConfig{});
+  EXPECT_LT(test::translationError(r.T, T), 5e-3) << r.T;
+  EXPECT_LT(test::rotationErrorDeg(r.T, T), 0.02);
+  // Without the anchor x stays where it started.
+  const RefineResult free = refinePlanes(query, index, candidate, {}, T0, RefineConfig{});
+  EXPECT_GT(std::abs(free.T(0, 3) - T(0, 3)), 0.2) << free.T;
+}
+
 TEST(RefinePlanes, TooFewPlanesKeepsStart) {
   const auto query = roomPlanes();
   const PlaneIndex index(query, 1.0);

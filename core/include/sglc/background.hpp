@@ -15,7 +15,9 @@ namespace sglc {
 struct BevCell {
   std::int16_t ix = 0;
   std::int16_t iy = 0;
-  std::uint8_t cls = 0;  // Background value, highest priority present
+  // Background value: the structure class (fence, building, vegetation) with most points, ties to the higher
+  // priority; road only where no structure point falls.
+  std::uint8_t cls = 0;
 };
 
 struct Plane {
@@ -39,6 +41,7 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 
 // Agreement of two labelled BEV clouds once `candidate` is moved by T_q_c into the query frame:
 // (cells holding the same class) / (cells occupied in either), over a square grid of +-radius around the query.
+// A grid cell's class is the majority of the stored cells falling in it, by the same rule as BevCell::cls.
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
                     const Mat4d& T_q_c, double grid_cell, double radius);
 

@@ -36,6 +36,10 @@ struct ClusterConfig {
 struct GraphConfig {
   double d_max = 60.0;  // edge if node centres are closer than this (m)
   int max_nodes = 200;  // ours: the largest instances are kept if a scan has more
+  // Ours: a cluster whose length and height are both below this (m) is a fragment, not a landmark: pieces of a
+  // mislabelled blob or of a passing car broken up at close range. Real trunks and poles are taller (the
+  // shortest of 72 in five SemanticKITTI scans: 0.83 m).
+  double min_extent_m = 0.5;
 };
 
 struct DescriptorConfig {
@@ -54,6 +58,10 @@ struct MatchConfig {
   double triangle_tol = 0.25;    // side-length tolerance for "same triangle" (m; reference value)
   int t_m = 2;                   // triangles that must agree for a match to survive
   int prune_min_matches = 15;    // prune only when at least this many matches (reference behaviour)
+  // Ours: when pruning keeps fewer matches than this, RANSAC gets the unpruned ones instead. Triangles need
+  // two neighbours placed within triangle_tol in both scans; under label noise or a large change of heading
+  // they can all fail for a true loop, while RANSAC and the verification still reject false ones.
+  int prune_min_kept = 6;
 };
 
 struct RansacConfig {
@@ -69,7 +77,11 @@ struct VerifyConfig {
   double t_b = 0.5;               // background agreement threshold
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
   double bev_cell_m = 2.0;        // background agreement grid cell (m); 1 m loses loops under label noise
-  double bev_radius_m = 50.0;     // background agreement grid half-size (m)
+  // Background agreement grid half-size (m; ours, the reference scores rings out to 50 m). Sparse far cells
+  // are occupied by chance; the near street decides (simulated KITTI 00 pairs at 5 % label noise: F1max 0.84
+  // with 50 m, 0.94 with 25 m; real negatives that pass the graph check are same-street scans 27-30 m apart
+  // that max_translation rejects).
+  double bev_radius_m = 25.0;
 };
 
 struct FingerprintConfig {
@@ -98,6 +110,9 @@ struct RefineConfig {
   double min_normal_cosine = 0.9;  // normals must agree this well
   double cauchy_m = 0.1;           // robust kernel scale of plane residuals
   double instance_weight = 1.0;    // weight of instance point residuals kept as anchor
+  // Directions whose plane information (Hessian eigenvalue, rotations scaled by a 10 m lever arm, in 1/m^2)
+  // is below this are degenerate for the planes (a straight corridor); only there the anchor acts.
+  double min_information = 5.0;
   double converged_m = 1e-5;
 };
 

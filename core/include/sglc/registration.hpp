@@ -73,7 +73,9 @@ class PlaneIndex {
 
 // Point-to-plane alignment of the candidate's plane centroids onto the query's planes (re-associated each
 // round, Cauchy-weighted), with the instance correspondences of the fine stage as an anchor so that
-// directions the planes leave free (a straight corridor) stay where the instances put them.
+// directions the planes leave free (a straight corridor) stay where the instances put them. The anchor acts
+// only in those directions (Hessian eigenvalues below config.min_information): elsewhere instance pairs,
+// which join differently sampled sides of the same objects, would bias the pose the planes fix.
 RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
                           const std::vector<Plane>& candidate,
                           const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,
