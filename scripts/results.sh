@@ -2,7 +2,7 @@
 # Regenerates docs/RESULTS.md with build/bin/sglc-eval: simulated sequences along KITTI 00, 05 and 08 at 0, 5
 # and 15 % label noise (sequence, pair and pose protocols), the real pairs of ../shared/data, and ablations.
 # Summaries, CSV files and figures go to docs/results/ (generated, not committed).
-#   scripts/results.sh                    # everything (about 25 minutes on 2 cores)
+#   scripts/results.sh                    # everything (about two hours on 2 cores)
 #   SEQS=00 NOISES=0.05 scripts/results.sh   # a subset
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,9 +14,10 @@ NOISES=${NOISES-"0.05 0 0.15"}  # the target noise first
 [ -x "$EVAL" ] || { echo "results.sh: $EVAL missing: run scripts/build.sh first" >&2; exit 1; }
 [ -d "$DATA/kitti_odometry_gt_poses" ] || { echo "results.sh: $DATA (KITTI poses, pair lists) is absent" >&2; exit 1; }
 mkdir -p "$OUT"
-# Only sequence 00's calibration is available: its Tr converts the camera poses of every sequence (the
-# simulated world is built along the converted path, so the data stays self-consistent).
+# Sequences 00-02 share the Tr of the shared data's calib.txt; 04-10 share KITTI's other published Tr, kept in
+# tools/sim/calib (the simulated world is built along the converted path, so either keeps the data consistent).
 CALIB=$DATA/semantickitti_scans/sequences/00/calib.txt
+calibFor() { if [[ "$1" > "03" ]]; then echo tools/sim/calib/kitti-04-10-calib.txt; else echo "$CALIB"; fi; }
 
 # SIM_ONLY=1 skips the real pairs and the ablations (they are quick, and run first otherwise).
 if [ "${SIM_ONLY:-0}" != 1 ]; then
@@ -55,7 +56,7 @@ for seq in $SEQS; do
   for noise in $NOISES; do
     dir=$OUT/sim-$seq-noise$noise
     echo "== simulated $seq, label noise $noise -> $dir" >&2
-    "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$CALIB" \
+    "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$(calibFor "$seq")" \
       --label-noise "$noise" --pairs "$DATA/ssc_pairs/neg_1/$seq.txt" \
       --pose-pairs "$DATA/loop_gt_lcrnet/loop_distance4/$seq.txt" \
       --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null

@@ -54,6 +54,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"verify.t_g", &c.verify.t_g},
       {"verify.t_b", &c.verify.t_b},
       {"verify.max_translation", &c.verify.max_translation},
+      {"verify.score_distance_m", &c.verify.score_distance_m},
       {"verify.bev_cell_m", &c.verify.bev_cell_m},
       {"verify.bev_radius_m", &c.verify.bev_radius_m},
       {"fingerprint.instance_voxel_m", &c.fingerprint.instance_voxel_m},

@@ -357,6 +357,26 @@ TEST(SyntheticPipeline, PruningThatKeepsTooFewFallsBackToAllMatches) {
   EXPECT_LT(rotationErrorDeg(r.T, T_a_b), 0.3) << r.T;
 }
 
+// Of two verified views of the same street the nearer one scores higher; the proximity factor only ranks.
+TEST(SyntheticPipeline, NearerRevisitScoresHigher) {
+  const LabelledScan world = test::makeStreetWorld();
+  const Pipeline p;
+  const Fingerprint q = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
+  const LoopResult near = p.verify(q, p.fingerprint(test::viewFrom(world, test::makeT(1.0, 2.0, 0.5, 0.0))));
+  const LoopResult far = p.verify(q, p.fingerprint(test::viewFrom(world, test::makeT(1.0, 8.0, 0.5, 0.0))));
+  ASSERT_TRUE(near.is_loop) << near.reason;
+  ASSERT_TRUE(far.is_loop) << far.reason;
+  EXPECT_GT(near.score, far.score);
+  const double support = 1.0 - std::exp(-far.inliers / 3.0);
+  const double t = far.T.topRightCorner<3, 1>().norm();
+  EXPECT_NEAR(far.score, far.graph_similarity * far.background_similarity * support * std::exp(-t / 10.0), 1e-12);
+  Config flat;
+  flat.verify.score_distance_m = 0;  // no proximity factor: same decision, plain product
+  const LoopResult plain = Pipeline(flat).verify(q, p.fingerprint(test::viewFrom(world, test::makeT(1.0, 8.0, 0.5, 0.0))));
+  EXPECT_EQ(plain.is_loop, far.is_loop);
+  EXPECT_NEAR(plain.score, far.graph_similarity * far.background_similarity * support, 1e-12);
+}
+
 LabelledScan emptyScan() { return {}; }
 
 LabelledScan noLandmarks() {

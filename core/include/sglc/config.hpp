@@ -76,6 +76,9 @@ struct VerifyConfig {
   double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
   double t_b = 0.5;               // background agreement threshold
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
+  // Ours: the score is multiplied by exp(-|t| / this), so of two verified candidates the nearer revisit ranks
+  // first (<= 0: no such factor). It does not change which candidates are loops.
+  double score_distance_m = 10.0;
   double bev_cell_m = 2.0;        // background agreement grid cell (m); 1 m loses loops under label noise
   // Background agreement grid half-size (m; ours, the reference scores rings out to 50 m). Sparse far cells
   // are occupied by chance; the near street decides (simulated KITTI 00 pairs at 5 % label noise: F1max 0.84

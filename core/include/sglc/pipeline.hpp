@@ -11,7 +11,8 @@ namespace sglc {
 
 struct LoopResult {
   bool is_loop = false;
-  // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support.
+  // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support x proximity
+  // (exp(-|t| / verify.score_distance_m), so the nearer of two revisits ranks first).
   double score = 0.0;
   int matches = 0;           // node matches after pruning
   int inliers = 0;           // RANSAC inliers
