@@ -54,6 +54,9 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"verify.t_g", &c.verify.t_g},
       {"verify.t_b", &c.verify.t_b},
       {"verify.max_translation", &c.verify.max_translation},
+      {"verify.confirm_below_inliers", &c.verify.confirm_below_inliers},
+      {"verify.confirm_min_fitness", &c.verify.confirm_min_fitness},
+      {"verify.confirm_max_rmse_m", &c.verify.confirm_max_rmse_m},
       {"verify.score_distance_m", &c.verify.score_distance_m},
       {"verify.bev_cell_m", &c.verify.bev_cell_m},
       {"verify.bev_radius_m", &c.verify.bev_radius_m},
@@ -124,6 +127,10 @@ void validateConfig(const Config& config) {
   require(c.ransac.min_inliers >= 3, "ransac.min_inliers", ">= 3");
   require(c.verify.t_g >= 0 && c.verify.t_g <= 1, "verify.t_g", "in [0, 1]");
   require(c.verify.t_b >= 0 && c.verify.t_b <= 1, "verify.t_b", "in [0, 1]");
+  require(c.verify.confirm_below_inliers >= 0, "verify.confirm_below_inliers", ">= 0");
+  require(c.verify.confirm_min_fitness >= 0 && c.verify.confirm_min_fitness <= 1, "verify.confirm_min_fitness",
+          "in [0, 1]");
+  require(c.verify.confirm_max_rmse_m > 0, "verify.confirm_max_rmse_m", "> 0");
   require(c.verify.bev_cell_m > 0 && c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000, "verify.bev_cell_m",
           "> 0 with bev_radius_m / bev_cell_m <= 2000");
   require(c.verify.bev_radius_m > 0, "verify.bev_radius_m", "> 0");

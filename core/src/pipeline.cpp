@@ -143,6 +143,18 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)
     r.reason = "translation exceeds verify.max_translation";
   else r.is_loop = true;
+  // Few node inliers are weak evidence (three or four landmarks align by chance between look-alike streets):
+  // such a loop stands only if the background planes, aligned from the coarse pose, agree with it.
+  if (r.is_loop && r.inliers < c.verify.confirm_below_inliers) {
+    const auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
+    const Mat4d d = r.T.inverse() * planes.T;  // confirming means staying near the coarse pose
+    if (planes.iterations == 0 || planes.fitness < c.verify.confirm_min_fitness ||
+        planes.rmse > c.verify.confirm_max_rmse_m || d.topRightCorner<3, 1>().norm() > 1.0 ||
+        rotationAngleDeg(d.topLeftCorner<3, 3>()) > 5.0) {
+      r.is_loop = false;
+      r.reason = "few node inliers and the background planes do not confirm the pose";
+    }
+  }
   if (r.is_loop) {
     // Keep the inlier node pairs for the fine stage.
     r.inlier_pairs.reserve(ransac.inliers.size());

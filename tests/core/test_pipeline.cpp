@@ -377,6 +377,33 @@ TEST(SyntheticPipeline, NearerRevisitScoresHigher) {
   EXPECT_NEAR(plain.score, far.graph_similarity * far.background_similarity * support, 1e-12);
 }
 
+// A loop with few node inliers must be confirmed by the background planes. The candidate below shows the same
+// street with both facades moved 0.8 m towards its middle: nodes and the bird's-eye view still agree, but no
+// rigid motion fits both facades' planes.
+TEST(SyntheticPipeline, FewInliersNeedThePlanesToConfirm) {
+  const LabelledScan world = test::makeStreetWorld();
+  LabelledScan squeezed = world;
+  for (std::size_t i = 0; i < squeezed.points.size(); ++i)
+    if (squeezed.labels[i] == test::kBuilding) squeezed.points[i].y() += squeezed.points[i].y() > 0 ? -0.8f : 0.8f;
+  const Mat4d T = test::makeT(1.0, 2.0, 0.5, 0.0);
+  Config always;
+  always.verify.confirm_below_inliers = 1000;  // every loop needs confirmation
+  Config never = always;
+  never.verify.confirm_below_inliers = 0;
+  const Pipeline p_always(always), p_never(never);
+  const Fingerprint fq = p_always.fingerprint(test::viewFrom(world, Mat4d::Identity()));
+  const Fingerprint fc = p_always.fingerprint(test::viewFrom(world, T));
+  const Fingerprint fs = p_always.fingerprint(test::viewFrom(squeezed, T));
+  const LoopResult same = p_always.verify(fq, fc);
+  EXPECT_TRUE(same.is_loop) << same.reason;
+  const LoopResult unconfirmed = p_always.verify(fq, fs);
+  EXPECT_FALSE(unconfirmed.is_loop);
+  EXPECT_STREQ(unconfirmed.reason, "few node inliers and the background planes do not confirm the pose");
+  EXPECT_TRUE(unconfirmed.inlier_pairs.empty());
+  const LoopResult unchecked = p_never.verify(fq, fs);
+  EXPECT_TRUE(unchecked.is_loop) << unchecked.reason;
+}
+
 LabelledScan emptyScan() { return {}; }
 
 LabelledScan noLandmarks() {

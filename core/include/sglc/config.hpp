@@ -85,6 +85,14 @@ struct VerifyConfig {
   // with 50 m, 0.94 with 25 m; real negatives that pass the graph check are same-street scans 27-30 m apart
   // that max_translation rejects).
   double bev_radius_m = 25.0;
+  // Ours: a loop with fewer node inliers than this must be confirmed by the plane stage run from the coarse
+  // pose: at least confirm_min_fitness of the candidate's plane features explained, with a point-to-plane RMSE
+  // of at most confirm_max_rmse_m. Chance alignments of three or four landmarks between look-alike streets
+  // pass t_g and t_b; their planes do not fit (simulated KITTI 00, ten descriptor neighbours per frame: 262
+  // such false loops against 4482 true ones without this check, 1 with it, no true loop lost). 0 disables.
+  int confirm_below_inliers = 6;
+  double confirm_min_fitness = 0.5;
+  double confirm_max_rmse_m = 0.1;
 };
 
 struct FingerprintConfig {
