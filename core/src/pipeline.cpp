@@ -179,6 +179,7 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
       T = icp.T;
       r.fitness = icp.fitness;
       r.rmse = icp.rmse;
+      r.information = pointPairInformation(icp.pairs, T, icp.rmse);
       anchor = std::move(icp.pairs);
     }
   }
@@ -187,6 +188,7 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
     const Mat4d d = T.inverse() * ref.T;
     if (ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0) {
       T = ref.T;
+      r.information = ref.information;
     }
     r.fitness = ref.fitness;
     r.rmse = ref.rmse;

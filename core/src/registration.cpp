@@ -10,6 +10,9 @@
 namespace sglc {
 namespace {
 
+// Residual sigmas below this (m) are not trusted when turning a fit into an information matrix.
+constexpr double kMinResidualSigma = 0.01;
+
 // Weighted closed-form rigid fit: dst ~= R * src + t (Kabsch with the reflection fix).
 template <typename GetSrc, typename GetDst, typename GetW>
 Mat4d weightedFit(std::size_t n, GetSrc src, GetDst dst, GetW weight) {
@@ -83,7 +86,36 @@ Mat4d expSE3(const Eigen::Matrix<double, 6, 1>& d) {
   return T;
 }
 
+// Information of a left perturbation (omega, v) of T, T' = exp(d) T, expressed for a right perturbation
+// (rho, phi), T' = T exp(xi), translation first: with d = M xi, omega = R phi and v = R rho + [t]x R phi.
+Mat6d rightInformation(const Mat6d& left, const Mat4d& T) {
+  const Mat3d R = T.topLeftCorner<3, 3>();
+  const Vec3d t = T.topRightCorner<3, 1>();
+  Mat3d tx;
+  tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+  Mat6d M = Mat6d::Zero();
+  M.block<3, 3>(0, 3) = R;
+  M.block<3, 3>(3, 0) = R;
+  M.block<3, 3>(3, 3) = tx * R;
+  return M.transpose() * left * M;
+}
+
 }  // namespace
+
+Mat6d pointPairInformation(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double rmse) {
+  Mat6d H = Mat6d::Zero();
+  const Mat3d R = T.topLeftCorner<3, 3>();
+  const Vec3d t = T.topRightCorner<3, 1>();
+  for (const auto& [qp, cp] : pairs) {
+    const Vec3d x = R * cp.cast<double>() + t;
+    Eigen::Matrix<double, 3, 6> J;
+    J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;
+    J.rightCols<3>().setIdentity();
+    H += J.transpose() * J;
+  }
+  const double sigma = std::max(rmse, kMinResidualSigma);
+  return rightInformation(H / (sigma * sigma), T);
+}
 
 Mat4d fitRigid(const std::vector<Vec3d>& src, const std::vector<Vec3d>& dst) {
   return weightedFit(
@@ -336,12 +368,14 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   constexpr double kLever = 10.0;
   Vec6 scale;
   scale << 1.0 / kLever, 1.0 / kLever, 1.0 / kLever, 1.0, 1.0, 1.0;
-  for (int it = 0; it < config.max_iterations; ++it) {
-    if (associate(result.T) < 6) break;
-    const Mat3d R = result.T.topLeftCorner<3, 3>();
-    const Vec3d t = result.T.topRightCorner<3, 1>();
-    Mat6 H = Mat6::Zero();
-    Vec6 g = Vec6::Zero();
+  // Gauss-Newton normal equations at T (left perturbation, rotation first), associating first; false when
+  // fewer than 6 planes associate.
+  auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
+    if (associate(T) < 6) return false;
+    const Mat3d R = T.topLeftCorner<3, 3>();
+    const Vec3d t = T.topRightCorner<3, 1>();
+    H.setZero();
+    g.setZero();
     for (std::size_t k = 0; k < candidate.size(); ++k) {
       if (assoc[k] < 0) continue;
       const Plane& q = query[assoc[k]];
@@ -383,6 +417,12 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
         g += inv.asDiagonal() * (P * gas);
       }
     }
+    return true;
+  };
+  Mat6 H;
+  Vec6 g;
+  for (int it = 0; it < config.max_iterations; ++it) {
+    if (!normalEquations(result.T, H, g)) break;
     H.diagonal().array() += 1e-9 * (1.0 + H.trace());
     const Vec6 delta = -H.ldlt().solve(g);
     if (!delta.allFinite()) break;
@@ -403,6 +443,10 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   }
   result.rmse = result.correspondences ? std::sqrt(sq / result.correspondences) : 0.0;
   result.fitness = candidate.empty() ? 0.0 : static_cast<double>(result.correspondences) / candidate.size();
+  if (result.iterations > 0 && normalEquations(result.T, H, g)) {
+    const double sigma = std::max(result.rmse, kMinResidualSigma);
+    result.information = rightInformation(H / (sigma * sigma), result.T);
+  }
   return result;
 }
 

@@ -134,6 +134,11 @@ TEST_F(RealPipeline, LoopPairMatchesReferencePose) {
   RecordProperty("loop_rotation_error_deg", std::to_string(dr));
   EXPECT_LT(dt, 0.10) << r.T;
   EXPECT_LT(dr, 0.5) << r.T;
+  // The refined loop carries its information: symmetric, positive definite; the verified-only one none.
+  const Eigen::SelfAdjointEigenSolver<Mat6d> eig(r.information);
+  EXPECT_LT((r.information - r.information.transpose()).norm(), 1e-6 * r.information.norm());
+  EXPECT_GT(eig.eigenvalues()[0], 0.0) << r.information;
+  EXPECT_TRUE(pipeline_->verify(fp("00/000052"), fp("00/004501")).information.isZero());
 }
 
 // pairs.txt's pose comes from SemanticKITTI's trajectory (a few cm). A dense point-to-plane registration of the

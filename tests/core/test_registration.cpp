@@ -306,6 +306,62 @@ TEST(RefinePlanes, CorridorTakesTheFreeDirectionFromTheAnchor) {
   EXPECT_GT(std::abs(free.T(0, 3) - T(0, 3)), 0.2) << free.T;
 }
 
+Mat4d rightPerturbed(const Mat4d& T, const Eigen::Matrix<double, 6, 1>& xi) {
+  Mat4d E = Mat4d::Identity();
+  const Vec3d phi = xi.tail<3>();
+  if (phi.norm() > 0) E.topLeftCorner<3, 3>() = Eigen::AngleAxisd(phi.norm(), phi.normalized()).toRotationMatrix();
+  E.topRightCorner<3, 1>() = xi.head<3>();
+  return T * E;
+}
+
+// The information is the curvature of the whitened residuals for a right perturbation, translation first:
+// moving the converged pose by xi raises sum(r^2) / sigma^2 by xi' I xi.
+TEST(RefinePlanes, InformationIsTheResidualCurvature) {
+  const Mat4d T = makeT(35.0, 4.0, -2.5, 0.3, 1.0, -0.5);
+  const auto query = roomPlanes();
+  const auto candidate = movedPlanes(query, T.inverse());
+  const PlaneIndex index(query, 1.0);
+  const RefineResult r = refinePlanes(query, index, candidate, {}, makeT(0.5, 0.1, -0.1, 0.02) * T, RefineConfig{});
+  ASSERT_LT(test::translationError(r.T, T), 1e-3);
+  const Mat6d& I = r.information;
+  EXPECT_LT((I - I.transpose()).norm(), 1e-6 * I.norm());
+  const double sigma = 0.01;  // exact planes: the 1 cm floor
+  RefineConfig look;
+  look.max_iterations = 0;  // evaluate only
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  for (const Vec6& xi : {(Vec6() << 0.01, 0, 0, 0, 0, 0).finished(), (Vec6() << 0, 0, 0.01, 0, 0, 0).finished(),
+                         (Vec6() << 0, 0, 0, 0, 0, 0.001).finished(), (Vec6() << 0, 0, 0, 0.001, 0, 0).finished(),
+                         (Vec6() << 0.005, -0.004, 0.003, 0.0005, -0.0003, 0.0008).finished()}) {
+    const RefineResult at = refinePlanes(query, index, candidate, {}, rightPerturbed(r.T, xi), look);
+    const double cost = at.rmse * at.rmse * at.correspondences / (sigma * sigma);
+    EXPECT_NEAR(cost, xi.dot(I * xi), 0.05 * cost) << xi.transpose();
+  }
+}
+
+TEST(RefinePlanes, InformationIsSmallAlongACorridor) {
+  std::vector<Plane> query;
+  auto add = [&](Vec3f c, Vec3f n) {
+    Plane p;
+    p.centroid = c;
+    p.normal = n;
+    query.push_back(p);
+  };
+  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
+    for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
+    for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
+      add({x, 8.0f, z}, {0, -1, 0});
+      add({x, -8.0f, z}, {0, 1, 0});
+    }
+  }
+  const Mat4d T = makeT(0.0, 0.0, 0.3, 0.0);
+  const PlaneIndex index(query, 1.0);
+  const RefineResult r = refinePlanes(query, index, movedPlanes(query, T.inverse()), {}, Mat4d::Identity(), RefineConfig{});
+  const Mat6d& I = r.information;
+  EXPECT_LT(I(0, 0), 1e-6 * I(1, 1));  // along the corridor: nothing
+  EXPECT_GT(I(1, 1), 1e6);             // across it and vertically: plenty (1 cm sigma, hundreds of planes)
+  EXPECT_GT(I(2, 2), 1e6);
+}
+
 TEST(RefinePlanes, TooFewPlanesKeepsStart) {
   const auto query = roomPlanes();
   const PlaneIndex index(query, 1.0);

@@ -25,6 +25,10 @@ struct LoopResult {
   // point-to-plane RMSE (m). With the plane stage disabled: the instance ICP's share of matched points and RMSE.
   double fitness = 0.0;
   double rmse = 0.0;
+  // After refinement: Fisher information of T (6x6, translation then rotation, metres and radians) for a
+  // right perturbation T_true = T exp(xi) in the candidate's frame; directions the registration leaves free
+  // (a straight corridor) get little. Zero when neither stage ran or was kept.
+  Mat6d information = Mat6d::Zero();
   const char* reason = "";  // why it is not a loop (empty for loops)
   std::vector<Match> inlier_pairs;  // node matches consistent with T (query node, candidate node)
 };

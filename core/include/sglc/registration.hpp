@@ -53,6 +53,10 @@ struct RefineResult {
   int correspondences = 0;  // plane pairs at the final pose
   double rmse = 0.0;        // point-to-plane, over correspondences (m)
   double fitness = 0.0;     // share of candidate planes with a consistent query plane
+  // Fisher information of T at the final pose (zero when the stage did not run): residuals weighted by
+  // 1 / max(rmse, 1 cm)^2, over a right perturbation T_true = T exp(xi), xi = (translation, rotation) in the
+  // candidate's frame (metres, radians).
+  Mat6d information = Mat6d::Zero();
 };
 
 // Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.
@@ -76,6 +80,9 @@ class PlaneIndex {
 // directions the planes leave free (a straight corridor) stay where the instances put them. The anchor acts
 // only in those directions (Hessian eigenvalues below config.min_information): elsewhere instance pairs,
 // which join differently sampled sides of the same objects, would bias the pose the planes fix.
+// Information of T from point pairs (query point, candidate point), as RefineResult::information.
+Mat6d pointPairInformation(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double rmse);
+
 RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
                           const std::vector<Plane>& candidate,
                           const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,

@@ -14,6 +14,7 @@ using Vec3f = Eigen::Vector3f;
 using Vec3d = Eigen::Vector3d;
 using Mat3d = Eigen::Matrix3d;
 using Mat4d = Eigen::Matrix4d;
+using Mat6d = Eigen::Matrix<double, 6, 6>;
 using Points = std::vector<Vec3f>;
 
 // One LiDAR scan in its sensor frame: N points and one semantic label per point.
