@@ -17,12 +17,8 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-// Odometry between consecutive scans of a session: trusted, no robust loss, with a sigma that grows with the
-// distance driven (LiDAR odometry drifts about 1-2 % of it). Loop edges get their sigma from the refinement's
-// residual (rmse) with a floor; both are per-axis, whitened in the residual.
-constexpr double kOdomSigmaT0 = 0.01, kOdomSigmaTPerM = 0.02;     // m, m per m driven
-constexpr double kOdomSigmaR0 = 0.0005, kOdomSigmaRPerM = 0.0005;  // rad, rad per m driven
-constexpr double kLoopSigmaTFloor = 0.05;
+constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
+constexpr double kWideLoss = 10.0;  // loss scale of the first solve, in nominal loss scales
 
 struct Pose {
   Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
@@ -42,11 +38,14 @@ struct Pose {
 };
 
 // Residual of a relative-pose measurement T_ab (maps b's points into a's frame) between poses a and b (both
-// scan -> map): translation and rotation error of inv(T_ab) * inv(T_a) * T_b, scaled by 1 / sigma.
+// scan -> map): translation and rotation of inv(T_ab) * inv(T_a) * T_b, i.e. the right perturbation
+// (translation first) that takes T_ab to the predicted relative pose, whitened by an upper-triangular square
+// root of the edge's information (information = sqrt_info' * sqrt_info).
+using Mat6 = Eigen::Matrix<double, 6, 6>;
 struct RelativePoseError {
   Eigen::Quaterniond q_ab;
   Eigen::Vector3d t_ab;
-  double inv_sigma_t, inv_sigma_r;
+  Mat6 sqrt_info;
   template <typename T>
   bool operator()(const T* qa_p, const T* ta_p, const T* qb_p, const T* tb_p, T* r) const {
     Eigen::Map<const Eigen::Quaternion<T>> qa(qa_p), qb(qb_p);
@@ -55,14 +54,33 @@ struct RelativePoseError {
     const Eigen::Quaternion<T> q_pred = qa_inv * qb;
     const Eigen::Matrix<T, 3, 1> t_pred = qa_inv * (tb - ta);
     const Eigen::Quaternion<T> dq = q_ab.template cast<T>().conjugate() * q_pred;
-    const Eigen::Matrix<T, 3, 1> dt = q_ab.template cast<T>().conjugate() * (t_pred - t_ab.template cast<T>());
-    for (int i = 0; i < 3; ++i) {
-      r[i] = dt[i] * T(inv_sigma_t);
-      r[3 + i] = T(2.0) * dq.vec()[i] * T(inv_sigma_r);
-    }
+    Eigen::Matrix<T, 6, 1> e;
+    e.template head<3>() = q_ab.template cast<T>().conjugate() * (t_pred - t_ab.template cast<T>());
+    e.template tail<3>() = T(2.0) * dq.vec();
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> out(r);
+    out = sqrt_info.template cast<T>() * e;
     return true;
   }
 };
+
+Mat6 diagonalSqrtInformation(double sigma_t, double sigma_r) {
+  Mat6 S = Mat6::Zero();
+  S.diagonal() << 1 / sigma_t, 1 / sigma_t, 1 / sigma_t, 1 / sigma_r, 1 / sigma_r, 1 / sigma_r;
+  return S;
+}
+
+// A loop's registration information, with a floor covariance added (no registration is better than its model:
+// planes are not perfectly flat, labels not perfectly right), as an upper-triangular square root.
+Mat6 loopSqrtInformation(const Mat6& information, double floor_t, double floor_r) {
+  const Eigen::SelfAdjointEigenSolver<Mat6> eig(0.5 * (information + information.transpose()));
+  Eigen::Matrix<double, 6, 1> var;
+  for (int k = 0; k < 6; ++k) var[k] = 1.0 / std::max(eig.eigenvalues()[k], 1e-12);  // free directions: huge
+  Mat6 cov = eig.eigenvectors() * var.asDiagonal() * eig.eigenvectors().transpose();
+  cov.diagonal().head<3>().array() += floor_t * floor_t;
+  cov.diagonal().tail<3>().array() += floor_r * floor_r;
+  const Mat6 info = cov.inverse();
+  return Eigen::LLT<Mat6>(0.5 * (info + info.transpose())).matrixU();
+}
 
 }  // namespace
 
@@ -79,6 +97,7 @@ struct GraphOptimiser::MapGraph {
     std::int64_t id, a, b;  // a = query scan, b = candidate scan; T maps b into a
     Mat4d T;
     double rmse, fitness;
+    std::optional<Mat6d> information;
   };
   std::vector<Node> nodes;
   std::unordered_map<std::int64_t, std::size_t> index;  // scan id -> node
@@ -189,7 +208,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   for (const auto& l : loops) {
     g.last_loop = std::max(g.last_loop, l.id);
     if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
-    g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness});
+    g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness, l.information});
   }
 
   // Sessions and their scans in sequence order; initial guesses for new nodes.
@@ -268,10 +287,11 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     q[i] = {p.q.x(), p.q.y(), p.q.z(), p.q.w()};
     t[i] = {p.t.x(), p.t.y(), p.t.z()};
   }
-  auto addEdge = [&](std::size_t a, std::size_t b, const Mat4d& T_ab, double sigma_t, double sigma_r,
-                     ceres::LossFunction* loss) {
-    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 4, 3, 4, 3>(new RelativePoseError{
-        Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), 1.0 / sigma_t, 1.0 / sigma_r});
+  auto edge = [](const Mat4d& T_ab, const Mat6& sqrt_info) {
+    return RelativePoseError{Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), sqrt_info};
+  };
+  auto addEdge = [&](std::size_t a, std::size_t b, const RelativePoseError& e, ceres::LossFunction* loss) {
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 4, 3, 4, 3>(new RelativePoseError(e));
     problem.AddResidualBlock(cost, loss, q[a].data(), t[a].data(), q[b].data(), t[b].data());
   };
   for (const auto& [sid, idx] : sessions)
@@ -280,13 +300,30 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
       const auto& b = g.nodes[idx[k]];
       const Mat4d step = a.odometry.inverse() * b.odometry;
       const double d = step.block<3, 1>(0, 3).norm();
-      addEdge(idx[k - 1], idx[k], step, kOdomSigmaT0 + kOdomSigmaTPerM * d, kOdomSigmaR0 + kOdomSigmaRPerM * d, nullptr);
+      // Odometry: trusted (no robust loss), sigmas growing with the distance driven.
+      addEdge(idx[k - 1], idx[k],
+              edge(step, diagonalSqrtInformation(options_.odometry_sigma_m + options_.odometry_sigma_per_m * d,
+                                                 (options_.odometry_sigma_deg + options_.odometry_sigma_deg_per_m * d) *
+                                                     kRadPerDeg)),
+              nullptr);
     }
-  std::vector<double> loop_sigma;
+  std::vector<RelativePoseError> loop_edges;
+  std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
+  const double floor_r = options_.loop_sigma_deg * kRadPerDeg;
   for (const auto& l : g.loops) {
-    const double st = std::max(kLoopSigmaTFloor, l.rmse);
-    loop_sigma.push_back(st);
-    addEdge(g.index[l.a], g.index[l.b], l.T, st, st / 10.0, new ceres::CauchyLoss(options_.loss_scale));
+    // Loops: the registration's information plus a floor covariance, or (loops recorded without one) a sigma
+    // from the refinement's residual; a robust loss discounts false ones.
+    if (l.information) {
+      loop_edges.push_back(edge(l.T, loopSqrtInformation(*l.information, options_.loop_sigma_m, floor_r)));
+    } else {
+      const double st = std::max(options_.loop_sigma_m, l.rmse);
+      loop_edges.push_back(edge(l.T, diagonalSqrtInformation(st, floor_r * st / options_.loop_sigma_m)));
+    }
+    // Graduated: a wide loss first (from odometry-initialised poses every loop is many sigmas off, and a tight
+    // Cauchy loss would discount true loops along with false ones), then the nominal one.
+    loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(kWideLoss * options_.loss_scale),
+                                                         ceres::TAKE_OWNERSHIP));
+    addEdge(g.index[l.a], g.index[l.b], loop_edges.back(), loop_losses.back());
   }
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
     problem.AddParameterBlock(q[i].data(), 4, new ceres::EigenQuaternionManifold());
@@ -307,19 +344,26 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   so.num_threads = 1;  // deterministic
   so.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
-  if (!g.nodes.empty()) ceres::Solve(so, &problem, &summary);
+  if (!g.nodes.empty()) {
+    ceres::Solve(so, &problem, &summary);
+    for (auto* loss : loop_losses) loss->Reset(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP);
+    ceres::Solver::Summary second;
+    ceres::Solve(so, &problem, &second);
+    summary.iterations.insert(summary.iterations.end(), second.iterations.begin(), second.iterations.end());
+  }
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
     g.nodes[i].pose.q = Eigen::Quaterniond(q[i][3], q[i][0], q[i][1], q[i][2]).normalized();
     g.nodes[i].pose.t = Eigen::Vector3d(t[i][0], t[i][1], t[i][2]);
   }
 
-  // Loops the robust loss discounted: whitened translation error beyond 3 loss scales.
+  // Loops the robust loss discounted: whitened squared error beyond the 99.9 % point of a chi-square with six
+  // degrees of freedom (22.46), in loss scales (the Cauchy weight there is below 0.05).
   int rejected = 0;
   for (std::size_t k = 0; k < g.loops.size(); ++k) {
-    const auto& l = g.loops[k];
-    const Mat4d pred = g.nodes[g.index[l.a]].pose.matrix().inverse() * g.nodes[g.index[l.b]].pose.matrix();
-    const double err = (pred.block<3, 1>(0, 3) - l.T.block<3, 1>(0, 3)).norm() / loop_sigma[k];
-    rejected += err > 3.0 * options_.loss_scale;
+    const auto a = g.index[g.loops[k].a], b = g.index[g.loops[k].b];
+    double r[6];
+    loop_edges[k](q[a].data(), t[a].data(), q[b].data(), t[b].data(), r);
+    rejected += Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).squaredNorm() > 22.46 * options_.loss_scale * options_.loss_scale;
   }
 
   std::vector<storage::OptimisedPose> poses;

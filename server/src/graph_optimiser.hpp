@@ -35,6 +35,13 @@ struct GraphOptimiserOptions {
   double max_seconds = 5.0;                 // per optimisation
   int max_iterations = 100;
   double loss_scale = 1.0;                  // Cauchy loss scale on whitened loop residuals
+  // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
+  // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.
+  double odometry_sigma_m = 0.01, odometry_sigma_per_m = 0.015;
+  double odometry_sigma_deg = 0.005, odometry_sigma_deg_per_m = 0.005;
+  // Loops: the registration's information with this floor covariance added (per axis), or, for loops recorded
+  // without information, a per-axis sigma from the refinement's RMSE, at least these.
+  double loop_sigma_m = 0.05, loop_sigma_deg = 0.3;
 };
 
 class GraphOptimiser {

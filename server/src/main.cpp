@@ -8,6 +8,8 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cmath>
+#include <map>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -40,10 +42,37 @@ struct Settings {
   double shutdown_grace_s = 10;
   sglc::Config engine;
   sglc::storage::StoreOptions store;
+  sglc::server::GraphOptimiserOptions graph;
 };
 
-// The config file has three sections: engine (the same keys as `sglc-pair --config`), storage and server.
-// Command-line flags override it.
+void setGraphOption(sglc::server::GraphOptimiserOptions& g, const std::string& key, double v) {
+  const std::map<std::string, double*> fields{
+      {"pose_graph.odometry_sigma_m", &g.odometry_sigma_m},
+      {"pose_graph.odometry_sigma_per_m", &g.odometry_sigma_per_m},
+      {"pose_graph.odometry_sigma_deg", &g.odometry_sigma_deg},
+      {"pose_graph.odometry_sigma_deg_per_m", &g.odometry_sigma_deg_per_m},
+      {"pose_graph.loop_sigma_m", &g.loop_sigma_m},
+      {"pose_graph.loop_sigma_deg", &g.loop_sigma_deg},
+      {"pose_graph.loss_scale", &g.loss_scale},
+      {"pose_graph.max_seconds", &g.max_seconds},
+  };
+  if (key == "pose_graph.debounce_ms") {
+    if (!(v >= 0 && v <= 60000)) throw std::runtime_error(key + " must be in [0, 60000]");
+    g.debounce = std::chrono::milliseconds(static_cast<long>(v));
+    return;
+  }
+  const auto it = fields.find(key);
+  if (it == fields.end()) throw std::runtime_error("unknown parameter '" + key + "'");
+  if (!std::isfinite(v) || v < 0) throw std::runtime_error(key + " must be a finite number >= 0");
+  *it->second = v;
+  if (g.odometry_sigma_m + g.odometry_sigma_per_m <= 0 || g.odometry_sigma_deg + g.odometry_sigma_deg_per_m <= 0)
+    throw std::runtime_error("pose_graph: the odometry sigmas must not all be zero");
+  if (g.loop_sigma_m <= 0 || g.loop_sigma_deg <= 0 || g.loss_scale <= 0 || g.max_seconds <= 0)
+    throw std::runtime_error(key + " must be > 0");
+}
+
+// The config file has four sections: engine (the same keys as `sglc-pair --config`), storage, server and
+// pose_graph. Command-line flags override it.
 void applyConfigFile(Settings& s, const std::string& path) {
   YAML::Node root;
   try {
@@ -60,7 +89,8 @@ void applyConfigFile(Settings& s, const std::string& path) {
       s.engine = sglc::parseConfig(out.c_str());
       continue;
     }
-    if (name != "storage" && name != "server") throw std::runtime_error(path + ": unknown section '" + name + "'");
+    if (name != "storage" && name != "server" && name != "pose_graph")
+      throw std::runtime_error(path + ": unknown section '" + name + "'");
     for (const auto& item : node) {
       const auto key = name + "." + item.first.as<std::string>();
       const auto& v = item.second;
@@ -94,6 +124,7 @@ void applyConfigFile(Settings& s, const std::string& path) {
         else if (key == "server.tokens") s.tokens = v.as<std::string>();
         else if (key == "server.backup_dir") s.backup_dir = v.as<std::string>();
         else if (key == "server.shutdown_grace_s") s.shutdown_grace_s = v.as<double>();
+        else if (key.rfind("pose_graph.", 0) == 0) setGraphOption(s.graph, key, v.as<double>());
         else throw std::runtime_error("unknown parameter '" + key + "'");
       } catch (const YAML::Exception& e) {
         throw std::runtime_error(path + ": bad value for '" + key + "': " + e.what());
@@ -208,7 +239,7 @@ int main(int argc, char** argv) {
       throw;
     }
     const auto st = store->stats();
-    auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, sglc::server::GraphOptimiserOptions{});
+    auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, s.graph);
     state->attach(store.get(), graph.get());
     health->SetServingStatus(true);
     spdlog::info("{{\"event\":\"serving\",\"db\":\"{}\",\"maps\":{},\"scans\":{},\"load_ms\":{:.1f}}}", s.db, st.maps,

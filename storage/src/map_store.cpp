@@ -67,7 +67,19 @@ const std::vector<const char*> kMigrations = {
       session_id INTEGER PRIMARY KEY REFERENCES sessions(id), t BLOB NOT NULL, connected INTEGER NOT NULL);
     ALTER TABLE maps ADD COLUMN graph_version INTEGER NOT NULL DEFAULT 0;
     )sql",
+    // 2 -> 3: the information matrix of each loop's pose (36 doubles; NULL for loops recorded before).
+    R"sql(
+    ALTER TABLE loops ADD COLUMN information BLOB;
+    )sql",
 };
+
+std::vector<std::uint8_t> informationBlob(const Mat6d& I) {
+  std::vector<std::uint8_t> out(36 * sizeof(double));
+  double v[36];
+  for (int k = 0; k < 36; ++k) v[k] = I(k / 6, k % 6);
+  std::memcpy(out.data(), v, sizeof(v));
+  return out;
+}
 
 std::vector<std::uint8_t> poseBlob(const Mat4d& T) {
   std::vector<std::uint8_t> out(12 * sizeof(double));
@@ -456,7 +468,8 @@ class SqliteMapStore final : public MapStore {
 
   // ---- Pose graph
   std::int64_t addLoop(const std::string& map, const LoopRecord& loop) override {
-    if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse))
+    if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse) ||
+        (loop.information && !loop.information->allFinite()))
       throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
     if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
     std::lock_guard write(write_mutex_);
@@ -477,10 +490,13 @@ class SqliteMapStore final : public MapStore {
         .bind(2, loop.candidate_scan)
         .run();
     sql::Stmt st(writer_,
-                 "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, created_at)"
-                 " VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?)");
+                 "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, created_at,"
+                 " information) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
     st.bind(1, map_id).bind(2, loop.query_scan).bind(3, loop.candidate_scan).bindBlob(4, t).bind(5, loop.score);
     st.bind(6, static_cast<std::int64_t>(loop.inliers)).bind(7, loop.fitness).bind(8, loop.rmse).bind(9, nowSeconds());
+    const auto info = loop.information ? informationBlob(*loop.information) : std::vector<std::uint8_t>{};
+    if (loop.information) st.bindBlob(10, info);
+    else st.bindNull(10);
     st.run();
     const auto id = sqlite3_last_insert_rowid(writer_.get());
     tx.commit();
@@ -491,7 +507,7 @@ class SqliteMapStore final : public MapStore {
     const auto map_id = mapId(map);
     auto reader = acquireReader();
     sql::Stmt st(*reader,
-                 "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse FROM loops"
+                 "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information FROM loops"
                  " WHERE map_id = ? AND id > ? ORDER BY id");
     st.bind(1, map_id).bind(2, after_id);
     std::vector<LoopRecord> out;
@@ -507,6 +523,16 @@ class SqliteMapStore final : public MapStore {
       r.inliers = static_cast<int>(st.i64(5));
       r.fitness = st.f64(6);
       r.rmse = st.f64(7);
+      if (!st.isNull(8)) {
+        const auto b = st.blob(8);
+        if (b.size() != 36 * sizeof(double))
+          throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged information matrix");
+        double v[36];
+        std::memcpy(v, b.data(), sizeof(v));
+        Mat6d I;
+        for (int k = 0; k < 36; ++k) I(k / 6, k % 6) = v[k];
+        r.information = I;
+      }
       out.push_back(r);
     }
     return out;

@@ -140,6 +140,10 @@ def test_inter_robot_loop_and_restart(tmp):
         dt, dr = pose_error(T, reference_pose())
         assert dt < 0.10 and dr < 0.5, f"pose error {dt:.3f} m {dr:.3f} deg"
         print(f"  inter-robot loop: score {loop.score:.3f}, inliers {loop.inliers}, RTE {dt:.4f} m, RRE {dr:.4f} deg")
+        # The refined loop carries its information matrix: 6x6, symmetric, positive definite.
+        info = np.array(loop.information).reshape(6, 6)
+        assert np.allclose(info, info.T, rtol=1e-9, atol=1e-9 * np.abs(info).max()), "information is symmetric"
+        assert np.linalg.eigvalsh(info).min() > 0, "information is positive definite"
         # Same-robot scope finds nothing; query by stored id finds the other scan with the inverse pose.
         same = s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
                                             options=pb.QueryOptions(scope=pb.SCOPE_SAME_ROBOT)))
@@ -336,6 +340,29 @@ def ate(est, gt):
     return float(np.sqrt(np.mean(np.sum((b - (a - ma) @ R.T - mb) ** 2, axis=1))))
 
 
+def test_config_file(tmp):
+    # The pose_graph section is read and checked; mistakes end the server with a message naming the key.
+    good = os.path.join(tmp, "good.yaml")
+    with open(good, "w") as f:
+        f.write("pose_graph:\n  odometry_sigma_per_m: 0.02\n  odometry_sigma_deg_per_m: 0.01\n"
+                "  loop_sigma_m: 0.05\n  debounce_ms: 50\n")
+    s = Server(os.path.join(tmp, "a.db"), ["--config", good])
+    try:
+        assert s.admin.ListMaps(pb.ListMapsRequest(), timeout=10) is not None
+    finally:
+        assert s.stop() == 0
+    for text, expected in [("pose_graph:\n  odometry_sigma: 0.02\n", "unknown parameter 'pose_graph.odometry_sigma'"),
+                           ("pose_graph:\n  loss_scale: -1\n", "pose_graph.loss_scale must be a finite number >= 0"),
+                           ("pose_graph:\n  loop_sigma_deg: 0\n", "pose_graph.loop_sigma_deg must be > 0"),
+                           ("posegraph:\n  loss_scale: 1\n", "unknown section 'posegraph'")]:
+        bad = os.path.join(tmp, "bad.yaml")
+        with open(bad, "w") as f:
+            f.write(text)
+        r = subprocess.run([SERVER, "--db", os.path.join(tmp, "b.db"), "--listen", f"127.0.0.1:{free_port()}",
+                            "--config", bad], capture_output=True, text=True, timeout=60)
+        assert r.returncode != 0 and expected in r.stderr, (text, r.returncode, r.stderr)
+
+
 def test_pose_graph(tmp):
     # A drive of the built-in route (every 8th frame) with 2 % odometry drift, as two robots: "a" drives it
     # all, "b" the second half with its odometry in an unrelated frame. Loops correct both.
@@ -364,7 +391,11 @@ def test_pose_graph(tmp):
         return pb.Transform(m=[float(v) for v in T.reshape(-1)])
 
     db = os.path.join(tmp, "graph.db")
-    s = Server(db)
+    # The server's odometry model matches the simulated drift (2 % per axis, 0.01 deg/m in heading).
+    cfg = os.path.join(tmp, "graph.yaml")
+    with open(cfg, "w") as f:
+        f.write("pose_graph:\n  odometry_sigma_per_m: 0.02\n  odometry_sigma_deg_per_m: 0.01\n")
+    s = Server(db, ["--config", cfg])
     try:
         s.admin.CreateMap(pb.CreateMapRequest(name="m"))
         C = grpc.StatusCode
@@ -431,7 +462,7 @@ def test_pose_graph(tmp):
         assert len(rows) == n and np.allclose(rows, np.array([T[:3, :] for T in est]), atol=1e-6)
     finally:
         s.stop(signal.SIGKILL)
-    s = Server(db)
+    s = Server(db, ["--config", cfg])
     try:
         after = [(p.scan_id, tuple(p.t_map_scan.m)) for p in s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses]
         assert len(after) == len(before), "poses lost on restart"
@@ -442,7 +473,8 @@ def test_pose_graph(tmp):
         assert s.stop() == 0
 
 def main():
-    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients, test_pose_graph]
+    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
+             test_pose_graph]
     passed = failed = 0
     for t in tests:
         tmp = tempfile.mkdtemp(prefix="sglc-server-test-")

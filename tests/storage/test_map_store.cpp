@@ -571,5 +571,50 @@ TEST(MapStore, MigratesAVersion1FileForward) {
   EXPECT_EQ(store->integrityCheck(), "ok");
 }
 
+Mat6d someInformation() {
+  Mat6d A;
+  for (int k = 0; k < 36; ++k) A(k / 6, k % 6) = 0.1 * k - 1.3;
+  return A * A.transpose() + Mat6d::Identity();  // symmetric positive definite, not diagonal
+}
+
+TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));
+    all = fill(*store, 1, 1, 4);
+    store->addLoop("m", {0, all[3].id, all[0].id, rigid(0.1, 1, 2), 0.5, 0.5, 0.1, 5});  // no information
+  }
+  {  // Back to a version-2 file: no information column.
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE loops DROP COLUMN information; PRAGMA user_version=2;", nullptr, nullptr,
+                           nullptr),
+              SQLITE_OK)
+        << sqlite3_errmsg(db);
+    sqlite3_close(db);
+  }
+  const Mat6d info = someInformation();
+  {
+    auto store = MapStore::open(options(path));
+    auto loops = store->loops("m");
+    ASSERT_EQ(loops.size(), 1u);
+    EXPECT_FALSE(loops[0].information.has_value());  // recorded before: none
+    LoopRecord with{0, all[2].id, all[1].id, rigid(-0.2, 3, 0), 0.6, 0.7, 0.08, 7};
+    with.information = info;
+    store->addLoop("m", with);
+    auto bad = with;
+    bad.information->coeffRef(2, 4) = std::numeric_limits<double>::infinity();
+    EXPECT_EQ(errorCode([&] { store->addLoop("m", bad); }), StorageError::Code::kInvalidArgument);
+  }
+  auto store = MapStore::open(options(path));
+  const auto loops = store->loops("m");
+  ASSERT_EQ(loops.size(), 2u);
+  ASSERT_TRUE(loops[1].information.has_value());
+  EXPECT_TRUE((loops[1].information->array() == info.array()).all());  // bit-exact
+  EXPECT_EQ(store->integrityCheck(), "ok");
+}
+
 }  // namespace
 }  // namespace sglc::storage

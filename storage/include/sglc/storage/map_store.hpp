@@ -138,6 +138,8 @@ struct LoopRecord {
   Mat4d T = Mat4d::Identity();
   double score = 0, fitness = 0, rmse = 0;
   int inliers = 0;
+  // Information of T (sglc::LoopResult::information); absent for loops recorded without one.
+  std::optional<Mat6d> information;
 };
 
 // A scan as a pose-graph node.
@@ -234,6 +236,6 @@ class MapStore {
 };
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 2;
+inline constexpr int kSchemaVersion = 3;
 
 }  // namespace sglc::storage
