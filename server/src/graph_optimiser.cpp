@@ -46,10 +46,11 @@ struct RelativePoseError {
   Eigen::Quaterniond q_ab;
   Eigen::Vector3d t_ab;
   Mat6 sqrt_info;
+  // A pose is 7 numbers: quaternion x, y, z, w, then translation.
   template <typename T>
-  bool operator()(const T* qa_p, const T* ta_p, const T* qb_p, const T* tb_p, T* r) const {
-    Eigen::Map<const Eigen::Quaternion<T>> qa(qa_p), qb(qb_p);
-    Eigen::Map<const Eigen::Matrix<T, 3, 1>> ta(ta_p), tb(tb_p);
+  bool operator()(const T* a, const T* b, T* r) const {
+    Eigen::Map<const Eigen::Quaternion<T>> qa(a), qb(b);
+    Eigen::Map<const Eigen::Matrix<T, 3, 1>> ta(a + 4), tb(b + 4);
     const Eigen::Quaternion<T> qa_inv = qa.conjugate();
     const Eigen::Quaternion<T> q_pred = qa_inv * qb;
     const Eigen::Matrix<T, 3, 1> t_pred = qa_inv * (tb - ta);
@@ -205,6 +206,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
                        Pose::of(k != kept.end() ? k->second : *n.odometry_pose), k != kept.end()});
     g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
   }
+  const std::size_t known_loops = g.loops.size();
   for (const auto& l : loops) {
     g.last_loop = std::max(g.last_loop, l.id);
     if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
@@ -280,19 +282,17 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
 
   // The problem: odometry edges within sessions, robust loop edges, one fixed node per component.
   ceres::Problem problem;
-  std::vector<std::array<double, 4>> q(g.nodes.size());
-  std::vector<std::array<double, 3>> t(g.nodes.size());
+  std::vector<std::array<double, 7>> x(g.nodes.size());  // per node: quaternion (x, y, z, w), translation
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
     const auto& p = g.nodes[i].pose;
-    q[i] = {p.q.x(), p.q.y(), p.q.z(), p.q.w()};
-    t[i] = {p.t.x(), p.t.y(), p.t.z()};
+    x[i] = {p.q.x(), p.q.y(), p.q.z(), p.q.w(), p.t.x(), p.t.y(), p.t.z()};
   }
   auto edge = [](const Mat4d& T_ab, const Mat6& sqrt_info) {
     return RelativePoseError{Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), sqrt_info};
   };
   auto addEdge = [&](std::size_t a, std::size_t b, const RelativePoseError& e, ceres::LossFunction* loss) {
-    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 4, 3, 4, 3>(new RelativePoseError(e));
-    problem.AddResidualBlock(cost, loss, q[a].data(), t[a].data(), q[b].data(), t[b].data());
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 7, 7>(new RelativePoseError(e));
+    problem.AddResidualBlock(cost, loss, x[a].data(), x[b].data());
   };
   for (const auto& [sid, idx] : sessions)
     for (std::size_t k = 1; k < idx.size(); ++k) {
@@ -319,23 +319,29 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
       const double st = std::max(options_.loop_sigma_m, l.rmse);
       loop_edges.push_back(edge(l.T, diagonalSqrtInformation(st, floor_r * st / options_.loop_sigma_m)));
     }
-    // Graduated: a wide loss first (from odometry-initialised poses every loop is many sigmas off, and a tight
-    // Cauchy loss would discount true loops along with false ones), then the nominal one.
-    loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(kWideLoss * options_.loss_scale),
-                                                         ceres::TAKE_OWNERSHIP));
+    loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP));
     addEdge(g.index[l.a], g.index[l.b], loop_edges.back(), loop_losses.back());
   }
+  // Graduated: when a new loop is far off the current poses (a first optimisation from odometry, a long drift
+  // corrected at once), a tight Cauchy loss would discount it along with false ones: solve with a wide loss
+  // first, then the nominal one. Loops that agree with the warm-started graph need only the second solve.
+  bool wide = false;
+  for (std::size_t k = known_loops; k < g.loops.size() && !wide; ++k) {
+    const auto a = g.index[g.loops[k].a], b = g.index[g.loops[k].b];
+    double r[6];
+    loop_edges[k](x[a].data(), x[b].data(), r);
+    wide = Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).norm() > kWideLoss * options_.loss_scale;
+  }
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
-    problem.AddParameterBlock(q[i].data(), 4, new ceres::EigenQuaternionManifold());
-    problem.AddParameterBlock(t[i].data(), 3);
+    problem.AddParameterBlock(x[i].data(), 7,
+                              new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
   }
   std::set<std::int64_t> fixed_roots;
   for (const auto& [sid, idx] : sessions)
     if (fixed_roots.insert(find(sid)).second) {
       // The root session's first node anchors its component (the map frame for the map session's).
       const auto first = sessions[find(sid)].front();
-      problem.SetParameterBlockConstant(q[first].data());
-      problem.SetParameterBlockConstant(t[first].data());
+      problem.SetParameterBlockConstant(x[first].data());
     }
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
@@ -345,15 +351,19 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   so.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
   if (!g.nodes.empty()) {
-    ceres::Solve(so, &problem, &summary);
-    for (auto* loss : loop_losses) loss->Reset(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP);
-    ceres::Solver::Summary second;
-    ceres::Solve(so, &problem, &second);
-    summary.iterations.insert(summary.iterations.end(), second.iterations.begin(), second.iterations.end());
+    if (wide) {
+      for (auto* loss : loop_losses)
+        loss->Reset(new ceres::CauchyLoss(kWideLoss * options_.loss_scale), ceres::TAKE_OWNERSHIP);
+      ceres::Solve(so, &problem, &summary);
+      for (auto* loss : loop_losses) loss->Reset(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP);
+    }
+    ceres::Solver::Summary last;
+    ceres::Solve(so, &problem, &last);
+    summary.iterations.insert(summary.iterations.end(), last.iterations.begin(), last.iterations.end());
   }
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
-    g.nodes[i].pose.q = Eigen::Quaterniond(q[i][3], q[i][0], q[i][1], q[i][2]).normalized();
-    g.nodes[i].pose.t = Eigen::Vector3d(t[i][0], t[i][1], t[i][2]);
+    g.nodes[i].pose.q = Eigen::Quaterniond(x[i][3], x[i][0], x[i][1], x[i][2]).normalized();
+    g.nodes[i].pose.t = Eigen::Vector3d(x[i][4], x[i][5], x[i][6]);
   }
 
   // Loops the robust loss discounted: whitened squared error beyond the 99.9 % point of a chi-square with six
@@ -362,7 +372,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   for (std::size_t k = 0; k < g.loops.size(); ++k) {
     const auto a = g.index[g.loops[k].a], b = g.index[g.loops[k].b];
     double r[6];
-    loop_edges[k](q[a].data(), t[a].data(), q[b].data(), t[b].data(), r);
+    loop_edges[k](x[a].data(), x[b].data(), r);
     rejected += Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).squaredNorm() > 22.46 * options_.loss_scale * options_.loss_scale;
   }
 
