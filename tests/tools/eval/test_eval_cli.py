@@ -50,11 +50,15 @@ def main():
         print(f"sequence: F1max {s['f1max']:.3f} EP {s['ep']:.3f} R@1 {s['recall_at_1']:.3f} RR {s['rr']:.3f} "
               f"RTE {s['rte_mean']:.3f} m RRE {s['rre_mean']:.3f} deg ({s['registered']} poses)")
         assert s["queries"] == 319 and s["queries_with_true_loop"] > 100, s
-        # Floors below today's figures (0.83 / 0.86 / 100 % / 0.02 m / 0.06 deg on this run).
-        assert s["f1max"] >= 0.75 and s["ep"] >= 0.78, s
+        # Floors below today's figures (0.975 / 0.976 / 100 % / 0.002 m / 0.008 deg on this run).
+        assert s["f1max"] >= 0.92 and s["ep"] >= 0.92, s
         assert s["at_f1max"]["false_loops"] == 0, s
-        assert s["rr"] == 1.0 and s["registered"] >= 60, s
-        assert s["rte_mean"] < 0.05 and s["rre_mean"] < 0.2, s
+        # Every verified top-1 detection, whatever its score, is a true loop (today: precision 1.0 at the lowest
+        # threshold): "verified" must mean right, not just "above the F1max threshold".
+        lowest = next(csv.DictReader(open(os.path.join(local, "pr.csv"))))
+        assert float(lowest["precision"]) >= 0.98, lowest
+        assert s["rr"] == 1.0 and s["registered"] >= 100, s
+        assert s["rte_mean"] < 0.01 and s["rre_mean"] < 0.05, s
         for stage in ("fingerprint", "search", "verify", "refine", "total"):
             assert s["timings"][stage]["n"] == 319 and s["timings"][stage]["median_ms"] >= 0, stage
         if plots:
@@ -92,7 +96,8 @@ def main():
         fa = sl["frame_alignment_error"]
         print(f"slam: ATE {sl['ate_odometry']:.3f} -> {sl['ate_optimised']:.3f} m, second robot's frame "
               f"{fa['m']:.3f} m / {fa['deg']:.3f} deg")
-        assert sl["ate_optimised"] < sl["ate_odometry"] / 2 and fa["connected"] and fa["m"] < 1.0 and fa["deg"] < 2.0, sl
+        # Today: 1.39 -> 0.22 m, the second robot's frame 0.23 m / 0.10 deg off.
+        assert sl["ate_optimised"] < sl["ate_odometry"] / 4 and fa["connected"] and fa["m"] < 0.6 and fa["deg"] < 1.0, sl
         if plots:
             assert os.path.getsize(os.path.join(slam, "slam.png")) > 1000
         run(["--protocol", "slam", "--sim", "--out", slam], expect=1)  # needs --server
@@ -123,7 +128,7 @@ def main():
         pr = json.load(open(os.path.join(out, "summary.json")))
         print(f"pairs: F1max {pr['f1max']:.3f} EP {pr['ep']:.3f} ({pr['positives']} + {pr['negatives']} pairs)")
         assert pr["positives"] == len(loops) and pr["negatives"] == len(far) and len(far) > 20, pr
-        assert pr["f1max"] >= 0.95 and pr["ep"] >= 0.9, pr
+        assert pr["f1max"] >= 0.97 and pr["ep"] >= 0.95, pr
 
         # 3b. "all": the three protocols over one set of stored frames give the same numbers as separate runs.
         out = os.path.join(tmp, "all")
