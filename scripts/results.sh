@@ -4,6 +4,8 @@
 # Summaries, CSV files and figures go to docs/results/ (generated, not committed).
 #   scripts/results.sh                    # everything (about two hours on 2 cores)
 #   SEQS=00 NOISES=0.05 scripts/results.sh   # a subset
+#   PARTS="real ablation" scripts/results.sh # only some parts: real, ablation, sim, slam (default: all)
+# RESULTS.md is written from every run present in docs/results, so parts can be re-run one at a time.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DATA:-../shared/data}
@@ -19,8 +21,12 @@ mkdir -p "$OUT"
 CALIB=$DATA/semantickitti_scans/sequences/00/calib.txt
 calibFor() { if [[ "$1" > "03" ]]; then echo tools/sim/calib/kitti-04-10-calib.txt; else echo "$CALIB"; fi; }
 
-# SIM_ONLY=1 skips the real pairs and the ablations (they are quick, and run first otherwise).
-if [ "${SIM_ONLY:-0}" != 1 ]; then
+PARTS=${PARTS:-"real ablation sim slam"}
+[ "${SIM_ONLY:-0}" = 1 ] && PARTS="sim slam"  # older spelling: skip the quick parts
+want() { [[ " $PARTS " == *" $1 "* ]]; }
+[ "${SLAM:-1}" = 1 ] || PARTS=${PARTS/slam/}
+
+if want real; then
 # The real SemanticKITTI scans: every listed pair scored, and the loop's pose against its reference.
 real=$OUT/real
 mkdir -p "$real"
@@ -32,6 +38,9 @@ grep -v '^#' "$DATA/semantickitti_scans/pairs.txt" | awk '$4 == 1 {printf "%d %d
 "$EVAL" --protocol pose --data "$DATA/semantickitti_scans/sequences/00" --pairs "$real/loops.txt" --gt-from-pairs \
   --out "$real/pose" --no-plots > /dev/null
 
+fi
+
+if want ablation; then
 # Ablations on the built-in route (every 3rd frame), sequence protocol.
 abl=$OUT/ablation
 mkdir -p "$abl"
@@ -49,8 +58,27 @@ for name in default prune-always no-pruning no-fine-icp no-plane-refine coarse-o
   "$EVAL" --protocol sequence --sim --frames ::3 --config "$abl/$name.yaml" --title "ablation: $name" \
     --out "$abl/$name" --no-plots > /dev/null
 done
-
+# This engine's own changes, each switched off, at 5 % label noise.
+abl=$OUT/ablation-noise
+mkdir -p "$abl"
+declare -A NOISY=(
+  [default]=""
+  [no-prune-fallback]="match: {prune_min_kept: 0}"
+  [no-plane-confirm]="verify: {confirm_below_inliers: 0}"
+  [keep-fragments]="graph: {min_extent_m: 0}"
+  [bev-50m]="verify: {bev_radius_m: 50}"
+  [no-proximity]="verify: {score_distance_m: 0}"
+  [anchor-everywhere]="refine: {min_information: 1000000000}"
+)
+for name in default no-prune-fallback no-plane-confirm keep-fragments bev-50m no-proximity anchor-everywhere; do
+  echo "== ablation at 5 % noise: $name" >&2
+  printf '%s\n' "${NOISY[$name]}" > "$abl/$name.yaml"
+  "$EVAL" --protocol sequence --sim --frames ::3 --label-noise 0.05 --config "$abl/$name.yaml" \
+    --title "ablation at 5 % noise: $name" --out "$abl/$name" --no-plots > /dev/null
+done
 fi
+
+if want sim; then
 
 for seq in $SEQS; do
   for noise in $NOISES; do
@@ -62,9 +90,10 @@ for seq in $SEQS; do
       --title "simulated KITTI $seq, label noise $noise" --out "$dir" > /dev/null
   done
 done
+fi
 
 # Pose graph (SLAM protocol) through a server: KITTI 00's path with 1 % odometry drift, one and two robots.
-if [ "${SLAM:-1}" = 1 ]; then
+if want slam; then
   srv=$OUT/slam-server
   rm -rf "$srv" && mkdir -p "$srv"
   port=$((50000 + RANDOM % 10000))

@@ -173,6 +173,7 @@ json candidateJson(const v1::Candidate& c) {
   j["refined"] = c.refined();
   j["descriptor_distance"] = c.descriptor_distance();
   j["T"] = transformJson(c.t_query_candidate());
+  if (c.information_size() > 0) j["information"] = std::vector<double>(c.information().begin(), c.information().end());
   return j;
 }
 
@@ -279,16 +280,7 @@ int runIngest(const Common& common, const IngestArgs& a) {
       j["scan_id"] = r.scan_id();
       j["frame"] = frame;
       j["loops"] = json::array();
-      for (const auto& c : r.loops()) {
-        json l;
-        l["scan_id"] = c.scan_id();
-        l["robot"] = c.robot();
-        l["session"] = c.session();
-        l["score"] = c.score();
-        l["inliers"] = c.inliers();
-        l["T"] = transformJson(c.t_query_candidate());
-        j["loops"].push_back(std::move(l));
-      }
+      for (const auto& c : r.loops()) j["loops"].push_back(candidateJson(c));
       progress.clear();
       std::cout << j.dump() << std::endl;
     } else if (r.loops_size() > 0) {

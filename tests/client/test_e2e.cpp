@@ -270,6 +270,9 @@ TEST_F(EndToEnd, CommandLine) {
   ASSERT_EQ(loop.at("T").size(), 16u);
   for (const auto& v : loop["T"]) EXPECT_TRUE(v.is_number());
   expectPose(fromJson(loop["T"]), T_a_b_.inverse(), "sglc ingest --query: 4501 vs 52");
+  ASSERT_TRUE(loop.at("refined").get<bool>());
+  ASSERT_EQ(loop.at("information").size(), 36u);  // the loop pose's information matrix, row-major
+  for (int i = 0; i < 6; ++i) EXPECT_GT(loop["information"][7 * i].get<double>(), 0.0) << "diagonal " << i;
   const std::set<std::string> keys = {"scan_id", "frame", "loops"};
   for (const auto& [k, v] : second.items()) EXPECT_TRUE(keys.count(k)) << "unexpected key " << k;
 

@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
 """Writes docs/RESULTS.md (on stdout) from the summaries scripts/results.sh leaves in RESULTS_DIR."""
+import csv
 import datetime
 import json
 import os
@@ -23,6 +24,16 @@ def pct(x):
     return "-" if x is None else f"{100 * x:.1f} %"
 
 
+def lowest_precision(run_dir):
+    """Precision at the PR curve's lowest threshold (every verified detection), from pr.csv."""
+    try:
+        with open(os.path.join(run_dir, "pr.csv")) as f:
+            rows = list(csv.DictReader(f))
+    except FileNotFoundError:
+        return None
+    return float(rows[0]["precision"]) if rows else None
+
+
 def main():
     if len(sys.argv) != 2 or not os.path.isdir(sys.argv[1]):
         sys.exit("usage: results_md.py RESULTS_DIR")
@@ -44,9 +55,11 @@ def main():
     w("Data: the simulator (`tools/sim`) following the KITTI ground-truth trajectories 00, 05 and 08 (HDL-64, "
       "seed 7; label noise applied as `LabelNoise::fromRate`), with the published pair lists of KITTI frame "
       "numbers: SSC `neg_1` lists for the pair protocol and LCR-Net `loop_distance4` for the pose protocol. "
-      "Only sequence 00's `calib.txt` is available, so its Tr converts every sequence's camera poses; the "
-      "simulated world is built along the converted path. Simulated worlds are not KITTI: these numbers show "
-      "the method and its regressions, they are not a substitute for a run on the real sequences.")
+      "00's camera poses are converted with the Tr of the shared `calib.txt`, 05's and 08's with KITTI's "
+      "04-10 Tr (`tools/sim/calib`); the simulated world is built along the converted path and the sensor "
+      "rides 1.73 m over its ground (KITTI's recorded heights disagree by up to 4 m between passes of 08). "
+      "Ground truth is the pose each frame was rendered from. Simulated worlds are not KITTI: these numbers "
+      "show the method and its regressions, they are not a substitute for a run on the real sequences.")
     w("")
     w("## The paper's numbers (real KITTI, as reported; do not mix protocols)")
     w("")
@@ -82,16 +95,20 @@ def main():
       "A true loop is a frame closer than 3 m; a top-1 candidate between 3 and 20 m counts as no detection. "
       "RR/RTE/RRE: refined poses of the true top-1 detections against ground truth.")
     w("")
+    w("\"Precision, all verified\": the precision of every verified top-1 detection whatever its score (the "
+      "PR curve's lowest threshold), i.e. how often a loop the service reports as verified is a true loop.")
+    w("")
     w("| sequence | noise | queries with a loop | F1max | EP | AUC | Recall@1 | Recall@1% | false loops at F1max "
-      "| RR | RTE mean | RRE mean |")
-    w("|---|---|---|---|---|---|---|---|---|---|---|---|")
+      "| precision, all verified | RR | RTE mean | RRE mean |")
+    w("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in runs:
         s = load(os.path.join(root, r, "sequence", "summary.json"))
         if s:
             seq, noise = r[4:6], r.split("noise")[1]
             w(f"| {seq} | {pct(float(noise))} | {s['queries_with_true_loop']} / {s['queries']} | {f3(s['f1max'])} | "
               f"{f3(s['ep'])} | {f3(s['auc'])} | {f3(s['recall_at_1'])} | {f3(s['recall_at_1pct'])} | "
-              f"{s['at_f1max']['false_loops']} | {pct(s['rr'])} | {f3(s['rte_mean'])} m | {f3(s['rre_mean'])} deg |")
+              f"{s['at_f1max']['false_loops']} | {f3(lowest_precision(os.path.join(root, r, 'sequence')))} | "
+              f"{pct(s['rr'])} | {f3(s['rte_mean'])} m | {f3(s['rre_mean'])} deg |")
     w("")
 
     w("## Pose protocol (LCR-Net loop_distance4 pairs, ground truth from the simulated trajectory)")
@@ -118,10 +135,14 @@ def main():
             continue
         p = load(os.path.join(root, r, "pairs", "summary.json")) or {}
         q = load(os.path.join(root, r, "pose", "summary.json")) or {}
-        met = (p.get("f1max", 0) >= 0.97 and p.get("ep", 0) >= 0.95 and q.get("rr", 0) == 1.0
-               and q.get("rte_mean", 9) <= 0.05 and q.get("rre_mean", 9) <= 0.3)
+        missed = [name for name, ok in [("F1max", p.get("f1max", 0) >= 0.97), ("EP", p.get("ep", 0) >= 0.95),
+                                        ("RR", q.get("rr", 0) == 1.0), ("RTE", q.get("rte_mean", 9) <= 0.05),
+                                        ("RRE", q.get("rre_mean", 9) <= 0.3)] if not ok]
         w(f"| {r[4:6]} | {f3(p.get('f1max'))} | {f3(p.get('ep'))} | {pct(q.get('rr'))} | {f3(q.get('rte_mean'))} m | "
-          f"{f3(q.get('rre_mean'))} deg | {'yes' if met else '**no**'} |")
+          f"{f3(q.get('rre_mean'))} deg | {'yes' if not missed else '**no**: ' + ', '.join(missed)} |")
+    w("")
+    w("A pose-protocol pair that fails verification counts against RR; the unregistered pairs at 5 % noise are "
+      "places whose noisy labels leave too few consistent landmarks or too little background agreement.")
     w("")
 
     w("## Time per frame (sequence protocol, in-process, medians / p90 in ms)")
@@ -146,7 +167,10 @@ def main():
           f"non-loops): F1max {f3(p['f1max'])}, EP {f3(p['ep'])}.")
     if q:
         w(f"Pose of the loop against pairs.txt's reference: RR {pct(q['rr'])}, RTE {q['rte_mean']:.3f} m, "
-          f"RRE {q['rre_mean']:.3f} deg (paper, KITTI 00 mean: 0.04 m, 0.21 deg).")
+          f"RRE {q['rre_mean']:.3f} deg (paper, KITTI 00 mean: 0.04 m, 0.21 deg). pairs.txt's pose comes from "
+          f"SemanticKITTI's trajectory and is itself 36 mm / 0.12 deg from a dense point-to-plane registration "
+          f"of the two full scans; against that registration the engine is 6 mm / 0.10 deg off "
+          f"(`RealPipeline.LoopPairAgreesWithDenseRegistration`).")
     w("")
 
     w("## Ablations (built-in route, every 3rd frame, sequence protocol, no label noise)")
@@ -169,6 +193,28 @@ def main():
     w("The node descriptor's global part cannot be switched off by configuration (`descriptor.k_eigen` >= 1), "
       "so that ablation of the paper's table is not run.")
     w("")
+    noisy = [(name, what) for name, what in [
+        ("default", "defaults"),
+        ("no-prune-fallback", "no fallback when pruning keeps too few matches (`match.prune_min_kept: 0`)"),
+        ("no-plane-confirm", "no plane confirmation of weak loops (`verify.confirm_below_inliers: 0`)"),
+        ("keep-fragments", "fragments kept as nodes (`graph.min_extent_m: 0`)"),
+        ("bev-50m", "background agreement out to 50 m (`verify.bev_radius_m: 50`)"),
+        ("no-proximity", "no proximity factor in the score (`verify.score_distance_m: 0`)"),
+        ("anchor-everywhere", "instance pairs anchor every direction (`refine.min_information: 1e9`)")]
+        if load(os.path.join(root, "ablation-noise", name, "summary.json"))]
+    if noisy:
+        w("## Ablations of this engine's own changes (built-in route, every 3rd frame, 5 % label noise)")
+        w("")
+        w("\"Precision, all verified\" as in the sequence table.")
+        w("")
+        w("| configuration | F1max | EP | Recall@1 | precision, all verified | RR | RTE mean | RRE mean |")
+        w("|---|---|---|---|---|---|---|---|")
+        for name, what in noisy:
+            d = os.path.join(root, "ablation-noise", name)
+            s = load(os.path.join(d, "summary.json"))
+            w(f"| {what} | {f3(s['f1max'])} | {f3(s['ep'])} | {f3(s['recall_at_1'])} | {f3(lowest_precision(d))} | "
+              f"{pct(s['rr'])} | {f3(s['rte_mean'])} m | {f3(s['rre_mean'])} deg |")
+        w("")
     w("## Pose graph (SLAM protocol through a server: KITTI 00's path, 1 % odometry drift)")
     w("")
     w("ATE after SE(3) alignment; odometry aligned per robot, optimised poses of all robots with one alignment. "

@@ -74,7 +74,11 @@ struct RansacConfig {
 
 struct VerifyConfig {
   double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
-  double t_b = 0.5;               // background agreement threshold
+  // Background agreement threshold. The paper: 0.5 on KITTI, 0.45 where segmentation is worse (Ford Campus).
+  // Ours: 0.45, for labels from a real network (simulated KITTI 00 at 5 % label noise: loop_distance4 pairs
+  // registered 98.7 % -> 99.4 %, with no more false loops among ten descriptor neighbours per frame at 0 % or
+  // 5 % noise; the real negatives that pass t_b are scans 27-30 m apart, which max_translation rejects).
+  double t_b = 0.45;
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
   // Ours: the score is multiplied by exp(-|t| / this), so of two verified candidates the nearer revisit ranks
   // first (<= 0: no such factor). It does not change which candidates are loops.
