@@ -233,6 +233,26 @@ std::vector<Plane> movedPlanes(const std::vector<Plane>& planes, const Mat4d& T)
   return out;
 }
 
+// A straight corridor 60 m long: road and two facades along x, planes every metre. Nothing fixes x.
+std::vector<Plane> corridorPlanes() {
+  std::vector<Plane> planes;
+  auto add = [&](Vec3f c, Vec3f n) {
+    Plane p;
+    p.centroid = c;
+    p.normal = n;
+    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
+    planes.push_back(p);
+  };
+  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
+    for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
+    for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
+      add({x, 8.0f, z}, {0, -1, 0});
+      add({x, -8.0f, z}, {0, 1, 0});
+    }
+  }
+  return planes;
+}
+
 TEST(RefinePlanes, BoxRoomConverges) {
   const Mat4d T = makeT(2.0, 0.25, -0.15, 0.05, 0.5, -0.3);
   const auto query = roomPlanes();
@@ -279,21 +299,7 @@ TEST(RefinePlanes, BiasedAnchorDoesNotMoveAConstrainedPose) {
 
 TEST(RefinePlanes, CorridorTakesTheFreeDirectionFromTheAnchor) {
   // A straight corridor: road and two facades along x. Planes say nothing about x; the anchor does.
-  std::vector<Plane> query;
-  auto add = [&](Vec3f c, Vec3f n) {
-    Plane p;
-    p.centroid = c;
-    p.normal = n;
-    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
-    query.push_back(p);
-  };
-  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
-    for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
-    for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
-      add({x, 8.0f, z}, {0, -1, 0});
-      add({x, -8.0f, z}, {0, 1, 0});
-    }
-  }
+  const std::vector<Plane> query = corridorPlanes();
   const Mat4d T = makeT(1.0, 1.3, 0.2, 0.0);
   const auto candidate = movedPlanes(query, T.inverse());
   const PlaneIndex index(query, 1.0);
@@ -339,20 +345,7 @@ TEST(RefinePlanes, InformationIsTheResidualCurvature) {
 }
 
 TEST(RefinePlanes, InformationIsSmallAlongACorridor) {
-  std::vector<Plane> query;
-  auto add = [&](Vec3f c, Vec3f n) {
-    Plane p;
-    p.centroid = c;
-    p.normal = n;
-    query.push_back(p);
-  };
-  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
-    for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
-    for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
-      add({x, 8.0f, z}, {0, -1, 0});
-      add({x, -8.0f, z}, {0, 1, 0});
-    }
-  }
+  const std::vector<Plane> query = corridorPlanes();
   const Mat4d T = makeT(0.0, 0.0, 0.3, 0.0);
   const PlaneIndex index(query, 1.0);
   const RefineResult r = refinePlanes(query, index, movedPlanes(query, T.inverse()), {}, Mat4d::Identity(), RefineConfig{});
