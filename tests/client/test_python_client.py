@@ -204,6 +204,15 @@ try:
           "4501 (robot b) finds 52 (robot a)")
     if b.loops:
         check_pose(sglc_client.to_matrix(b.loops[0].t_query_candidate), np.linalg.inv(ref), "query 4501 -> 52")
+        info = sglc_client.information_matrix(b.loops[0])
+        check(info is not None and info.shape == (6, 6) and np.allclose(info, info.T, rtol=1e-9, atol=1e-9 * abs(info).max())
+              and np.linalg.eigvalsh(info).min() > 0, "a refined loop carries a 6x6 positive definite information matrix")
+    check(sglc_client.information_matrix([]) is None, "no information: None")
+    try:
+        sglc_client.information_matrix([1.0] * 5)
+        check(False, "information_matrix rejects a wrong length")
+    except ValueError as e:
+        check("36" in str(e), "information_matrix names the expected length")
 
     q = c.query("py", scan_id=a.scan_id, scope="other")
     hit = [x for x in q.candidates if x.scan_id == b.scan_id]

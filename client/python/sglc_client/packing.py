@@ -132,3 +132,15 @@ def to_matrix(transform):
         raise ValueError(f"transform has {len(values)} values, expected 16 (row-major 4x4)")
     np = _np()
     return np.array(values, dtype=np.float64).reshape(4, 4)
+
+
+def information_matrix(candidate):
+    """A Candidate's loop-pose information -> numpy 6x6 float64 array (translation then rotation, for a right
+    perturbation in the candidate's frame), or None when the candidate was not refined."""
+    values = list(candidate.information) if hasattr(candidate, "information") else list(candidate)
+    if not values:
+        return None
+    if len(values) != 36:
+        raise ValueError(f"information has {len(values)} values, expected 36 (row-major 6x6)")
+    np = _np()
+    return np.array(values, dtype=np.float64).reshape(6, 6)
