@@ -103,6 +103,7 @@ struct GraphOptimiser::MapGraph {
   std::vector<Node> nodes;
   std::unordered_map<std::int64_t, std::size_t> index;  // scan id -> node
   std::vector<Loop> loops;
+  std::set<std::pair<std::int64_t, std::int64_t>> pairs;  // (a, b) of the loops above
   std::int64_t last_scan = 0, last_loop = 0;
   std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
 };
@@ -138,6 +139,15 @@ void GraphOptimiser::loopsAdded(const std::string& map) {
   {
     std::lock_guard lock(mutex_);
     if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+  }
+  wake_.notify_all();
+}
+
+void GraphOptimiser::scansRemoved(const std::string& map) {
+  {
+    std::lock_guard lock(mutex_);
+    stale_.insert(map);
+    due_[map] = Clock::now();
   }
   wake_.notify_all();
 }
@@ -185,18 +195,26 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   std::lock_guard one(optimise_mutex_);
   const auto t0 = Clock::now();
   auto& slot = graphs_[map];
+  {
+    std::lock_guard lock(mutex_);
+    if (stale_.erase(map)) slot.reset();
+  }
   if (!slot) slot = std::make_unique<MapGraph>();
   MapGraph& g = *slot;
 
-  // New rows since the last optimisation. Scans deleted meanwhile make the whole graph stale: rebuild.
+  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above).
   auto nodes = store_.graphNodes(map, g.last_scan);
   auto loops = store_.loops(map, g.last_loop);
   // A fresh graph (server start) starts from the poses kept in the database, so a restart continues
   // from where the last run stopped.
+  // Loops up to `accounted` are already reflected in those poses: they are not new to the solve below.
   std::unordered_map<std::int64_t, Mat4d> kept;
-  if (g.nodes.empty())
+  std::int64_t accounted = 0;
+  if (g.nodes.empty()) {
     for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
       kept[p.scan_id] = p.pose;
+    accounted = store_.optimisedThroughLoop(map);
+  }
   for (const auto& n : nodes) {
     g.last_scan = std::max(g.last_scan, n.scan_id);
     if (!n.odometry_pose) continue;
@@ -206,10 +224,17 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
                        Pose::of(k != kept.end() ? k->second : *n.odometry_pose), k != kept.end()});
     g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
   }
-  const std::size_t known_loops = g.loops.size();
+  std::size_t known_loops = g.loops.size();
   for (const auto& l : loops) {
     g.last_loop = std::max(g.last_loop, l.id);
     if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
+    // A second loop for the same pair replaced the first in the database: drop the first here too.
+    if (!g.pairs.insert({l.query_scan, l.candidate_scan}).second) {
+      const auto old = std::find_if(g.loops.begin(), g.loops.end(),
+                                    [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; });
+      if (static_cast<std::size_t>(old - g.loops.begin()) < known_loops) --known_loops;
+      g.loops.erase(old);
+    }
     g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness, l.information});
   }
 
@@ -327,7 +352,9 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   // first, then the nominal one. Loops that agree with the warm-started graph need only the second solve.
   bool wide = false;
   for (std::size_t k = known_loops; k < g.loops.size() && !wide; ++k) {
-    const auto a = g.index[g.loops[k].a], b = g.index[g.loops[k].b];
+    const auto& l = g.loops[k];
+    if (l.id <= accounted && kept.count(l.a) && kept.count(l.b)) continue;  // solved before a restart
+    const auto a = g.index[l.a], b = g.index[l.b];
     double r[6];
     loop_edges[k](x[a].data(), x[b].data(), r);
     wide = Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).norm() > kWideLoss * options_.loss_scale;
@@ -389,7 +416,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     frames.push_back(f);
   }
   GraphEvent event;
-  event.graph_version = store_.saveOptimised(map, poses, frames);
+  event.graph_version = store_.saveOptimised(map, poses, frames, g.last_loop);
   event.loops = static_cast<std::int64_t>(g.loops.size());
   event.nodes = static_cast<std::int64_t>(g.nodes.size());
   event.rejected_loops = rejected;

@@ -53,6 +53,8 @@ class GraphOptimiser {
 
   // New loops (or scans) in `map`: optimise soon.
   void loopsAdded(const std::string& map);
+  // Scans (and with them loops) of `map` were deleted: rebuild its graph from the database and optimise now.
+  void scansRemoved(const std::string& map);
   // The latest event of the map once its graph version exceeds `after`, waiting at most `timeout`; nullopt on
   // timeout or when stopping.
   std::optional<GraphEvent> waitForVersion(const std::string& map, std::int64_t after,
@@ -75,6 +77,7 @@ class GraphOptimiser {
   std::condition_variable changed_;  // watchers
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
+  std::set<std::string> stale_;  // maps whose in-memory graph must be rebuilt
   std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
   std::mutex optimise_mutex_;  // one optimisation at a time
   bool stop_ = false;

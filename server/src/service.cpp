@@ -496,6 +496,8 @@ grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::
   return run(ctx, {"DeleteSession", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteSession(req->map(), req->robot(), req->session()));
+    // The pose graph drops the removed scans and their loops and is solved again without them.
+    if (auto* graph = state_.graph(); graph && resp->scans_removed() > 0) graph->scansRemoved(req->map());
   });
 }
 
@@ -504,6 +506,8 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
   return run(ctx, {"DeleteRobot", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteRobot(req->map(), req->robot()));
+    // The pose graph drops the removed scans and their loops and is solved again without them.
+    if (auto* graph = state_.graph(); graph && resp->scans_removed() > 0) graph->scansRemoved(req->map());
   });
 }
 

@@ -71,6 +71,10 @@ const std::vector<const char*> kMigrations = {
     R"sql(
     ALTER TABLE loops ADD COLUMN information BLOB;
     )sql",
+    // 3 -> 4: the last loop the stored optimised poses account for (0: unknown, all loops are new).
+    R"sql(
+    ALTER TABLE maps ADD COLUMN graph_loop INTEGER NOT NULL DEFAULT 0;
+    )sql",
 };
 
 std::vector<std::uint8_t> informationBlob(const Mat6d& I) {
@@ -562,7 +566,7 @@ class SqliteMapStore final : public MapStore {
   }
 
   std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
-                             const std::vector<SessionFrame>& frames) override {
+                             const std::vector<SessionFrame>& frames, std::int64_t through_loop) override {
     for (const auto& p : poses)
       if (!p.pose.allFinite()) throw StorageError(Code::kInvalidArgument, "optimised pose is not finite");
     for (const auto& f : frames)
@@ -597,7 +601,10 @@ class SqliteMapStore final : public MapStore {
         st.reset();
       }
     }
-    sql::Stmt(writer_, "UPDATE maps SET graph_version = graph_version + 1 WHERE id = ?").bind(1, map_id).run();
+    sql::Stmt(writer_, "UPDATE maps SET graph_version = graph_version + 1, graph_loop = ?2 WHERE id = ?1")
+        .bind(1, map_id)
+        .bind(2, through_loop)
+        .run();
     sql::Stmt v(writer_, "SELECT graph_version FROM maps WHERE id = ?");
     v.bind(1, map_id);
     const std::int64_t version = v.step() ? v.i64(0) : 0;
@@ -652,6 +659,14 @@ class SqliteMapStore final : public MapStore {
     const auto map_id = mapId(map);
     auto reader = acquireReader();
     sql::Stmt st(*reader, "SELECT graph_version FROM maps WHERE id = ?");
+    st.bind(1, map_id);
+    return st.step() ? st.i64(0) : 0;
+  }
+
+  std::int64_t optimisedThroughLoop(const std::string& map) const override {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    sql::Stmt st(*reader, "SELECT graph_loop FROM maps WHERE id = ?");
     st.bind(1, map_id);
     return st.step() ? st.i64(0) : 0;
   }

@@ -151,9 +151,13 @@ TEST(GraphOptimiser, ARestartContinuesFromTheStoredPosesAndWakesWatchers) {
   std::vector<Mat4d> first;
   {
     auto store = storage::MapStore::open(options(path));
-    drive(*store);
+    const auto d = drive(*store);
     GraphOptimiser graph(*store, {});
     graph.optimiseNow("m");
+    // A false loop far off the solution, added once the graph is solved: discounted, and it must stay so
+    // after the restart (not re-solved as if new, which would move the poses).
+    store->addLoop("m", {0, d.ids[200], d.ids[20], pose(0.0, 1.0, 0.0), 0.9, 0.9, 0.02, 30});
+    EXPECT_GE(graph.optimiseNow("m").rejected_loops, 1);
     first = optimised(*store);
   }
   auto store = storage::MapStore::open(options(path));
@@ -173,6 +177,49 @@ TEST(GraphOptimiser, ARestartContinuesFromTheStoredPosesAndWakesWatchers) {
   EXPECT_FALSE(graph.waitForVersion("m", stored + 1, std::chrono::milliseconds(300)).has_value());
   graph.stop();
   EXPECT_TRUE(graph.stopping());
+}
+
+// Deleting a session takes its scans and loops out of the graph: the map is solved again without them, from
+// the poses it had, and a loop recorded twice for the same pair counts once (the second replaces the first).
+TEST(GraphOptimiser, DeletedScansAndReplacedLoopsLeaveTheGraph) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  const auto d = drive(*store);
+  GraphOptimiser graph(*store, {.debounce = std::chrono::milliseconds(10)});
+  const auto e = graph.optimiseNow("m");
+  ASSERT_EQ(e.loops, 39);
+  const auto solved = optimised(*store);
+  // A second robot whose (false) loops claim the first lap is 3 m off: they pull until it is deleted.
+  std::vector<std::int64_t> other;
+  for (int i = 0; i < 10; ++i) {
+    const auto fp = randomFingerprint(1000 + i);
+    storage::NewScan ns{.map = "m", .robot = "x", .session = "s", .seq = i, .odometry_pose = pose(0, 2.0 * i, 0),
+                        .fingerprint = &fp};
+    other.push_back(store->addScan(ns));
+  }
+  for (int i = 0; i < 10; ++i)
+    store->addLoop("m", {0, other[static_cast<std::size_t>(i)], d.ids[static_cast<std::size_t>(10 + i)],
+                         pose(0, 3.0, 0), 0.9, 0.9, 0.02, 30});
+  // The same pair again: replaces the loop above in the database and must do so in the graph.
+  store->addLoop("m", {0, other[0], d.ids[10], pose(0, 3.0, 0), 0.9, 0.9, 0.02, 31});
+  const auto e2 = graph.optimiseNow("m");
+  EXPECT_EQ(e2.nodes, 250);
+  EXPECT_EQ(e2.loops, 49);
+  const auto version = store->graphVersion("m");
+  EXPECT_EQ(store->deleteRobot("m", "x"), 10);
+  graph.scansRemoved("m");
+  const auto e3 = graph.waitForVersion("m", version, std::chrono::seconds(60));
+  ASSERT_TRUE(e3.has_value());
+  EXPECT_EQ(e3->nodes, 240);
+  EXPECT_EQ(e3->loops, 39);
+  EXPECT_EQ(e3->rejected_loops, 0);
+  const auto after = optimised(*store);
+  ASSERT_EQ(after.size(), solved.size());
+  double moved = 0;
+  for (std::size_t i = 0; i < after.size(); ++i)
+    moved = std::max(moved, (after[i].block<3, 1>(0, 3) - solved[i].block<3, 1>(0, 3)).norm());
+  EXPECT_LT(moved, 0.01);  // back where it was without the deleted robot
+  graph.stop();
 }
 
 }  // namespace

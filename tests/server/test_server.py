@@ -469,6 +469,17 @@ def test_pose_graph(tmp):
         a_before = dict(before)
         moved = max(np.abs(np.array(m) - np.array(a_before[i])).max() for i, m in after)
         assert moved < 0.05, f"poses moved by {moved} across a restart"
+        # Deleting robot b takes its scans and loops out of the graph, which is solved again at once.
+        events = s.graph.WatchMap(pb.WatchMapRequest(map="m"), timeout=60)
+        removed = s.admin.DeleteRobot(pb.DeleteRobotRequest(map="m", robot="b")).scans_removed
+        assert removed == n - half, removed
+        for ev in events:
+            if ev.nodes == n:
+                break
+        events.cancel()
+        assert ev.nodes == n and ev.loops < loops, (ev.nodes, ev.loops)
+        left = s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses
+        assert len(left) == n and all(p.optimised for p in left), len(left)
     finally:
         assert s.stop() == 0
 

@@ -486,17 +486,19 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
   TempDir dir;
   const auto path = dir.file("map.db");
   std::vector<Stored> all;
+  std::int64_t id_a2 = 0;
   {
     auto store = MapStore::open(options(path));
     all = fill(*store, 2, 1, 3);  // r0/s0: all[0..2], r1/s0: all[3..5]
     EXPECT_EQ(store->graphVersion("m"), 0);
+    EXPECT_EQ(store->optimisedThroughLoop("m"), 0);
     const LoopRecord a{0, all[2].id, all[0].id, rigid(0.1, 1, 2), 0.8, 0.9, 0.05, 12};
     const LoopRecord b{0, all[4].id, all[1].id, rigid(-0.2, 3, 0), 0.6, 0.7, 0.08, 7};
     const auto id_a = store->addLoop("m", a);
     store->addLoop("m", b);
     auto again = a;
     again.score = 0.9;
-    const auto id_a2 = store->addLoop("m", again);  // replaces the first
+    id_a2 = store->addLoop("m", again);  // replaces the first
     EXPECT_GT(id_a2, id_a);
     EXPECT_EQ(errorCode([&] { store->addLoop("m", {0, all[0].id, 999999, Mat4d::Identity(), 0, 0, 0, 0}); }),
               StorageError::Code::kNotFound);
@@ -513,12 +515,14 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
     EXPECT_EQ(nodes[3].seq, 0);
     std::vector<SessionFrame> frames{{nodes[0].session_id, "", "", Mat4d::Identity(), true},
                                      {nodes[3].session_id, "", "", rigid(0.5, 10, -4), true}};
-    EXPECT_EQ(store->saveOptimised("m", poses, frames), 1);
-    EXPECT_EQ(store->saveOptimised("m", poses, frames), 2);
+    EXPECT_EQ(store->saveOptimised("m", poses, frames, id_a), 1);
+    EXPECT_EQ(store->optimisedThroughLoop("m"), id_a);
+    EXPECT_EQ(store->saveOptimised("m", poses, frames, id_a2), 2);
   }
   {
     auto store = MapStore::open(options(path));  // everything survives a reopen
     EXPECT_EQ(store->graphVersion("m"), 2);
+    EXPECT_EQ(store->optimisedThroughLoop("m"), id_a2);
     const auto loops = store->loops("m");
     ASSERT_EQ(loops.size(), 2u);
     EXPECT_EQ(loops[1].query_scan, all[2].id);
@@ -551,12 +555,13 @@ TEST(MapStore, MigratesAVersion1FileForward) {
     auto store = MapStore::open(options(path));
     all = fill(*store, 1, 1, 4);
   }
-  {  // Turn it back into a version-1 file: no pose-graph tables, no graph_version column.
+  {  // Turn it back into a version-1 file: no pose-graph tables, no graph_version or graph_loop column.
     sqlite3* db = nullptr;
     ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
     ASSERT_EQ(sqlite3_exec(db,
                            "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
-                           " ALTER TABLE maps DROP COLUMN graph_version; PRAGMA user_version=1;",
+                           " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop;"
+                           " PRAGMA user_version=1;",
                            nullptr, nullptr, nullptr),
               SQLITE_OK)
         << sqlite3_errmsg(db);
@@ -586,10 +591,11 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
     all = fill(*store, 1, 1, 4);
     store->addLoop("m", {0, all[3].id, all[0].id, rigid(0.1, 1, 2), 0.5, 0.5, 0.1, 5});  // no information
   }
-  {  // Back to a version-2 file: no information column.
+  {  // Back to a version-2 file: no information column, no graph_loop.
     sqlite3* db = nullptr;
     ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-    ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE loops DROP COLUMN information; PRAGMA user_version=2;", nullptr, nullptr,
+    ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
+                           " PRAGMA user_version=2;", nullptr, nullptr,
                            nullptr),
               SQLITE_OK)
         << sqlite3_errmsg(db);
@@ -601,6 +607,7 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
     auto loops = store->loops("m");
     ASSERT_EQ(loops.size(), 1u);
     EXPECT_FALSE(loops[0].information.has_value());  // recorded before: none
+    EXPECT_EQ(store->optimisedThroughLoop("m"), 0);   // schema 4's column, added by the migration
     LoopRecord with{0, all[2].id, all[1].id, rigid(-0.2, 3, 0), 0.6, 0.7, 0.08, 7};
     with.information = info;
     store->addLoop("m", with);

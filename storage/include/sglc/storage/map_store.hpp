@@ -222,9 +222,10 @@ class MapStore {
   // Scans with id > after_scan, in id order.
   virtual std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan = 0) const = 0;
   // Replaces the optimised poses of the given scans and the given sessions' frames in one transaction and
-  // bumps the map's graph version, which it returns. Scans or sessions deleted meanwhile are skipped.
+  // bumps the map's graph version, which it returns. `through_loop` is the id of the last loop the poses
+  // account for (see optimisedThroughLoop). Scans or sessions deleted meanwhile are skipped.
   virtual std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
-                                     const std::vector<SessionFrame>& frames) = 0;
+                                     const std::vector<SessionFrame>& frames, std::int64_t through_loop) = 0;
   // Optimised poses in scan-id order: of one robot (and session) or the whole map (empty names), scan ids
   // > after_scan, at most `limit`.
   virtual std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot,
@@ -233,9 +234,12 @@ class MapStore {
   virtual std::vector<SessionFrame> sessionFrames(const std::string& map) const = 0;
   // 0 until the first saveOptimised; survives restarts.
   virtual std::int64_t graphVersion(const std::string& map) const = 0;
+  // The through_loop of the last saveOptimised (0 before any, or in files from before schema 4): loops with
+  // larger ids are not yet reflected in the stored poses.
+  virtual std::int64_t optimisedThroughLoop(const std::string& map) const = 0;
 };
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 3;
+inline constexpr int kSchemaVersion = 4;
 
 }  // namespace sglc::storage
