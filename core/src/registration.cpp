@@ -390,6 +390,13 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     }
     const double wa = config.instance_weight;
     if (wa > 0 && !anchor_pairs.empty()) {
+      // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
+      const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
+      const Eigen::SelfAdjointEigenSolver<Mat6> eig(Hs);
+      Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
+      for (int k = 0; k < 6; ++k)
+        if (eig.eigenvalues()[k] < config.min_information) P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
+      if (P.isZero()) return true;  // fully constrained: the pairs are not needed
       Mat6 Ha = Mat6::Zero();
       Vec6 ga = Vec6::Zero();
       for (const auto& [qp, cp] : anchor_pairs) {
@@ -402,20 +409,12 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
         Ha += wa * J.transpose() * J;
         ga += wa * J.transpose() * r;
       }
-      // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
-      const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
-      const Eigen::SelfAdjointEigenSolver<Mat6> eig(Hs);
-      Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
-      for (int k = 0; k < 6; ++k)
-        if (eig.eigenvalues()[k] < config.min_information) P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
-      if (!P.isZero()) {
-        const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
-        const Vec6 gas = scale.asDiagonal() * ga;
-        // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
-        const Vec6 inv = scale.cwiseInverse();
-        H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
-        g += inv.asDiagonal() * (P * gas);
-      }
+      const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
+      const Vec6 gas = scale.asDiagonal() * ga;
+      // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
+      const Vec6 inv = scale.cwiseInverse();
+      H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
+      g += inv.asDiagonal() * (P * gas);
     }
     return true;
   };

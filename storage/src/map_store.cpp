@@ -77,21 +77,19 @@ const std::vector<const char*> kMigrations = {
     )sql",
 };
 
-std::vector<std::uint8_t> informationBlob(const Mat6d& I) {
-  std::vector<std::uint8_t> out(36 * sizeof(double));
-  double v[36];
-  for (int k = 0; k < 36; ++k) v[k] = I(k / 6, k % 6);
-  std::memcpy(out.data(), v, sizeof(v));
+// The first `rows` rows of M, row-major, as native doubles.
+template <typename M>
+std::vector<std::uint8_t> rowsBlob(const M& m, int rows) {
+  std::vector<std::uint8_t> out(static_cast<std::size_t>(rows * m.cols()) * sizeof(double));
+  for (int k = 0; k < rows * m.cols(); ++k) {
+    const double v = m(k / m.cols(), k % m.cols());
+    std::memcpy(&out[static_cast<std::size_t>(k) * sizeof(double)], &v, sizeof(double));
+  }
   return out;
 }
 
-std::vector<std::uint8_t> poseBlob(const Mat4d& T) {
-  std::vector<std::uint8_t> out(12 * sizeof(double));
-  double v[12];
-  for (int k = 0; k < 12; ++k) v[k] = T(k / 4, k % 4);
-  std::memcpy(out.data(), v, sizeof(v));
-  return out;
-}
+std::vector<std::uint8_t> informationBlob(const Mat6d& I) { return rowsBlob(I, 6); }
+std::vector<std::uint8_t> poseBlob(const Mat4d& T) { return rowsBlob(T, 3); }  // the last row is implied
 
 std::optional<Mat4d> poseFrom(std::span<const std::uint8_t> blob) {
   if (blob.size() != 12 * sizeof(double)) return std::nullopt;
