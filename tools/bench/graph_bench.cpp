@@ -18,6 +18,8 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 
 #include "graph_optimiser.hpp"
 #include "sglc/descriptors.hpp"
@@ -86,6 +88,8 @@ int main(int argc, char** argv) {
   app.add_option("--scans", scans, "scans in the map")->check(CLI::Range(200, 200000));
   app.add_option("--events", events, "loop events timed on the full map")->check(CLI::Range(1, 10000));
   CLI11_PARSE(app, argc, argv);
+  // The optimiser logs each event; stdout carries only the JSON.
+  spdlog::set_default_logger(spdlog::stderr_logger_st("bench"));
 
   fs::remove_all(dir);
   fs::create_directories(dir);
