@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
+#include <utility>
 
 namespace sglc {
 
@@ -65,7 +65,7 @@ std::vector<Node> buildNodes(const Points& points, const std::vector<Cluster>& c
   }
   std::vector<Node> nodes;
   nodes.reserve(order.size());
-  for (int i : order) nodes.push_back(all[i]);
+  for (int i : order) nodes.push_back(std::move(all[i]));
   if (kept_clusters) *kept_clusters = order;
   return nodes;
 }

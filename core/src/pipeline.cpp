@@ -134,10 +134,10 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   r.graph_similarity = std::exp(-ransac.mean_residual);
   r.background_similarity = bevAgreement(query.background, candidate.background, query.background_cell, r.T,
                                          c.verify.bev_cell_m, c.verify.bev_radius_m);
+  const double translation = r.T.topRightCorner<3, 1>().norm();
   r.score = r.graph_similarity * r.background_similarity * (1.0 - std::exp(-r.inliers / 3.0));
   // Nearer revisits rank first: they share more of the scene, so their pose is the more reliable.
-  if (c.verify.score_distance_m > 0) r.score *= std::exp(-r.T.topRightCorner<3, 1>().norm() / c.verify.score_distance_m);
-  const double translation = r.T.topRightCorner<3, 1>().norm();
+  if (c.verify.score_distance_m > 0) r.score *= std::exp(-translation / c.verify.score_distance_m);
   if (r.graph_similarity < c.verify.t_g) r.reason = "graph similarity below t_g";
   else if (r.background_similarity < c.verify.t_b) r.reason = "background similarity below t_b";
   else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)

@@ -100,19 +100,28 @@ Mat6d rightInformation(const Mat6d& left, const Mat4d& T) {
   return M.transpose() * left * M;
 }
 
-}  // namespace
-
-Mat6d pointPairInformation(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double rmse) {
-  Mat6d H = Mat6d::Zero();
+// Gauss-Newton terms of point pairs (query point, candidate point) at T, for a left perturbation (rotation
+// first): H += w J'J, g += w J'r with r = T * candidate - query and J = d(T * candidate)/d(omega, v).
+void addPointPairs(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double w, Mat6d& H,
+                   Eigen::Matrix<double, 6, 1>& g) {
   const Mat3d R = T.topLeftCorner<3, 3>();
   const Vec3d t = T.topRightCorner<3, 1>();
   for (const auto& [qp, cp] : pairs) {
     const Vec3d x = R * cp.cast<double>() + t;
     Eigen::Matrix<double, 3, 6> J;
-    J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;
+    J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;  // -[x]_x
     J.rightCols<3>().setIdentity();
-    H += J.transpose() * J;
+    H += w * J.transpose() * J;
+    g += w * J.transpose() * (x - qp.cast<double>());
   }
+}
+
+}  // namespace
+
+Mat6d pointPairInformation(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double rmse) {
+  Mat6d H = Mat6d::Zero();
+  Eigen::Matrix<double, 6, 1> g = Eigen::Matrix<double, 6, 1>::Zero();
+  addPointPairs(pairs, T, 1.0, H, g);
   const double sigma = std::max(rmse, kMinResidualSigma);
   return rightInformation(H / (sigma * sigma), T);
 }
@@ -368,10 +377,8 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   constexpr double kLever = 10.0;
   Vec6 scale;
   scale << 1.0 / kLever, 1.0 / kLever, 1.0 / kLever, 1.0, 1.0, 1.0;
-  // Gauss-Newton normal equations at T (left perturbation, rotation first), associating first; false when
-  // fewer than 6 planes associate.
+  // Gauss-Newton normal equations at T (left perturbation, rotation first) over the current association.
   auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
-    if (associate(T) < 6) return false;
     const Mat3d R = T.topLeftCorner<3, 3>();
     const Vec3d t = T.topRightCorner<3, 1>();
     H.setZero();
@@ -396,19 +403,10 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
       for (int k = 0; k < 6; ++k)
         if (eig.eigenvalues()[k] < config.min_information) P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
-      if (P.isZero()) return true;  // fully constrained: the pairs are not needed
+      if (P.isZero()) return;  // fully constrained: the pairs are not needed
       Mat6 Ha = Mat6::Zero();
       Vec6 ga = Vec6::Zero();
-      for (const auto& [qp, cp] : anchor_pairs) {
-        const Vec3d x = R * cp.cast<double>() + t;
-        const Vec3d r = x - qp.cast<double>();
-        Eigen::Matrix<double, 3, 6> J;
-        // d(R x + t)/d(omega, v) for a left perturbation: [-[x]_x | I].
-        J.leftCols<3>() << 0, x.z(), -x.y(), -x.z(), 0, x.x(), x.y(), -x.x(), 0;
-        J.rightCols<3>().setIdentity();
-        Ha += wa * J.transpose() * J;
-        ga += wa * J.transpose() * r;
-      }
+      addPointPairs(anchor_pairs, T, wa, Ha, ga);
       const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
       const Vec6 gas = scale.asDiagonal() * ga;
       // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
@@ -416,12 +414,12 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
       g += inv.asDiagonal() * (P * gas);
     }
-    return true;
   };
   Mat6 H;
   Vec6 g;
   for (int it = 0; it < config.max_iterations; ++it) {
-    if (!normalEquations(result.T, H, g)) break;
+    if (associate(result.T) < 6) break;
+    normalEquations(result.T, H, g);
     H.diagonal().array() += 1e-9 * (1.0 + H.trace());
     const Vec6 delta = -H.ldlt().solve(g);
     if (!delta.allFinite()) break;
@@ -442,7 +440,8 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   }
   result.rmse = result.correspondences ? std::sqrt(sq / result.correspondences) : 0.0;
   result.fitness = candidate.empty() ? 0.0 : static_cast<double>(result.correspondences) / candidate.size();
-  if (result.iterations > 0 && normalEquations(result.T, H, g)) {
+  if (result.iterations > 0 && result.correspondences >= 6) {
+    normalEquations(result.T, H, g);  // at the final pose and association
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);
   }

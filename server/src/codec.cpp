@@ -52,6 +52,18 @@ void encodeTransform(const Mat4d& T, v1::Transform* out) {
   for (int k = 0; k < 16; ++k) out->add_m(T(k / 4, k % 4));
 }
 
+void encodeInformation(const Mat6d& information, v1::Candidate* out) {
+  out->clear_information();
+  for (int k = 0; k < 36; ++k) out->add_information(information(k / 6, k % 6));
+}
+
+std::optional<Mat6d> decodeInformation(const v1::Candidate& c) {
+  if (c.information_size() != 36) return std::nullopt;
+  Mat6d I;
+  for (int k = 0; k < 36; ++k) I(k / 6, k % 6) = c.information(k);
+  return I;
+}
+
 void checkName(const std::string& what, const std::string& name) {
   if (name.empty()) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, what + " is empty");
   if (name.size() > 256) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, what + " is longer than 256 bytes");

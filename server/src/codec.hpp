@@ -3,6 +3,7 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -27,6 +28,10 @@ LabelledScan decodeScan(const std::string& points, const std::string& labels, st
 // 16 finite values -> matrix; throws RpcError(INVALID_ARGUMENT) naming `what` otherwise.
 Mat4d decodeTransform(const v1::Transform& t, const std::string& what);
 void encodeTransform(const Mat4d& T, v1::Transform* out);
+
+// A loop pose's 6x6 information <-> Candidate.information (36 values, row-major); nullopt when it has not 36.
+void encodeInformation(const Mat6d& information, v1::Candidate* out);
+std::optional<Mat6d> decodeInformation(const v1::Candidate& c);
 
 // Names of maps, robots and sessions: 1..256 printable bytes.
 void checkName(const std::string& what, const std::string& name);

@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <limits>
 #include <unordered_map>
 #include <vector>
@@ -205,15 +206,15 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above).
   auto nodes = store_.graphNodes(map, g.last_scan);
   auto loops = store_.loops(map, g.last_loop);
-  // A fresh graph (server start) starts from the poses kept in the database, so a restart continues
-  // from where the last run stopped.
-  // Loops up to `accounted` are already reflected in those poses: they are not new to the solve below.
+  // Loops with ids up to solved_through are reflected in the poses the solve starts from: the last solve's,
+  // or, for a fresh graph (server start, after a deletion), the poses kept in the database, so that a restart
+  // continues from where the last run stopped.
+  std::int64_t solved_through = g.last_loop;
   std::unordered_map<std::int64_t, Mat4d> kept;
-  std::int64_t accounted = 0;
   if (g.nodes.empty()) {
     for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
       kept[p.scan_id] = p.pose;
-    accounted = store_.optimisedThroughLoop(map);
+    solved_through = store_.optimisedThroughLoop(map);
   }
   for (const auto& n : nodes) {
     g.last_scan = std::max(g.last_scan, n.scan_id);
@@ -224,17 +225,13 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
                        Pose::of(k != kept.end() ? k->second : *n.odometry_pose), k != kept.end()});
     g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
   }
-  std::size_t known_loops = g.loops.size();
   for (const auto& l : loops) {
     g.last_loop = std::max(g.last_loop, l.id);
     if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
     // A second loop for the same pair replaced the first in the database: drop the first here too.
-    if (!g.pairs.insert({l.query_scan, l.candidate_scan}).second) {
-      const auto old = std::find_if(g.loops.begin(), g.loops.end(),
-                                    [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; });
-      if (static_cast<std::size_t>(old - g.loops.begin()) < known_loops) --known_loops;
-      g.loops.erase(old);
-    }
+    if (!g.pairs.insert({l.query_scan, l.candidate_scan}).second)
+      g.loops.erase(std::find_if(g.loops.begin(), g.loops.end(),
+                                 [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; }));
     g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness, l.information});
   }
 
@@ -350,15 +347,15 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   // Graduated: when a new loop is far off the current poses (a first optimisation from odometry, a long drift
   // corrected at once), a tight Cauchy loss would discount it along with false ones: solve with a wide loss
   // first, then the nominal one. Loops that agree with the warm-started graph need only the second solve.
+  // Whitened residual of loop k at the current poses, squared.
+  auto loopError2 = [&](std::size_t k) {
+    Eigen::Matrix<double, 6, 1> r;
+    loop_edges[k](x[g.index[g.loops[k].a]].data(), x[g.index[g.loops[k].b]].data(), r.data());
+    return r.squaredNorm();
+  };
   bool wide = false;
-  for (std::size_t k = known_loops; k < g.loops.size() && !wide; ++k) {
-    const auto& l = g.loops[k];
-    if (l.id <= accounted && kept.count(l.a) && kept.count(l.b)) continue;  // solved before a restart
-    const auto a = g.index[l.a], b = g.index[l.b];
-    double r[6];
-    loop_edges[k](x[a].data(), x[b].data(), r);
-    wide = Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).norm() > kWideLoss * options_.loss_scale;
-  }
+  for (std::size_t k = 0; k < g.loops.size() && !wide; ++k)
+    wide = g.loops[k].id > solved_through && loopError2(k) > std::pow(kWideLoss * options_.loss_scale, 2);
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
     problem.AddParameterBlock(x[i].data(), 7,
                               new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
@@ -396,12 +393,8 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   // Loops the robust loss discounted: whitened squared error beyond the 99.9 % point of a chi-square with six
   // degrees of freedom (22.46), in loss scales (the Cauchy weight there is below 0.05).
   int rejected = 0;
-  for (std::size_t k = 0; k < g.loops.size(); ++k) {
-    const auto a = g.index[g.loops[k].a], b = g.index[g.loops[k].b];
-    double r[6];
-    loop_edges[k](x[a].data(), x[b].data(), r);
-    rejected += Eigen::Map<Eigen::Matrix<double, 6, 1>>(r).squaredNorm() > 22.46 * options_.loss_scale * options_.loss_scale;
-  }
+  for (std::size_t k = 0; k < g.loops.size(); ++k)
+    rejected += loopError2(k) > 22.46 * options_.loss_scale * options_.loss_scale;
 
   std::vector<storage::OptimisedPose> poses;
   for (const auto& n : g.nodes) poses.push_back({n.scan_id, n.pose.matrix()});

@@ -65,10 +65,17 @@ void setGraphOption(sglc::server::GraphOptimiserOptions& g, const std::string& k
   if (it == fields.end()) throw std::runtime_error("unknown parameter '" + key + "'");
   if (!std::isfinite(v) || v < 0) throw std::runtime_error(key + " must be a finite number >= 0");
   *it->second = v;
-  if (g.odometry_sigma_m + g.odometry_sigma_per_m <= 0 || g.odometry_sigma_deg + g.odometry_sigma_deg_per_m <= 0)
-    throw std::runtime_error("pose_graph: the odometry sigmas must not all be zero");
-  if (g.loop_sigma_m <= 0 || g.loop_sigma_deg <= 0 || g.loss_scale <= 0 || g.max_seconds <= 0)
-    throw std::runtime_error(key + " must be > 0");
+}
+
+// Checks that need every pose_graph key read first.
+void validateGraphOptions(const sglc::server::GraphOptimiserOptions& g) {
+  if (g.odometry_sigma_m + g.odometry_sigma_per_m <= 0)
+    throw std::runtime_error("pose_graph.odometry_sigma_m and odometry_sigma_per_m must not both be zero");
+  if (g.odometry_sigma_deg + g.odometry_sigma_deg_per_m <= 0)
+    throw std::runtime_error("pose_graph.odometry_sigma_deg and odometry_sigma_deg_per_m must not both be zero");
+  for (const auto& [name, v] : {std::pair{"loop_sigma_m", g.loop_sigma_m}, {"loop_sigma_deg", g.loop_sigma_deg},
+                                {"loss_scale", g.loss_scale}, {"max_seconds", g.max_seconds}})
+    if (v <= 0) throw std::runtime_error(std::string("pose_graph.") + name + " must be > 0");
 }
 
 // The config file has four sections: engine (the same keys as `sglc-pair --config`), storage, server and
@@ -132,6 +139,11 @@ void applyConfigFile(Settings& s, const std::string& path) {
         throw std::runtime_error(path + ": " + e.what());
       }
     }
+  }
+  try {
+    validateGraphOptions(s.graph);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(path + ": " + e.what());
   }
 }
 

@@ -210,8 +210,7 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
     c->set_fitness(v.result.fitness);
     c->set_rmse(v.result.rmse);
     c->set_refined(v.result.refined);
-    if (v.result.refined && !v.result.information.isZero())
-      for (int k = 0; k < 36; ++k) c->add_information(v.result.information(k / 6, k % 6));
+    if (v.result.refined && !v.result.information.isZero()) encodeInformation(v.result.information, c);
     c->set_descriptor_distance(v.hit.distance);
     encodeTransform(v.result.T, c->mutable_t_query_candidate());
   }
@@ -274,11 +273,7 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
       r.inliers = loop.inliers();
       r.fitness = loop.fitness();
       r.rmse = loop.rmse();
-      if (loop.information_size() == 36) {
-        Mat6d I;
-        for (int k = 0; k < 36; ++k) I(k / 6, k % 6) = loop.information(k);
-        r.information = I;
-      }
+      r.information = decodeInformation(loop);
       try {
         state.store().addLoop(key.map(), r);
         added = true;

@@ -91,13 +91,22 @@ std::vector<std::uint8_t> rowsBlob(const M& m, int rows) {
 std::vector<std::uint8_t> informationBlob(const Mat6d& I) { return rowsBlob(I, 6); }
 std::vector<std::uint8_t> poseBlob(const Mat4d& T) { return rowsBlob(T, 3); }  // the last row is implied
 
+// The inverse of rowsBlob: fills the first `rows` rows of `m` (the rest keep their values); false when the
+// blob has the wrong size.
+template <typename M>
+bool fromRowsBlob(std::span<const std::uint8_t> blob, int rows, M& m) {
+  if (blob.size() != static_cast<std::size_t>(rows * m.cols()) * sizeof(double)) return false;
+  for (int k = 0; k < rows * m.cols(); ++k) {
+    double v;
+    std::memcpy(&v, &blob[static_cast<std::size_t>(k) * sizeof(double)], sizeof(double));
+    m(k / m.cols(), k % m.cols()) = v;
+  }
+  return true;
+}
+
 std::optional<Mat4d> poseFrom(std::span<const std::uint8_t> blob) {
-  if (blob.size() != 12 * sizeof(double)) return std::nullopt;
-  double v[12];
-  std::memcpy(v, blob.data(), sizeof(v));
   Mat4d T = Mat4d::Identity();
-  for (int k = 0; k < 12; ++k) T(k / 4, k % 4) = v[k];
-  return T;
+  return fromRowsBlob(blob, 3, T) ? std::optional<Mat4d>(T) : std::nullopt;
 }
 
 std::vector<std::uint8_t> rawBlob(const LabelledScan& scan) {
@@ -526,13 +535,9 @@ class SqliteMapStore final : public MapStore {
       r.fitness = st.f64(6);
       r.rmse = st.f64(7);
       if (!st.isNull(8)) {
-        const auto b = st.blob(8);
-        if (b.size() != 36 * sizeof(double))
-          throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged information matrix");
-        double v[36];
-        std::memcpy(v, b.data(), sizeof(v));
         Mat6d I;
-        for (int k = 0; k < 36; ++k) I(k / 6, k % 6) = v[k];
+        if (!fromRowsBlob(st.blob(8), 6, I))
+          throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged information matrix");
         r.information = I;
       }
       out.push_back(r);
@@ -653,21 +658,8 @@ class SqliteMapStore final : public MapStore {
     return out;
   }
 
-  std::int64_t graphVersion(const std::string& map) const override {
-    const auto map_id = mapId(map);
-    auto reader = acquireReader();
-    sql::Stmt st(*reader, "SELECT graph_version FROM maps WHERE id = ?");
-    st.bind(1, map_id);
-    return st.step() ? st.i64(0) : 0;
-  }
-
-  std::int64_t optimisedThroughLoop(const std::string& map) const override {
-    const auto map_id = mapId(map);
-    auto reader = acquireReader();
-    sql::Stmt st(*reader, "SELECT graph_loop FROM maps WHERE id = ?");
-    st.bind(1, map_id);
-    return st.step() ? st.i64(0) : 0;
-  }
+  std::int64_t graphVersion(const std::string& map) const override { return mapRowValue(map, "graph_version"); }
+  std::int64_t optimisedThroughLoop(const std::string& map) const override { return mapRowValue(map, "graph_loop"); }
 
   std::string integrityCheck() const override {
     auto reader = acquireReader();
@@ -932,6 +924,16 @@ class SqliteMapStore final : public MapStore {
   std::int64_t mapId(const std::string& map) const {
     std::shared_lock lock(state_mutex_);
     return mapLocked(map).id;
+  }
+
+  // An integer column of the map's row in `maps` (a fixed column name from this file, never user input).
+  std::int64_t mapRowValue(const std::string& map, const char* column) const {
+    const auto map_id = mapId(map);
+    auto reader = acquireReader();
+    const std::string query = std::string("SELECT ") + column + " FROM maps WHERE id = ?";
+    sql::Stmt st(*reader, query.c_str());
+    st.bind(1, map_id);
+    return st.step() ? st.i64(0) : 0;
   }
 
   MapInfo infoLocked(const MapState& m) const {

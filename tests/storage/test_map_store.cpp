@@ -20,6 +20,14 @@ std::vector<std::uint8_t> fileBytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
+// Runs SQL on a database file behind the store's back (to fake foreign, newer or older files).
+void execSql(const std::string& path, const char* sql) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  EXPECT_EQ(sqlite3_exec(db, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
+  sqlite3_close(db);
+}
+
 StorageError::Code errorCode(const std::function<void()>& f) {
   try {
     f();
@@ -324,24 +332,14 @@ TEST(MapStore, RefusesForeignCorruptAndNewerFilesWithoutTouchingThem) {
   EXPECT_EQ(fileBytes(junk), junk_before);
   // Another application's SQLite database.
   const auto foreign = dir.file("foreign.db");
-  {
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(foreign.c_str(), &db), SQLITE_OK);
-    sqlite3_exec(db, "CREATE TABLE t(x); INSERT INTO t VALUES(1);", nullptr, nullptr, nullptr);
-    sqlite3_close(db);
-  }
+  execSql(foreign, "CREATE TABLE t(x); INSERT INTO t VALUES(1);");
   const auto foreign_before = fileBytes(foreign);
   EXPECT_EQ(errorCode([&] { MapStore::open(options(foreign)); }), StorageError::Code::kCorrupt);
   EXPECT_EQ(fileBytes(foreign), foreign_before);
   // One of ours, written by a newer version.
   const auto newer = dir.file("newer.db");
   { fill(*MapStore::open(options(newer)), 1, 1, 2); }
-  {
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(newer.c_str(), &db), SQLITE_OK);
-    sqlite3_exec(db, "PRAGMA user_version=99", nullptr, nullptr, nullptr);
-    sqlite3_close(db);
-  }
+  execSql(newer, "PRAGMA user_version=99");
   const auto newer_before = fileBytes(newer);
   try {
     MapStore::open(options(newer));
@@ -555,18 +553,10 @@ TEST(MapStore, MigratesAVersion1FileForward) {
     auto store = MapStore::open(options(path));
     all = fill(*store, 1, 1, 4);
   }
-  {  // Turn it back into a version-1 file: no pose-graph tables, no graph_version or graph_loop column.
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-    ASSERT_EQ(sqlite3_exec(db,
-                           "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
-                           " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop;"
-                           " PRAGMA user_version=1;",
-                           nullptr, nullptr, nullptr),
-              SQLITE_OK)
-        << sqlite3_errmsg(db);
-    sqlite3_close(db);
-  }
+  // Turn it back into a version-1 file: no pose-graph tables, no graph_version or graph_loop column.
+  execSql(path,
+          "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
+          " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=1;");
   auto store = MapStore::open(options(path));
   EXPECT_EQ(store->stats("m").scans, 4);
   EXPECT_EQ(store->graphVersion("m"), 0);
@@ -591,16 +581,9 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
     all = fill(*store, 1, 1, 4);
     store->addLoop("m", {0, all[3].id, all[0].id, rigid(0.1, 1, 2), 0.5, 0.5, 0.1, 5});  // no information
   }
-  {  // Back to a version-2 file: no information column, no graph_loop.
-    sqlite3* db = nullptr;
-    ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
-    ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
-                           " PRAGMA user_version=2;", nullptr, nullptr,
-                           nullptr),
-              SQLITE_OK)
-        << sqlite3_errmsg(db);
-    sqlite3_close(db);
-  }
+  // Back to a version-2 file: no information column, no graph_loop.
+  execSql(path, "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
+                " PRAGMA user_version=2;");
   const Mat6d info = someInformation();
   {
     auto store = MapStore::open(options(path));
