@@ -107,6 +107,7 @@ struct GraphOptimiser::MapGraph {
   std::set<std::pair<std::int64_t, std::int64_t>> pairs;  // (a, b) of the loops above
   std::int64_t last_scan = 0, last_loop = 0;
   std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
+  bool converged = false;  // the last solve ended by convergence (not by its iteration or time bound)
 };
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
@@ -210,8 +211,10 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   // or, for a fresh graph (server start, after a deletion), the poses kept in the database, so that a restart
   // continues from where the last run stopped.
   std::int64_t solved_through = g.last_loop;
+  const bool fresh = g.nodes.empty();
+  bool changed = false;
   std::unordered_map<std::int64_t, Mat4d> kept;
-  if (g.nodes.empty()) {
+  if (fresh) {
     for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
       kept[p.scan_id] = p.pose;
     solved_through = store_.optimisedThroughLoop(map);
@@ -219,6 +222,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   for (const auto& n : nodes) {
     g.last_scan = std::max(g.last_scan, n.scan_id);
     if (!n.odometry_pose) continue;
+    changed = true;
     g.index[n.scan_id] = g.nodes.size();
     const auto k = kept.find(n.scan_id);
     g.nodes.push_back({n.scan_id, n.session_id, n.seq, *n.odometry_pose,
@@ -233,6 +237,14 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
       g.loops.erase(std::find_if(g.loops.begin(), g.loops.end(),
                                  [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; }));
     g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness, l.information});
+    changed = true;
+  }
+  // A solved graph with nothing new would only be solved again to the same poses: report the last event, no new
+  // version (a request queued while an optimisation was running is often already covered by it).
+  if (!fresh && !changed && g.converged) {
+    std::lock_guard lock(mutex_);
+    const auto it = latest_.find(map);
+    if (it != latest_.end()) return it->second;
   }
 
   // Sessions and their scans in sequence order; initial guesses for new nodes.
@@ -383,6 +395,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     }
     ceres::Solver::Summary last;
     ceres::Solve(so, &problem, &last);
+    g.converged = last.termination_type == ceres::CONVERGENCE;
     summary.iterations.insert(summary.iterations.end(), last.iterations.begin(), last.iterations.end());
   }
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {

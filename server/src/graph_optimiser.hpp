@@ -59,7 +59,8 @@ class GraphOptimiser {
   // timeout or when stopping.
   std::optional<GraphEvent> waitForVersion(const std::string& map, std::int64_t after,
                                            std::chrono::milliseconds timeout);
-  // Optimises now on the calling thread (tests, tools); returns the event.
+  // Optimises now on the calling thread (tests, tools); returns the event. A graph already solved to
+  // convergence with no new scans or loops is not solved again: its last event comes back, no new version.
   GraphEvent optimiseNow(const std::string& map);
   // Ends waits and the worker.
   void stop();
