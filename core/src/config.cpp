@@ -81,6 +81,12 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"refine.instance_weight", &c.refine.instance_weight},
       {"refine.min_information", &c.refine.min_information},
       {"refine.converged_m", &c.refine.converged_m},
+      {"bev_search.enabled", &c.bev_search.enabled},
+      {"bev_search.cell_m", &c.bev_search.cell_m},
+      {"bev_search.max_shift_m", &c.bev_search.max_shift_m},
+      {"bev_search.yaw_step_deg", &c.bev_search.yaw_step_deg},
+      {"bev_search.max_range_m", &c.bev_search.max_range_m},
+      {"bev_search.keep", &c.bev_search.keep},
   };
 }
 
@@ -157,6 +163,12 @@ void validateConfig(const Config& config) {
   require(c.refine.cauchy_m > 0, "refine.cauchy_m", "> 0");
   require(c.refine.instance_weight >= 0, "refine.instance_weight", ">= 0");
   require(c.refine.min_information >= 0, "refine.min_information", ">= 0");
+  const auto& b = c.bev_search;
+  require(b.cell_m >= 0.25 && b.cell_m <= 5, "bev_search.cell_m", "in [0.25, 5]");
+  require(b.max_shift_m >= 0 && b.max_shift_m <= 50, "bev_search.max_shift_m", "in [0, 50]");
+  require(b.yaw_step_deg > 0.1 && b.yaw_step_deg <= 30, "bev_search.yaw_step_deg", "in (0.1, 30]");
+  require(b.max_range_m > 0 && b.max_range_m <= 100, "bev_search.max_range_m", "in (0, 100]");
+  require(b.keep >= 1 && b.keep <= 20, "bev_search.keep", "in [1, 20]");
 }
 
 Config parseConfig(const std::string& yaml_text) {

@@ -4,6 +4,7 @@
 #include <numbers>
 
 #include "fast_math.hpp"
+#include "sglc/bev_search.hpp"
 #include "sglc/voxel_map.hpp"
 
 namespace sglc {
@@ -155,16 +156,33 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
       r.reason = "few node inliers and the background planes do not confirm the pose";
     }
   }
-  if (r.is_loop) {
-    // Keep the inlier node pairs for the fine stage.
-    r.inlier_pairs.reserve(ransac.inliers.size());
-    for (int k : ransac.inliers) r.inlier_pairs.push_back(matches[k]);
-  }
+  // The inlier node pairs, for the fine stage.
+  r.inlier_pairs.reserve(ransac.inliers.size());
+  for (int k : ransac.inliers) r.inlier_pairs.push_back(matches[k]);
   return r;
 }
 
-void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const {
-  if (!r.is_loop || r.refined) return;
+void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r, bool known_loop) const {
+  if (r.refined || !(r.is_loop || known_loop)) return;
+  const auto& c = config_;
+  const bool planes_kept = r.inliers >= 3 && refinePose(query, candidate, r);
+  // A known loop whose pose the landmarks may have got wrong (no coarse pose, a pose verification rejected, or
+  // one the plane stage would have moved beyond its guard): overlay the background views as well, refine the
+  // best overlays on the planes, and keep whichever pose explains most of the candidate's planes.
+  if (!known_loop || (r.is_loop && planes_kept) || !c.bev_search.enabled || !c.refine.enabled) return;
+  for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search)) {
+    const auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
+    if (ref.iterations == 0 || ref.correspondences < 6) continue;
+    if (r.refined && (ref.fitness < r.fitness || (ref.fitness == r.fitness && ref.rmse >= r.rmse))) continue;
+    r.T = ref.T;
+    r.fitness = ref.fitness;
+    r.rmse = ref.rmse;
+    r.information = ref.information;
+    r.refined = true;
+  }
+}
+
+bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const {
   const auto& c = config_;
   Mat4d T = r.T;
   std::vector<std::pair<Vec3f, Vec3f>> anchor;
@@ -183,18 +201,26 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
       anchor = std::move(icp.pairs);
     }
   }
+  bool kept = false;
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     const Mat4d d = T.inverse() * ref.T;
-    if (ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0) {
+    kept = ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0;
+    if (kept) {
       T = ref.T;
       r.information = ref.information;
+    } else if (ref.iterations > 0) {
+      // Guard: the planes moved too far to trust; report how well they fit at the pose that stays.
+      RefineConfig at = c.refine;
+      at.max_iterations = 0;
+      ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, T, at);
     }
     r.fitness = ref.fitness;
     r.rmse = ref.rmse;
   }
   r.T = T;
   r.refined = true;
+  return kept;
 }
 
 LoopResult Pipeline::match(const Fingerprint& query, const Fingerprint& candidate) const {

@@ -110,6 +110,10 @@ TEST(Config, InvalidValueNamesField) {
       {"ransac: {min_inliers: 2}", "ransac.min_inliers"},
       {"graph: {d_max: .nan}", "graph.d_max"},
       {"fingerprint: {plane_min_points: 2}", "fingerprint.plane_min_points"},
+      {"bev_search: {cell_m: 0}", "bev_search.cell_m"},
+      {"bev_search: {keep: 0}", "bev_search.keep"},
+      {"bev_search: {max_range_m: 500}", "bev_search.max_range_m"},
+      {"bev_search: {yaw_step_deg: 0}", "bev_search.yaw_step_deg"},
   };
   for (const auto& c : cases) {
     const std::string msg = errorOf(c.yaml);

@@ -51,6 +51,7 @@ for key, kind in [("is_loop", bool), ("score", float), ("inliers", int), ("T_a_b
 check(len(out["T_a_b"]) == 16 and out["T_a_b"][12:] == [0, 0, 0, 1], "T_a_b is a row-major 4x4 rigid transform")
 check(set(out["timings_ms"]) == {"fingerprint_a", "fingerprint_b", "verify", "refine"}, "timings_ms has the four stages")
 check(out["is_loop"] is True, "52-4501 is a loop")
+out_loop = out
 if ref:
     T = out["T_a_b"]
     t_err = math.dist([T[3], T[7], T[11]], [ref[3], ref[7], ref[11]])
@@ -63,6 +64,15 @@ if ref:
 
 p = run(scan("000052"), scan("000850"))
 check(p.returncode == 0 and json.loads(p.stdout)["is_loop"] is False, "52-850 (337 m apart) is not a loop")
+check(json.loads(p.stdout)["refined"] is False, "a rejected pair gets no refined pose")
+# Told it is a loop, sglc-pair estimates a pose for a pair verification rejects, and keeps the decision.
+p = run(scan("000052"), scan("000850"), ["--known-loop"])
+out = json.loads(p.stdout)
+check(p.returncode == 0 and out["is_loop"] is False and out["refined"] is True and out.get("reason"),
+      "--known-loop: a pose for the rejected pair, is_loop and reason kept")
+p = run(scan("000052"), scan("004501"), ["--known-loop"])
+check(p.returncode == 0 and json.loads(p.stdout)["T_a_b"] == out_loop["T_a_b"],
+      "--known-loop leaves a verified loop's pose as it is")
 
 with tempfile.TemporaryDirectory() as tmp:
     truncated = os.path.join(tmp, "t.bin")

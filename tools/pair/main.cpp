@@ -19,12 +19,15 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 int main(int argc, char** argv) {
   CLI::App app{"Checks whether two labelled LiDAR scans close a loop and estimates T_a_b (maps B into A)."};
   std::string scan_a, labels_a, scan_b, labels_b, config_path;
-  bool dump = false;
+  bool dump = false, known_loop = false;
   app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
   app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)");
   app.add_option("--labels-a", labels_a, "SemanticKITTI .label of scan A");
   app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)");
   app.add_option("--labels-b", labels_b, "SemanticKITTI .label of scan B");
+  app.add_flag("--known-loop", known_loop,
+               "The scans are known to show the same place: estimate T_a_b even when verification rejects the pair "
+               "(is_loop keeps the decision, refined says whether a pose was found)");
   app.add_option("--config", config_path, "YAML file overriding engine parameters (see --dump-config)");
   try {
     app.parse(argc, argv);
@@ -54,7 +57,7 @@ int main(int argc, char** argv) {
     auto result = pipeline.verify(fa, fb);
     const double t_verify = msSince(t0);
     t0 = std::chrono::steady_clock::now();
-    pipeline.refine(fa, fb, result);
+    pipeline.refine(fa, fb, result, known_loop);
     const double t_refine = msSince(t0);
 
     nlohmann::ordered_json out;
@@ -67,6 +70,7 @@ int main(int argc, char** argv) {
     out["matches"] = result.matches;
     out["graph_similarity"] = result.graph_similarity;
     out["background_similarity"] = result.background_similarity;
+    out["refined"] = result.refined;
     out["fitness"] = result.fitness;
     out["rmse"] = result.rmse;
     if (!result.is_loop) out["reason"] = std::string(result.reason);

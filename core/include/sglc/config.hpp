@@ -76,7 +76,7 @@ struct VerifyConfig {
   double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
   // Background agreement threshold. The paper: 0.5 on KITTI, 0.45 where segmentation is worse (Ford Campus).
   // Ours: 0.45, for labels from a real network (simulated KITTI 00 at 5 % label noise: loop_distance4 pairs
-  // registered 98.7 % -> 99.4 %, with no more false loops among ten descriptor neighbours per frame at 0 % or
+  // verified 98.7 % -> 99.4 %, with no more false loops among ten descriptor neighbours per frame at 0 % or
   // 5 % noise; the real negatives that pass t_b are scans 27-30 m apart, which max_translation rejects).
   double t_b = 0.45;
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
@@ -131,6 +131,19 @@ struct RefineConfig {
   double converged_m = 1e-5;
 };
 
+// Ours (not in the paper): the pose of a pair the caller knows to be a loop when the landmarks give none or
+// verification rejects the one they give (Pipeline::refine with known_loop): a search over heading and shift
+// overlaying the two labelled bird's-eye views, then the plane refinement from the best `keep` overlays; the
+// result whose planes fit best stands.
+struct BevSearchConfig {
+  bool enabled = true;
+  double cell_m = 1.0;        // coarse grid of the search
+  double max_shift_m = 10.0;  // on each axis
+  double yaw_step_deg = 2.0;  // coarse heading step (all headings are searched)
+  double max_range_m = 40.0;  // candidate cells used
+  int keep = 3;               // distinct overlays refined
+};
+
 struct Config {
   LabelConfig labels;
   ClusterConfig cluster;
@@ -142,6 +155,7 @@ struct Config {
   FingerprintConfig fingerprint;
   FineConfig fine;
   RefineConfig refine;
+  BevSearchConfig bev_search;
 };
 
 // Throws InputError when a value is out of its valid range (names the field).

@@ -30,7 +30,7 @@ struct LoopResult {
   // (a straight corridor) get little. Zero when neither stage ran or was kept.
   Mat6d information = Mat6d::Zero();
   const char* reason = "";  // why it is not a loop (empty for loops)
-  std::vector<Match> inlier_pairs;  // node matches consistent with T (query node, candidate node)
+  std::vector<Match> inlier_pairs;  // node matches consistent with the coarse T (query node, candidate node)
 };
 
 class Pipeline {
@@ -43,12 +43,19 @@ class Pipeline {
   Fingerprint fingerprint(const LabelledScan& scan) const;
   // Coarse pose and the loop decision.
   LoopResult verify(const Fingerprint& query, const Fingerprint& candidate) const;
-  // Fine and refine stages on a verified result (no-op for non-loops).
-  void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result) const;
+  // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
+  // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result that
+  // has a pose to start from; `refined` says whether a pose was estimated, is_loop and reason keep the
+  // verification's decision.
+  void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result,
+              bool known_loop = false) const;
   // verify + refine.
   LoopResult match(const Fingerprint& query, const Fingerprint& candidate) const;
 
  private:
+  // The fine and refine stages from the coarse pose; true when the plane stage's pose was kept.
+  bool refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const;
+
   Config config_;
   LabelMap labels_;
 };

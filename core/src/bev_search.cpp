@@ -1,0 +1,179 @@
+#include "sglc/bev_search.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <tuple>
+
+#include "fast_math.hpp"
+
+namespace sglc {
+namespace {
+
+constexpr int kClasses = 3;  // vegetation, building, fence (Background values 2..4)
+
+int structureIndex(std::uint8_t cls) {
+  return cls >= static_cast<std::uint8_t>(Background::kVegetation) && cls <= static_cast<std::uint8_t>(Background::kFence)
+             ? cls - static_cast<int>(Background::kVegetation)
+             : -1;
+}
+
+struct Point2 {
+  double x, y;
+  int k;  // structure index
+};
+
+// Per structure class, a square grid of scores around the query: 2 where the query has that class, 1 where a
+// neighbouring cell has it. Cells are (ix, iy) = floor((x + half) / cell).
+struct ScoreGrid {
+  double cell = 1.0, half = 0.0;
+  int n = 0;
+  std::vector<std::uint8_t> score;  // kClasses grids of n * n, row-major (iy, ix)
+
+  ScoreGrid(const std::vector<Point2>& points, double cell_m, double half_m)
+      : cell(cell_m), half(half_m), n(static_cast<int>(std::ceil(2.0 * half_m / cell_m))),
+        score(static_cast<std::size_t>(kClasses) * n * n, 0) {
+    // The majority class of each cell.
+    std::vector<std::array<int, kClasses>> votes(static_cast<std::size_t>(n) * n, {0, 0, 0});
+    for (const auto& p : points) {
+      const int ix = cellOf(p.x), iy = cellOf(p.y);
+      if (ix >= 0 && iy >= 0 && ix < n && iy < n) ++votes[static_cast<std::size_t>(iy) * n + ix][p.k];
+    }
+    for (int iy = 0; iy < n; ++iy)
+      for (int ix = 0; ix < n; ++ix) {
+        const auto& v = votes[static_cast<std::size_t>(iy) * n + ix];
+        const int k = static_cast<int>(std::max_element(v.begin(), v.end()) - v.begin());
+        if (v[k] == 0) continue;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int x = ix + dx, y = iy + dy;
+            if (x < 0 || y < 0 || x >= n || y >= n) continue;
+            auto& s = at(k, x, y);
+            s = std::max<std::uint8_t>(s, dx == 0 && dy == 0 ? 2 : 1);
+          }
+      }
+  }
+  int cellOf(double v) const { return detail::floorInt((v + half) / cell); }
+  std::uint8_t& at(int k, int ix, int iy) {
+    return score[(static_cast<std::size_t>(k) * n + static_cast<std::size_t>(iy)) * n + static_cast<std::size_t>(ix)];
+  }
+  std::uint8_t get(int k, double x, double y) const {
+    const int ix = cellOf(x), iy = cellOf(y);
+    if (ix < 0 || iy < 0 || ix >= n || iy >= n) return 0;
+    return score[(static_cast<std::size_t>(k) * n + static_cast<std::size_t>(iy)) * n + static_cast<std::size_t>(ix)];
+  }
+};
+
+std::vector<Point2> structurePoints(const std::vector<BevCell>& cells, double stored_cell, double max_range) {
+  std::vector<Point2> out;
+  for (const auto& c : cells) {
+    const int k = structureIndex(c.cls);
+    if (k < 0) continue;
+    const double x = (c.ix + 0.5) * stored_cell, y = (c.iy + 0.5) * stored_cell;
+    if (x * x + y * y <= max_range * max_range) out.push_back({x, y, k});
+  }
+  return out;
+}
+
+// One representative point per (coarse cell, class): the coarse search costs per point.
+std::vector<Point2> thin(const std::vector<Point2>& points, double cell) {
+  std::vector<Point2> out;
+  std::vector<std::pair<std::tuple<int, int, int>, std::size_t>> keyed;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    keyed.push_back({{detail::floorInt(points[i].x / cell), detail::floorInt(points[i].y / cell), points[i].k}, i});
+  std::stable_sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (std::size_t i = 0; i < keyed.size(); ++i)
+    if (i == 0 || keyed[i].first != keyed[i - 1].first) out.push_back(points[keyed[i].second]);
+  return out;
+}
+
+Mat4d planar(double yaw, double tx, double ty) {
+  Mat4d T = Mat4d::Identity();
+  T(0, 0) = std::cos(yaw);
+  T(0, 1) = -std::sin(yaw);
+  T(1, 0) = std::sin(yaw);
+  T(1, 1) = std::cos(yaw);
+  T(0, 3) = tx;
+  T(1, 3) = ty;
+  return T;
+}
+
+struct Hypothesis {
+  double score, yaw, tx, ty;
+};
+
+}  // namespace
+
+std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate,
+                                   double stored_cell, const BevSearchConfig& config) {
+  const double cell = config.cell_m;
+  const double range = config.max_range_m;
+  const double half = range + config.max_shift_m + 2.0 * cell;
+  const auto q = structurePoints(query, stored_cell, half);
+  const auto c_all = structurePoints(candidate, stored_cell, range);
+  if (q.empty() || c_all.empty() || config.keep <= 0) return {};
+  const auto c = thin(c_all, cell);
+
+  // Coarse: every heading step; for each, every whole-cell shift, accumulated row by row.
+  const ScoreGrid coarse(q, cell, half);
+  const int S = static_cast<int>(std::floor(config.max_shift_m / cell));
+  const int w = 2 * S + 1;
+  const int steps = std::max(1, static_cast<int>(std::lround(360.0 / config.yaw_step_deg)));
+  std::vector<Hypothesis> per_yaw;
+  std::vector<std::uint32_t> acc(static_cast<std::size_t>(w) * w);
+  for (int s = 0; s < steps; ++s) {
+    const double yaw = 2.0 * std::numbers::pi * s / steps;
+    const double cy = std::cos(yaw), sy = std::sin(yaw);
+    std::fill(acc.begin(), acc.end(), 0u);
+    for (const auto& p : c) {
+      const double x = cy * p.x - sy * p.y, y = sy * p.x + cy * p.y;
+      const int bx = coarse.cellOf(x) - S, by = coarse.cellOf(y) - S;
+      if (bx < 0 || by < 0 || bx + w > coarse.n || by + w > coarse.n) continue;
+      const std::uint8_t* grid = coarse.score.data() + static_cast<std::size_t>(p.k) * coarse.n * coarse.n;
+      for (int dy = 0; dy < w; ++dy) {
+        const std::uint8_t* row = grid + static_cast<std::size_t>(by + dy) * coarse.n + bx;
+        std::uint32_t* out = acc.data() + static_cast<std::size_t>(dy) * w;
+        for (int dx = 0; dx < w; ++dx) out[dx] += row[dx];
+      }
+    }
+    const auto best = std::max_element(acc.begin(), acc.end()) - acc.begin();  // first maximum: deterministic
+    per_yaw.push_back({static_cast<double>(acc[static_cast<std::size_t>(best)]), yaw,
+                       (static_cast<int>(best % w) - S) * cell, (static_cast<int>(best / w) - S) * cell});
+  }
+  std::stable_sort(per_yaw.begin(), per_yaw.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
+  std::vector<Hypothesis> picked;
+  const double min_yaw_gap = 3.0 * config.yaw_step_deg * std::numbers::pi / 180.0;
+  for (const auto& h : per_yaw) {
+    if (static_cast<int>(picked.size()) == config.keep) break;
+    const bool distinct = std::all_of(picked.begin(), picked.end(), [&](const Hypothesis& o) {
+      const double dyaw = std::abs(std::remainder(h.yaw - o.yaw, 2.0 * std::numbers::pi));
+      return dyaw > min_yaw_gap || std::hypot(h.tx - o.tx, h.ty - o.ty) > 2.0 * cell;
+    });
+    if (distinct) picked.push_back(h);
+  }
+
+  // Fine: around each, a quarter of the heading step and a quarter of the cell, on a grid of the stored cell.
+  const ScoreGrid fine(q, stored_cell, half);
+  const double yaw_step = config.yaw_step_deg * std::numbers::pi / 180.0 / 4.0, shift_step = cell / 4.0;
+  std::vector<BevPose> out;
+  for (const auto& h : picked) {
+    Hypothesis best{-1.0, h.yaw, h.tx, h.ty};
+    for (int a = -4; a <= 4; ++a) {
+      const double yaw = h.yaw + a * yaw_step;
+      const double cy = std::cos(yaw), sy = std::sin(yaw);
+      for (int iy = -4; iy <= 4; ++iy)
+        for (int ix = -4; ix <= 4; ++ix) {
+          const double tx = h.tx + ix * shift_step, ty = h.ty + iy * shift_step;
+          std::uint32_t sum = 0;
+          for (const auto& p : c_all) sum += fine.get(p.k, cy * p.x - sy * p.y + tx, sy * p.x + cy * p.y + ty);
+          if (sum > best.score) best = {static_cast<double>(sum), yaw, tx, ty};
+        }
+    }
+    out.push_back({planar(best.yaw, best.tx, best.ty), best.score / (2.0 * static_cast<double>(c_all.size()))});
+  }
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
+  return out;
+}
+
+}  // namespace sglc
