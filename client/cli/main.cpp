@@ -91,6 +91,8 @@ struct QueryFlags {
   unsigned candidates = 0;
   bool no_refine = false;
   bool include_rejected = false;
+  bool known_loops = false;
+  std::vector<std::int64_t> verify_scan_ids;
   double min_score = 0;
   CLI::Option* min_score_opt = nullptr;
 };
@@ -104,7 +106,13 @@ void addQueryFlags(CLI::App* app, QueryFlags& q, bool with_rejected) {
   app->add_option("--sessions", q.sessions, "robot/session names searched with --scope sessions (comma separated)");
   app->add_option("--candidates", q.candidates, "Descriptor neighbours to verify (server default max(top-k, 10))");
   app->add_flag("--no-refine", q.no_refine, "Skip the fine/refine pose stages");
-  if (with_rejected) app->add_flag("--include-rejected", q.include_rejected, "Also list candidates that failed verification");
+  if (with_rejected) {
+    app->add_flag("--include-rejected", q.include_rejected, "Also list candidates that failed verification");
+    app->add_option("--verify", q.verify_scan_ids, "Check exactly these stored scan ids instead of searching")
+        ->delimiter(',');
+    app->add_flag("--known-loops", q.known_loops,
+                  "The candidates are known loops (with --verify: a chosen place): estimate a pose for rejected ones too");
+  }
   q.min_score_opt = app->add_option("--min-score", q.min_score, "Drop verified candidates scoring below this");
 }
 
@@ -135,6 +143,9 @@ v1::QueryOptions toQueryOptions(const QueryFlags& q) {
     o.set_refine_set(true);
   }
   o.set_include_rejected(q.include_rejected);
+  if (q.known_loops && q.no_refine) throw UsageError("--known-loops asks for poses: it cannot go with --no-refine");
+  o.set_known_loops(q.known_loops);
+  for (const auto id : q.verify_scan_ids) o.add_verify_scan_ids(id);
   if (q.min_score_opt && q.min_score_opt->count() > 0) o.set_min_score(q.min_score);
   return o;
 }

@@ -109,6 +109,9 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   if (opt.exclude_recent() < 0 || !std::isfinite(opt.exclude_seconds()) || opt.exclude_seconds() < 0)
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "exclude_recent and exclude_seconds must be >= 0");
   const bool refine = opt.refine_set() ? opt.refine() : true;
+  if (opt.known_loops() && !refine)
+    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "known_loops asks for poses: it cannot go with refine = false");
+  const bool include_rejected = opt.include_rejected() || opt.known_loops();
 
   storage::SearchRequest req;
   req.map = who.map;
@@ -175,7 +178,7 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
     auto fp = store.fingerprint(hits[i].scan_id);
     if (!fp) return;  // deleted meanwhile
     auto r = state.pipeline().verify(query, *fp);
-    if (r.is_loop || opt.include_rejected()) verified[i] = Verified{hits[i], std::move(fp), std::move(r)};
+    if (r.is_loop || include_rejected) verified[i] = Verified{hits[i], std::move(fp), std::move(r)};
   });
   for (auto& v : verified)
     if (v) results.push_back(std::move(*v));
@@ -191,9 +194,9 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   t0 = Clock::now();
   if (refine)
     state.compute().parallelFor(results.size(), [&](std::size_t i) {
-      if (!results[i].result.is_loop) return;
+      if (!results[i].result.is_loop && !opt.known_loops()) return;
       checkAlive(ctx);
-      state.pipeline().refine(query, *results[i].fp, results[i].result);
+      state.pipeline().refine(query, *results[i].fp, results[i].result, opt.known_loops());
     });
   timing->set_refine_ms(msSince(t0));
   for (const auto& v : results) {

@@ -81,6 +81,8 @@ TEST(CliErrors, BadQueryInput) {
   expectOneLineError({"query", "--map", "m", "--scan", "a.bin"}, "--labels");
   expectOneLineError({"query", "--map", "m", "--scan", tmp / "none.bin", "--labels", tmp / "none.label"}, "none.bin");
   expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--exclude-recent", "-1"}, "--exclude-recent");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--known-loops", "--no-refine"}, "--known-loops");
+  expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--verify", "x"}, "--verify");
   expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--sessions", "a/b"}, "--scope sessions");
 }
 

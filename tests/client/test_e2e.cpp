@@ -296,6 +296,16 @@ TEST_F(EndToEnd, CommandLine) {
     }
   EXPECT_TRUE(found) << r.out;
 
+  // Exactly one named scan, told it is a loop: 4501 alone, with its pose.
+  r = cli({"query", "--map", "cli", "--scan-id", std::to_string(id52), "--verify",
+           std::to_string(second.at("scan_id").get<std::int64_t>()), "--known-loops", "--json"});
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const json qv = json::parse(r.out);
+  ASSERT_EQ(qv.at("candidates").size(), 1u) << r.out;
+  EXPECT_EQ(qv["candidates"][0].at("scan_id"), second.at("scan_id"));
+  EXPECT_TRUE(qv["candidates"][0].at("refined").get<bool>());
+  expectPose(fromJson(qv["candidates"][0].at("T")), T_a_b_, "sglc query --verify 4501 --known-loops");
+
   // Scope sessions: only b/00 (which holds 4501), the list given before a positional-free command.
   r = cli({"query", "--map", "cli", "--scope", "sessions", "--sessions", "b/00,c/nosuch", "--scan-id",
            std::to_string(id52), "--json"});

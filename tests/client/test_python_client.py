@@ -104,6 +104,9 @@ check(b"".join(c.points for c in chunks[1:]) == pb and b"".join(c.labels for c i
 check(chunks[0].header.query_options.scope == sglc_client.SCOPES["other"] and chunks[0].header.stamp == 1.5,
       "the header keeps the request's options")
 check(raises(ValueError, client0.query_options, scope="galaxy") is not None, "unknown scope rejected")
+o = client0.query_options(verify_scan_ids=[4, 9], known_loops=True)
+check(list(o.verify_scan_ids) == [4, 9] and o.known_loops and not o.include_rejected,
+      "query_options carries verify_scan_ids and known_loops")
 check(raises(ValueError, client0.query, "m") is not None, "query without a source rejected")
 e = raises(sglc_client.SglcError, client0.list_maps)
 check(e is not None and e.code_name == "UNAVAILABLE", f"unreachable server gives UNAVAILABLE (got {e})")

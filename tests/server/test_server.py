@@ -192,6 +192,39 @@ def test_inter_robot_loop_and_restart(tmp):
         assert s.stop() == 0, "graceful shutdown exits 0"
 
 
+def test_known_loop_pose(tmp):
+    """A known loop that verification rejects (the candidate's landmarks unlabelled) gets a pose only when asked."""
+    if not HAVE_DATA:
+        print("  skipped: real scans absent")
+        return
+    s = Server(os.path.join(tmp, "known.db"))
+    try:
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        bare = load_scan("004501")
+        lab = np.frombuffer(bare.labels, dtype="<u4").copy()
+        lab[np.isin(lab & 0xFFFF, [10, 18, 20, 71, 80])] = 0  # cars, trucks, other vehicles, trunks, poles
+        bare.labels = lab.tobytes()
+        r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=bare))
+        r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=load_scan("000052")))
+
+        def ask(**kw):
+            return s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
+                                                options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id], **kw)))
+        assert len(ask().candidates) == 0, "not a verified loop"
+        rejected = ask(include_rejected=True).candidates
+        assert len(rejected) == 1 and not rejected[0].verified and not rejected[0].refined
+        known = ask(known_loops=True).candidates
+        assert len(known) == 1 and not known[0].verified and known[0].refined, known
+        dt, dr = pose_error(np.array(known[0].t_query_candidate.m).reshape(4, 4), reference_pose())
+        assert dt < 0.10 and dr < 0.5, f"known-loop pose error {dt:.3f} m {dr:.3f} deg"
+        assert len(known[0].information) == 36 and 0 < known[0].fitness <= 1
+        print(f"  known loop without landmarks: RTE {dt:.4f} m, RRE {dr:.4f} deg, fitness {known[0].fitness:.3f}")
+        expect_code(grpc.StatusCode.INVALID_ARGUMENT, lambda: ask(known_loops=True, refine=False, refine_set=True),
+                    "known_loops without refinement")
+    finally:
+        assert s.stop() == 0
+
+
 def test_bad_inputs(tmp):
     s = Server(os.path.join(tmp, "bad.db"), extra=["--max-message-mb", "1"])
     try:
@@ -489,7 +522,7 @@ def test_pose_graph(tmp):
         assert s.stop() == 0
 
 def main():
-    tests = [test_inter_robot_loop_and_restart, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
+    tests = [test_inter_robot_loop_and_restart, test_known_loop_pose, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
              test_pose_graph]
     passed = failed = 0
     for t in tests:
