@@ -5,6 +5,7 @@
 #   scripts/results.sh                    # everything (about two hours on 2 cores)
 #   SEQS=00 NOISES=0.05 scripts/results.sh   # a subset
 #   PARTS="real ablation" scripts/results.sh # only some parts: real, ablation, sim, slam (default: all)
+#   PROTOCOLS=pose PARTS=sim scripts/results.sh  # simulated runs of one protocol only (pairs, sequence, pose)
 # RESULTS.md is written from every run present in docs/results, so parts can be re-run one at a time.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -80,9 +81,24 @@ fi
 
 if want sim; then
 
+PROTOCOLS=${PROTOCOLS:-all}
 for seq in $SEQS; do
   for noise in $NOISES; do
     dir=$OUT/sim-$seq-noise$noise
+    if [ "$PROTOCOLS" != all ]; then
+      for p in $PROTOCOLS; do
+        echo "== simulated $seq, label noise $noise, $p protocol -> $dir/$p" >&2
+        case $p in
+          pose) pairs=(--pairs "$DATA/loop_gt_lcrnet/loop_distance4/$seq.txt") ;;
+          pairs) pairs=(--pairs "$DATA/ssc_pairs/neg_1/$seq.txt") ;;
+          *) pairs=() ;;
+        esac
+        "$EVAL" --protocol "$p" --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$(calibFor "$seq")" \
+          --label-noise "$noise" "${pairs[@]}" --title "simulated KITTI $seq, label noise $noise - $p" \
+          --out "$dir/$p" > /dev/null
+      done
+      continue
+    fi
     echo "== simulated $seq, label noise $noise -> $dir" >&2
     "$EVAL" --protocol all --sim --poses "$DATA/kitti_odometry_gt_poses/poses/$seq.txt" --calib "$(calibFor "$seq")" \
       --label-noise "$noise" --pairs "$DATA/ssc_pairs/neg_1/$seq.txt" \

@@ -65,13 +65,13 @@ class InProcess final : public Backend {
     std::vector<std::int64_t> ids;
     for (const auto& h : store_->search(req)) ids.push_back(h.scan_id);
     t->search = msSince(t1);
-    auto out = verifyIds(fp, ids, q.refine, t);
+    auto out = verifyIds(fp, ids, q.refine ? Refine::verified : Refine::none, t);
     store(frame, fp, t);
     t->total = msSince(t0);
     return out;
   }
 
-  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, bool refine, StageTimes* t) override {
+  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {
     const auto t0 = Clock::now();
     const auto fp = store_->fingerprint(idOf(query));
     std::vector<std::int64_t> ids;
@@ -95,7 +95,7 @@ class InProcess final : public Backend {
     frames_[id] = frame;
     t->store = msSince(t0);
   }
-  std::vector<Candidate> verifyIds(const Fingerprint& query, const std::vector<std::int64_t>& ids, bool refine,
+  std::vector<Candidate> verifyIds(const Fingerprint& query, const std::vector<std::int64_t>& ids, Refine refine,
                                    StageTimes* t) {
     auto t0 = Clock::now();
     std::vector<Ranked> ranked;
@@ -127,8 +127,8 @@ class InProcess final : public Backend {
     std::vector<Candidate> out;
     for (const auto i : order) {
       auto c = ranked[i].c;
-      if (refine && c.verified) {
-        pipeline_.refine(query, *fps[i], results[i]);
+      if (refine == Refine::known_loops || (refine == Refine::verified && c.verified)) {
+        pipeline_.refine(query, *fps[i], results[i], refine == Refine::known_loops);
         c.T = results[i].T;
         c.refined = results[i].refined;
       }
@@ -163,7 +163,7 @@ class Remote final : public Backend {
                                       StageTimes* t) override {
     client::IngestOptions io;
     io.query = true;
-    io.query_options = options(q.refine, q.candidates);
+    io.query_options = options(q.refine ? Refine::verified : Refine::none, q.candidates);
     io.query_options.set_scope(v1::SCOPE_WHOLE_MAP);
     io.query_options.set_exclude_recent(q.exclude_recent);
     io.query_options.set_candidates(static_cast<std::uint32_t>(q.candidates));
@@ -173,7 +173,7 @@ class Remote final : public Backend {
     return convert(r.loops());
   }
 
-  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, bool refine, StageTimes* t) override {
+  std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {
     std::vector<Candidate> out;
     StageTimes sum;
     for (std::size_t first = 0; first < candidates.size(); first += 100) {  // top_k is at most 100
@@ -195,12 +195,13 @@ class Remote final : public Backend {
   }
 
  private:
-  static v1::QueryOptions options(bool refine, int n) {
+  static v1::QueryOptions options(Refine refine, int n) {
     v1::QueryOptions o;
     o.set_top_k(static_cast<std::uint32_t>(n));
     o.set_include_rejected(true);
-    o.set_refine(refine);
+    o.set_refine(refine != Refine::none);
     o.set_refine_set(true);
+    o.set_known_loops(refine == Refine::known_loops);
     return o;
   }
   static void times(const v1::Timing& in, StageTimes* t) {

@@ -28,6 +28,13 @@ struct StageTimes {
   double fingerprint = 0, search = 0, verify = 0, refine = 0, store = 0, total = 0;
 };
 
+// Which candidates get a refined pose.
+enum class Refine {
+  none,
+  verified,     // those verification accepts
+  known_loops,  // every candidate with a pose to start from, accepted or not (the pairs are known loops)
+};
+
 struct LoopQuery {
   int exclude_recent = 100;  // skip stored frames whose number is within this many of the query's
   int candidates = 10;       // descriptor neighbours verified (all of them are returned, verified first)
@@ -44,9 +51,9 @@ class Backend {
   // the service orders them: verified first, then by score (descending), then by storage order.
   virtual std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& query,
                                               StageTimes* times) = 0;
-  // Verifies stored frame `query` against each stored frame of `candidates` (refining the verified ones if
-  // asked); returns one Candidate per requested frame, in the service's order.
-  virtual std::vector<Candidate> verify(int query, const std::vector<int>& candidates, bool refine,
+  // Verifies stored frame `query` against each stored frame of `candidates`, refining as asked; returns one
+  // Candidate per requested frame, in the service's order.
+  virtual std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine,
                                         StageTimes* times) = 0;
 };
 

@@ -139,17 +139,20 @@ double mean(const std::vector<double>& v) {
 RegistrationSummary registrationRecall(const std::vector<RegistrationResult>& results, double max_rte_m,
                                        double max_rre_deg) {
   std::vector<double> rte, rre;
+  std::size_t verified = 0;
   for (const auto& r : results) {
     // Written as "<" so that a NaN error is a failure.
     if (r.registered && r.error.rte_m < max_rte_m && r.error.rre_deg < max_rre_deg) {
       rte.push_back(r.error.rte_m);
       rre.push_back(r.error.rre_deg);
+      verified += r.verified;
     }
   }
   RegistrationSummary s;
   s.pairs = results.size();
   s.successes = rte.size();
   s.rr = s.pairs > 0 ? static_cast<double>(s.successes) / static_cast<double>(s.pairs) : 0.0;
+  s.rr_verified = s.pairs > 0 ? static_cast<double>(verified) / static_cast<double>(s.pairs) : 0.0;
   s.rte_mean = mean(rte);
   s.rre_mean = mean(rre);
   s.rte_median = median(std::move(rte));

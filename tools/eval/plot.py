@@ -151,13 +151,13 @@ def plot_trajectory(out_dir):
 
 def plot_pose_errors(out_dir):
     path = os.path.join(out_dir, "pose_errors.csv")
-    rows = read_csv(path, ["i", "j", "registered", "rte_m", "rre_deg"], [int, int, flag, float, float])
+    rows = read_csv(path, ["i", "j", "registered", "verified", "rte_m", "rre_deg"], [int, int, flag, flag, float, float])
     registered = [r for r in rows if r[2]]
     for r in registered:
-        if not (math.isfinite(r[3]) and math.isfinite(r[4])):
+        if not (math.isfinite(r[4]) and math.isfinite(r[5])):
             raise Malformed(f"{path}: pair {r[0]},{r[1]}: registered with a non-finite error")
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    for ax, col, name, unit in ((axes[0], 3, "RTE", "m"), (axes[1], 4, "RRE", "deg")):
+    for ax, col, name, unit in ((axes[0], 4, "RTE", "m"), (axes[1], 5, "RRE", "deg")):
         values = np.array([r[col] for r in registered])
         ax.set_title(f"{name}: {len(values)} registered of {len(rows)} pairs", fontsize=10)
         ax.set(xlabel=f"{name} ({unit})", ylabel="pairs")

@@ -121,6 +121,11 @@ def main():
         print(f"pose: RR {ps['rr']:.3f} over {ps['pose_pairs']} pairs, RTE {ps['rte_mean']:.3f} m, "
               f"RRE {ps['rre_mean']:.3f} deg")
         assert ps["pose_pairs"] == len(loops) and ps["rr"] == 1.0 and ps["rte_mean"] < 0.05, ps
+        assert 0.9 <= ps["rr_verified"] <= ps["rr"], ps
+        with open(os.path.join(out, "pose_errors.csv")) as f:
+            rows = list(csv.DictReader(f))
+        assert len(rows) == len(loops) and set(rows[0]) == {"i", "j", "registered", "verified", "rte_m", "rre_deg"}
+        assert sum(r["verified"] == "1" for r in rows) / len(rows) >= ps["rr_verified"] - 1e-9
         if plots:
             assert os.path.getsize(os.path.join(out, "pose_errors.png")) > 1000
         out = os.path.join(tmp, "pairs")

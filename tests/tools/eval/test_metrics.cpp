@@ -305,7 +305,9 @@ TEST(PoseError, TranslationIgnoresRotation) {
               5.0, kEps);
 }
 
-RegistrationResult reg(bool registered, double rte, double rre) { return {registered, {rte, rre}}; }
+RegistrationResult reg(bool registered, double rte, double rre, bool verified = true) {
+  return {registered, {rte, rre}, verified};
+}
 
 TEST(RegistrationRecall, StrictLimitsFailuresMeansAndMedians) {
   const std::vector<RegistrationResult> r = {
@@ -325,6 +327,12 @@ TEST(RegistrationRecall, StrictLimitsFailuresMeansAndMedians) {
   EXPECT_NEAR(s.rre_mean, (1.0 + 4.9 + 0.2 + 3.0) / 4, kEps);
   EXPECT_NEAR(s.rte_median, (0.2 + 0.3) / 2, kEps);  // 0.1 0.2 | 0.3 1.9
   EXPECT_NEAR(s.rre_median, (1.0 + 3.0) / 2, kEps);  // 0.2 1.0 | 3.0 4.9
+
+  EXPECT_NEAR(s.rr_verified, 4.0 / 7, kEps);  // every pair above was verified
+  // A success verification rejected counts in rr, not in rr_verified; a verified failure in neither.
+  const auto mixed = registrationRecall({reg(true, 0.1, 1.0, false), reg(true, 0.1, 1.0), reg(true, 3.0, 1.0)});
+  EXPECT_NEAR(mixed.rr, 2.0 / 3, kEps);
+  EXPECT_NEAR(mixed.rr_verified, 1.0 / 3, kEps);
 
   // Odd count: the middle value.
   const auto odd = registrationRecall({r[0], r[4], r[5]});
