@@ -1,11 +1,11 @@
 #include "sglc/bev_search.hpp"
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <numbers>
 #include <tuple>
 
+#include "class_votes.hpp"
 #include "fast_math.hpp"
 
 namespace sglc {
@@ -17,6 +17,10 @@ int structureIndex(std::uint8_t cls) {
   return cls >= static_cast<std::uint8_t>(Background::kVegetation) && cls <= static_cast<std::uint8_t>(Background::kFence)
              ? cls - static_cast<int>(Background::kVegetation)
              : -1;
+}
+
+Background classOf(int structure_index) {
+  return static_cast<Background>(structure_index + static_cast<int>(Background::kVegetation));
 }
 
 struct Point2 {
@@ -34,17 +38,16 @@ struct ScoreGrid {
   ScoreGrid(const std::vector<Point2>& points, double cell_m, double half_m)
       : cell(cell_m), half(half_m), n(static_cast<int>(std::ceil(2.0 * half_m / cell_m))),
         score(static_cast<std::size_t>(kClasses) * n * n, 0) {
-    // The majority class of each cell.
-    std::vector<std::array<int, kClasses>> votes(static_cast<std::size_t>(n) * n, {0, 0, 0});
+    // Each cell's class by the stored BEV's own rule (majority, ties to the higher priority).
+    std::vector<detail::ClassVotes> votes(static_cast<std::size_t>(n) * n);
     for (const auto& p : points) {
       const int ix = cellOf(p.x), iy = cellOf(p.y);
-      if (ix >= 0 && iy >= 0 && ix < n && iy < n) ++votes[static_cast<std::size_t>(iy) * n + ix][p.k];
+      if (ix >= 0 && iy >= 0 && ix < n && iy < n) votes[static_cast<std::size_t>(iy) * n + ix].add(classOf(p.k));
     }
     for (int iy = 0; iy < n; ++iy)
       for (int ix = 0; ix < n; ++ix) {
-        const auto& v = votes[static_cast<std::size_t>(iy) * n + ix];
-        const int k = static_cast<int>(std::max_element(v.begin(), v.end()) - v.begin());
-        if (v[k] == 0) continue;
+        const int k = structureIndex(votes[static_cast<std::size_t>(iy) * n + ix].winner());
+        if (k < 0) continue;
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) {
             const int x = ix + dx, y = iy + dy;
@@ -54,14 +57,14 @@ struct ScoreGrid {
           }
       }
   }
-  int cellOf(double v) const { return detail::floorInt((v + half) / cell); }
-  std::uint8_t& at(int k, int ix, int iy) {
-    return score[(static_cast<std::size_t>(k) * n + static_cast<std::size_t>(iy)) * n + static_cast<std::size_t>(ix)];
+  int cellOf(double v) const { return detail::floorInt(static_cast<float>((v + half) / cell)); }
+  std::size_t index(int k, int ix, int iy) const {
+    return (static_cast<std::size_t>(k) * n + static_cast<std::size_t>(iy)) * n + static_cast<std::size_t>(ix);
   }
+  std::uint8_t& at(int k, int ix, int iy) { return score[index(k, ix, iy)]; }
   std::uint8_t get(int k, double x, double y) const {
     const int ix = cellOf(x), iy = cellOf(y);
-    if (ix < 0 || iy < 0 || ix >= n || iy >= n) return 0;
-    return score[(static_cast<std::size_t>(k) * n + static_cast<std::size_t>(iy)) * n + static_cast<std::size_t>(ix)];
+    return ix < 0 || iy < 0 || ix >= n || iy >= n ? 0 : score[index(k, ix, iy)];
   }
 };
 
@@ -81,7 +84,9 @@ std::vector<Point2> thin(const std::vector<Point2>& points, double cell) {
   std::vector<Point2> out;
   std::vector<std::pair<std::tuple<int, int, int>, std::size_t>> keyed;
   for (std::size_t i = 0; i < points.size(); ++i)
-    keyed.push_back({{detail::floorInt(points[i].x / cell), detail::floorInt(points[i].y / cell), points[i].k}, i});
+    keyed.push_back({{detail::floorInt(static_cast<float>(points[i].x / cell)),
+                      detail::floorInt(static_cast<float>(points[i].y / cell)), points[i].k},
+                     i});
   std::stable_sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   for (std::size_t i = 0; i < keyed.size(); ++i)
     if (i == 0 || keyed[i].first != keyed[i - 1].first) out.push_back(points[keyed[i].second]);
@@ -130,9 +135,8 @@ std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std:
       const double x = cy * p.x - sy * p.y, y = sy * p.x + cy * p.y;
       const int bx = coarse.cellOf(x) - S, by = coarse.cellOf(y) - S;
       if (bx < 0 || by < 0 || bx + w > coarse.n || by + w > coarse.n) continue;
-      const std::uint8_t* grid = coarse.score.data() + static_cast<std::size_t>(p.k) * coarse.n * coarse.n;
       for (int dy = 0; dy < w; ++dy) {
-        const std::uint8_t* row = grid + static_cast<std::size_t>(by + dy) * coarse.n + bx;
+        const std::uint8_t* row = &coarse.score[coarse.index(p.k, bx, by + dy)];
         std::uint32_t* out = acc.data() + static_cast<std::size_t>(dy) * w;
         for (int dx = 0; dx < w; ++dx) out[dx] += row[dx];
       }

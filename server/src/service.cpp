@@ -194,7 +194,6 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   t0 = Clock::now();
   if (refine)
     state.compute().parallelFor(results.size(), [&](std::size_t i) {
-      if (!results[i].result.is_loop && !opt.known_loops()) return;
       checkAlive(ctx);
       state.pipeline().refine(query, *results[i].fp, results[i].result, opt.known_loops());
     });

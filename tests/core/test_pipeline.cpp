@@ -99,6 +99,20 @@ class RealPipeline : public ::testing::Test {
   }
   void SetUp() override { SGLC_REQUIRE_REAL_DATA(); }
   static const Fingerprint& fp(const std::string& key) { return fps_->at(key); }
+  // A frame of the real sequence 00, read again from disk.
+  static LabelledScan scan00(const std::string& frame) {
+    const std::string dir = test::scansDir() + "/sequences/00";
+    return readScan(dir + "/velodyne/" + frame + ".bin", dir + "/labels/" + frame + ".label");
+  }
+  // T within max_m / max_deg of ref; the errors are recorded as test properties `property`_m and _deg.
+  static void expectPoseWithin(const Mat4d& T, const Mat4d& ref, double max_m, double max_deg,
+                               const std::string& property) {
+    const double dt = translationError(T, ref), dr = rotationErrorDeg(T, ref);
+    RecordProperty(property + "_m", std::to_string(dt));
+    RecordProperty(property + "_deg", std::to_string(dr));
+    EXPECT_LT(dt, max_m) << property << "\n" << T << "\nreference\n" << ref;
+    EXPECT_LT(dr, max_deg) << property << "\n" << T << "\nreference\n" << ref;
+  }
   static const PairRow& loopRow() {
     for (const auto& r : *pairs_)
       if (r.seq == "00" && r.a == "000052" && r.b == "004501") return r;
@@ -129,11 +143,7 @@ TEST_F(RealPipeline, LoopPairMatchesReferencePose) {
   expectSane(r);
   ASSERT_TRUE(r.is_loop) << r.reason;
   EXPECT_TRUE(r.refined);
-  const double dt = translationError(r.T, row.T_a_b), dr = rotationErrorDeg(r.T, row.T_a_b);
-  RecordProperty("loop_translation_error_m", std::to_string(dt));
-  RecordProperty("loop_rotation_error_deg", std::to_string(dr));
-  EXPECT_LT(dt, 0.10) << r.T;
-  EXPECT_LT(dr, 0.5) << r.T;
+  expectPoseWithin(r.T, row.T_a_b, 0.10, 0.5, "loop_error");
   // The refined loop carries its information: symmetric, positive definite; the verified-only one none.
   const Eigen::SelfAdjointEigenSolver<Mat6d> eig(r.information);
   EXPECT_LT((r.information - r.information.transpose()).norm(), 1e-6 * r.information.norm());
@@ -147,30 +157,23 @@ TEST_F(RealPipeline, LoopPairMatchesReferencePose) {
 // pairs.txt is 36 mm / 0.12 deg from it).
 TEST_F(RealPipeline, LoopPairAgreesWithDenseRegistration) {
   const PairRow& row = loopRow();
-  const std::string dir = test::scansDir() + "/sequences/00";
-  const auto scan = [&](const char* f) { return readScan(dir + "/velodyne/" + f + ".bin", dir + "/labels/" + f + ".label"); };
-  const test::DenseRegistration dense(test::DenseRegistration::staticPoints(scan("000052")));
-  const auto source = test::DenseRegistration::staticPoints(scan("004501"));
+  const test::DenseRegistration dense(test::DenseRegistration::staticPoints(scan00("000052")));
+  const auto source = test::DenseRegistration::staticPoints(scan00("004501"));
   const LoopResult r = pipeline_->match(fp("00/000052"), fp("00/004501"));
   ASSERT_TRUE(r.is_loop) << r.reason;
   const Mat4d from_reference = dense.align(source, row.T_a_b);
   const Mat4d from_engine = dense.align(source, r.T);
   EXPECT_LT(translationError(from_reference, from_engine), 0.002);
   EXPECT_LT(rotationErrorDeg(from_reference, from_engine), 0.01);
-  const double dt = translationError(r.T, from_reference), dr = rotationErrorDeg(r.T, from_reference);
-  RecordProperty("engine_vs_dense_m", std::to_string(dt));
-  RecordProperty("engine_vs_dense_deg", std::to_string(dr));
   RecordProperty("pairs_txt_vs_dense_m", std::to_string(translationError(row.T_a_b, from_reference)));
-  EXPECT_LT(dt, 0.015) << r.T << "\n" << from_reference;
-  EXPECT_LT(dr, 0.15) << r.T << "\n" << from_reference;
+  expectPoseWithin(r.T, from_reference, 0.015, 0.15, "engine_vs_dense");
 }
 
 // The same real loop with the candidate's landmarks unlabelled (no node matches): verification rejects it,
 // and a caller who knows it is a loop still gets its pose, from the background views and planes.
 TEST_F(RealPipeline, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
   const PairRow& row = loopRow();
-  const std::string dir = test::scansDir() + "/sequences/00";
-  LabelledScan bare = readScan(dir + "/velodyne/004501.bin", dir + "/labels/004501.label");
+  LabelledScan bare = scan00("004501");
   const LabelMap labels(pipeline_->config().labels);
   for (auto& l : bare.labels)
     if (labels.nodeClass(l) >= 0) l = 0;
@@ -181,11 +184,7 @@ TEST_F(RealPipeline, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
   pipeline_->refine(fp("00/000052"), b, r, /*known_loop=*/true);
   ASSERT_TRUE(r.refined);
   EXPECT_FALSE(r.is_loop);
-  const double dt = translationError(r.T, row.T_a_b), dr = rotationErrorDeg(r.T, row.T_a_b);
-  RecordProperty("background_only_translation_error_m", std::to_string(dt));
-  RecordProperty("background_only_rotation_error_deg", std::to_string(dr));
-  EXPECT_LT(dt, 0.10) << r.T;
-  EXPECT_LT(dr, 0.5) << r.T;
+  expectPoseWithin(r.T, row.T_a_b, 0.10, 0.5, "background_only_error");
 }
 
 TEST_F(RealPipeline, LoopPairReverseDirection) {
@@ -193,9 +192,7 @@ TEST_F(RealPipeline, LoopPairReverseDirection) {
   const LoopResult r = pipeline_->match(fp("00/004501"), fp("00/000052"));
   expectSane(r);
   ASSERT_TRUE(r.is_loop) << r.reason;
-  const Mat4d expected = row.T_a_b.inverse();  // maps 52 into 4501
-  EXPECT_LT(translationError(r.T, expected), 0.10) << r.T;
-  EXPECT_LT(rotationErrorDeg(r.T, expected), 0.5) << r.T;
+  expectPoseWithin(r.T, row.T_a_b.inverse(), 0.10, 0.5, "reverse_error");  // maps 52 into 4501
 }
 
 TEST_F(RealPipeline, VerifyAloneGivesCoarsePose) {

@@ -127,7 +127,7 @@ class InProcess final : public Backend {
     std::vector<Candidate> out;
     for (const auto i : order) {
       auto c = ranked[i].c;
-      if (refine == Refine::known_loops || (refine == Refine::verified && c.verified)) {
+      if (refine != Refine::none) {  // refine() itself skips rejected pairs unless they are known loops
         pipeline_.refine(query, *fps[i], results[i], refine == Refine::known_loops);
         c.T = results[i].T;
         c.refined = results[i].refined;

@@ -44,9 +44,10 @@ class Pipeline {
   // Coarse pose and the loop decision.
   LoopResult verify(const Fingerprint& query, const Fingerprint& candidate) const;
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
-  // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result that
-  // has a pose to start from; `refined` says whether a pose was estimated, is_loop and reason keep the
-  // verification's decision.
+  // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result: from
+  // its coarse pose and, when there is none, verification rejected it or the plane stage would leave its
+  // guard, also from a search over the two background views (config.bev_search), keeping the pose whose
+  // planes fit best. `refined` says whether a pose was found; is_loop and reason keep verification's decision.
   void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result,
               bool known_loop = false) const;
   // verify + refine.
