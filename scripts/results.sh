@@ -97,6 +97,12 @@ for seq in $SEQS; do
           --label-noise "$noise" "${pairs[@]}" --title "simulated KITTI $seq, label noise $noise - $p" \
           --out "$dir/$p" > /dev/null
       done
+      # The combined summary of an earlier --protocol all run would keep the old numbers: rebuild it.
+      /usr/bin/python3 -c 'import json, os, sys
+d = sys.argv[1]
+parts = {p: json.load(open(os.path.join(d, p, "summary.json"))) for p in ("sequence", "pairs", "pose")
+         if os.path.exists(os.path.join(d, p, "summary.json"))}
+json.dump(parts, open(os.path.join(d, "summary.json"), "w"), indent=2)' "$dir"
       continue
     fi
     echo "== simulated $seq, label noise $noise -> $dir" >&2
