@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <utility>
 
+#include "sglc/rigid.hpp"
+
 namespace sglc::client {
 
 // ---------------------------------------------------------------------------------------------------------
@@ -78,7 +80,12 @@ v1::IngestRequest makeIngestRequest(const v1::ScanKey& key, const LabelledScan& 
   *request.mutable_key() = key;
   packScan(scan, request.mutable_scan());
   if (options.stamp) request.set_stamp(*options.stamp);
-  if (options.odometry_pose) toTransform(*options.odometry_pose, request.mutable_odometry_pose());
+  if (options.odometry_pose) {
+    // The server refuses a pose that is not a rigid motion; say so before sending.
+    if (const auto error = rigidMotionError(*options.odometry_pose))
+      throw InputError("odometry pose is not a rigid motion: " + *error);
+    toTransform(*options.odometry_pose, request.mutable_odometry_pose());
+  }
   request.set_store_raw(options.store_raw);
   request.set_query(options.query);
   if (options.query) *request.mutable_query_options() = options.query_options;
@@ -215,11 +222,9 @@ v1::MapInfo Client::createMap(const std::string& name, const CallOptions& call) 
 }
 
 void Client::ensureMap(const std::string& name, const CallOptions& call) const {
-  try {
-    createMap(name, call);
-  } catch (const RpcError& e) {
-    if (e.code() != grpc::StatusCode::ALREADY_EXISTS) throw;
-  }
+  // CreateMap is idempotent; its ALREADY_EXISTS means the map was made by another engine configuration (another
+  // descriptor layout), which the caller must hear about.
+  createMap(name, call);
 }
 
 std::vector<v1::MapInfo> Client::listMaps(const CallOptions& call) const {

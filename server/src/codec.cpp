@@ -3,6 +3,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "sglc/rigid.hpp"
+
 namespace sglc::server {
 
 static_assert(sizeof(Vec3f) == 12, "scan decoding copies packed float triples");
@@ -40,11 +42,10 @@ Mat4d decodeTransform(const v1::Transform& t, const std::string& what) {
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
                    what + " must have 16 values (row-major 4x4), got " + std::to_string(t.m_size()));
   Mat4d T;
-  for (int k = 0; k < 16; ++k) {
-    if (!std::isfinite(t.m(k))) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, what + " has a non-finite value");
-    T(k / 4, k % 4) = t.m(k);
-  }
-  return T;
+  for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = t.m(k);
+  if (const auto error = rigidMotionError(T))
+    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, what + " is not a rigid motion: " + *error);
+  return orthonormalised(T);
 }
 
 void encodeTransform(const Mat4d& T, v1::Transform* out) {

@@ -25,7 +25,8 @@ class RpcError : public std::runtime_error {
 // Decodes and checks a scan: byte lengths, equal counts, not empty, at most max_points, finite coordinates.
 LabelledScan decodeScan(const std::string& points, const std::string& labels, std::size_t max_points);
 
-// 16 finite values -> matrix; throws RpcError(INVALID_ARGUMENT) naming `what` otherwise.
+// 16 values that form a rigid motion (sglc/rigid.hpp) -> that motion, re-orthonormalised; throws
+// RpcError(INVALID_ARGUMENT) naming `what` and the failed check otherwise.
 Mat4d decodeTransform(const v1::Transform& t, const std::string& what);
 void encodeTransform(const Mat4d& T, v1::Transform* out);
 

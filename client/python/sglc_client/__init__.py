@@ -12,11 +12,11 @@ The generated stubs (sglc_pb2, sglc_pb2_grpc) come from the build tree: set SGLC
 """
 from ._stubs import ENV_VAR as STUBS_ENV_VAR, load_stubs
 from .client import DEFAULT_CHUNK_BYTES, SCOPES, Client, IngestSession, SglcError
-from .packing import (information_matrix, pack_labels, pack_points, pack_scan, read_kitti_scan, to_matrix,
-                      transform_values, unpack_labels, unpack_points, unpack_scan)
+from .packing import (information_matrix, pack_labels, pack_points, pack_scan, read_kitti_scan,
+                      rigid_motion_error, to_matrix, transform_values, unpack_labels, unpack_points, unpack_scan)
 
 __all__ = [
     "Client", "IngestSession", "SglcError", "DEFAULT_CHUNK_BYTES", "SCOPES", "STUBS_ENV_VAR", "load_stubs",
     "pack_points", "pack_labels", "pack_scan", "unpack_points", "unpack_labels", "unpack_scan", "read_kitti_scan",
-    "to_matrix", "transform_values", "information_matrix",
+    "to_matrix", "transform_values", "rigid_motion_error", "information_matrix",
 ]

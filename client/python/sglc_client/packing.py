@@ -8,6 +8,7 @@ exactly) or already packed bytes. Unpacking and matrices need numpy; reading KIT
 Malformed input raises ValueError.
 """
 import array
+import math
 import sys
 
 POINT_BYTES = 12
@@ -117,12 +118,37 @@ def read_kitti_scan(bin_path, label_path):
     return values.tobytes(), labels
 
 
+RIGID_TOLERANCE = 1e-3  # the server's tolerance on |R'R - I| and |det R - 1|
+
+
+def rigid_motion_error(values):
+    """Why 16 row-major values are not a rigid motion (the server's checks), or None when they are one."""
+    m = [values[4 * r:4 * r + 4] for r in range(4)]
+    if not all(math.isfinite(v) for v in values):
+        return "has a non-finite value (NaN or inf)"
+    if any(abs(a - b) > 1e-9 for a, b in zip(m[3], (0.0, 0.0, 0.0, 1.0))):
+        return "last row is not 0 0 0 1"
+    ortho = max(abs(sum(m[k][i] * m[k][j] for k in range(3)) - (1.0 if i == j else 0.0))
+                for i in range(3) for j in range(3))
+    if not ortho <= RIGID_TOLERANCE:
+        return f"rotation block is not orthonormal (max |R'R - I| = {ortho:.3g}): not a rigid motion"
+    det = (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]))
+    if not abs(det - 1.0) <= RIGID_TOLERANCE:
+        return f"rotation block has determinant {det:.3g}, not +1: a reflection, not a rigid motion"
+    return None
+
+
 def transform_values(matrix):
-    """4x4 array-like (row-major) -> list of 16 floats."""
+    """4x4 array-like (row-major rigid motion) -> list of 16 floats; ValueError when it is not a rigid motion."""
     rows = [list(map(float, r)) for r in matrix]
     if len(rows) != 4 or any(len(r) != 4 for r in rows):
         raise ValueError("a transform must be a 4x4 matrix")
-    return [v for r in rows for v in r]
+    values = [v for r in rows for v in r]
+    error = rigid_motion_error(values)
+    if error:
+        raise ValueError("transform is not a rigid motion: " + error)
+    return values
 
 
 def to_matrix(transform):
