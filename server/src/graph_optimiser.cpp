@@ -12,6 +12,9 @@
 #include <unordered_map>
 #include <vector>
 
+#include "log_line.hpp"
+#include "sglc/rigid.hpp"
+
 namespace sglc::server {
 
 using Clock = std::chrono::steady_clock;
@@ -82,6 +85,14 @@ Mat6 loopSqrtInformation(const Mat6& information, double floor_t, double floor_r
   cov.diagonal().tail<3>().array() += floor_r * floor_r;
   const Mat6 info = cov.inverse();
   return Eigen::LLT<Mat6>(0.5 * (info + info.transpose())).matrixU();
+}
+
+// Why a stored loop cannot be an edge, or nullopt.
+std::optional<std::string> loopError(const storage::LoopRecord& l) {
+  if (const auto error = rigidMotionError(l.T)) return "transform " + *error;
+  if (l.information && !l.information->allFinite()) return std::string("information is not finite");
+  if (!std::isfinite(l.rmse)) return std::string("rmse is not finite");
+  return std::nullopt;
 }
 
 }  // namespace
@@ -182,11 +193,7 @@ void GraphOptimiser::run() {
     const std::string map = next->first;
     due_.erase(next);
     lock.unlock();
-    try {
-      optimise(map);
-    } catch (const std::exception& e) {
-      spdlog::warn("{{\"event\":\"optimise_failed\",\"map\":\"{}\",\"error\":\"{}\"}}", map, e.what());
-    }
+    optimise(map);  // never throws: a failure becomes the map's failed event
     lock.lock();
   }
 }
@@ -195,6 +202,23 @@ GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise
 
 GraphEvent GraphOptimiser::optimise(const std::string& map) {
   std::lock_guard one(optimise_mutex_);
+  try {
+    return solve(map);
+  } catch (const std::exception& e) {
+    // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
+    graphs_.erase(map);
+    GraphEvent event = latest(map).value_or(GraphEvent{});
+    if (!event.graph_version) event.graph_version = store_.graphVersion(map);
+    event.failed = true;
+    event.error = e.what();
+    spdlog::error("{}", logLine({{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version},
+                                 {"error", event.error}}));
+    publish(map, event);
+    return event;
+  }
+}
+
+GraphEvent GraphOptimiser::solve(const std::string& map) {
   const auto t0 = Clock::now();
   auto& slot = graphs_[map];
   {
@@ -216,27 +240,39 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   std::unordered_map<std::int64_t, Mat4d> kept;
   if (fresh) {
     for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
-      kept[p.scan_id] = p.pose;
+      if (!rigidMotionError(p.pose)) kept[p.scan_id] = orthonormalised(p.pose);  // else start from odometry
     solved_through = store_.optimisedThroughLoop(map);
   }
   for (const auto& n : nodes) {
     g.last_scan = std::max(g.last_scan, n.scan_id);
     if (!n.odometry_pose) continue;
+    // Files written before the server checked poses may hold ones that are not rigid motions: such a scan is
+    // no graph node (a pose graph cannot use it), but it stays in the map.
+    if (const auto error = rigidMotionError(*n.odometry_pose)) {
+      spdlog::warn("{}", logLine({{"event", "graph_node_skipped"}, {"map", map}, {"scan", n.scan_id},
+                                  {"error", "odometry pose " + *error}}));
+      continue;
+    }
     changed = true;
     g.index[n.scan_id] = g.nodes.size();
     const auto k = kept.find(n.scan_id);
-    g.nodes.push_back({n.scan_id, n.session_id, n.seq, *n.odometry_pose,
-                       Pose::of(k != kept.end() ? k->second : *n.odometry_pose), k != kept.end()});
+    const Mat4d odometry = orthonormalised(*n.odometry_pose);
+    g.nodes.push_back({n.scan_id, n.session_id, n.seq, odometry, Pose::of(k != kept.end() ? k->second : odometry),
+                       k != kept.end()});
     g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
   }
   for (const auto& l : loops) {
     g.last_loop = std::max(g.last_loop, l.id);
     if (!g.index.count(l.query_scan) || !g.index.count(l.candidate_scan)) continue;
+    if (const auto error = loopError(l)) {
+      spdlog::warn("{}", logLine({{"event", "graph_loop_skipped"}, {"map", map}, {"loop", l.id}, {"error", *error}}));
+      continue;
+    }
     // A second loop for the same pair replaced the first in the database: drop the first here too.
     if (!g.pairs.insert({l.query_scan, l.candidate_scan}).second)
       g.loops.erase(std::find_if(g.loops.begin(), g.loops.end(),
                                  [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; }));
-    g.loops.push_back({l.id, l.query_scan, l.candidate_scan, l.T, l.rmse, l.fitness, l.information});
+    g.loops.push_back({l.id, l.query_scan, l.candidate_scan, orthonormalised(l.T), l.rmse, l.fitness, l.information});
     changed = true;
   }
   // A solved graph with nothing new would only be solved again to the same poses: report the last event, no new
@@ -386,6 +422,15 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   so.num_threads = 1;  // deterministic
   so.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
+  // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.
+  for (const auto& xi : x)
+    for (double v : xi)
+      if (!std::isfinite(v)) throw std::runtime_error("a node's initial pose is not finite");
+  if (!g.nodes.empty()) {
+    double cost = 0;
+    problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
+    if (!std::isfinite(cost)) throw std::runtime_error("the graph's initial cost is not finite");
+  }
   if (!g.nodes.empty()) {
     if (wide) {
       for (auto* loss : loop_losses)
@@ -395,9 +440,13 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     }
     ceres::Solver::Summary last;
     ceres::Solve(so, &problem, &last);
+    if (!last.IsSolutionUsable()) throw std::runtime_error("the solver failed: " + last.message);
     g.converged = last.termination_type == ceres::CONVERGENCE;
     summary.iterations.insert(summary.iterations.end(), last.iterations.begin(), last.iterations.end());
   }
+  for (const auto& xi : x)
+    for (double v : xi)
+      if (!std::isfinite(v)) throw std::runtime_error("the solution is not finite");
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
     g.nodes[i].pose.q = Eigen::Quaterniond(x[i][3], x[i][0], x[i][1], x[i][2]).normalized();
     g.nodes[i].pose.t = Eigen::Vector3d(x[i][4], x[i][5], x[i][6]);
@@ -427,15 +476,41 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   event.nodes = static_cast<std::int64_t>(g.nodes.size());
   event.rejected_loops = rejected;
   event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-  spdlog::info("{{\"event\":\"optimised\",\"map\":\"{}\",\"version\":{},\"nodes\":{},\"loops\":{},\"rejected\":{},"
-               "\"iterations\":{},\"ms\":{:.1f}}}",
-               map, event.graph_version, event.nodes, event.loops, rejected, summary.iterations.size(), event.optimise_ms);
+  spdlog::info("{}", logLine({{"event", "optimised"}, {"map", map}, {"version", event.graph_version},
+                              {"nodes", event.nodes}, {"loops", event.loops}, {"rejected", rejected},
+                              {"iterations", summary.iterations.size()},
+                              {"ms", std::round(event.optimise_ms * 10) / 10}}));
+  publish(map, event);
+  return event;
+}
+
+void GraphOptimiser::publish(const std::string& map, const GraphEvent& event) {
   {
     std::lock_guard lock(mutex_);
     latest_[map] = event;
   }
   changed_.notify_all();
-  return event;
+  std::lock_guard lock(listeners_mutex_);
+  for (const auto& [id, listener] : listeners_) listener(map, event);
+}
+
+std::optional<GraphEvent> GraphOptimiser::latest(const std::string& map) const {
+  std::lock_guard lock(mutex_);
+  const auto it = latest_.find(map);
+  if (it == latest_.end()) return std::nullopt;
+  return it->second;
+}
+
+std::uint64_t GraphOptimiser::subscribe(Listener listener) {
+  std::lock_guard lock(listeners_mutex_);
+  const auto id = next_listener_++;
+  listeners_[id] = std::move(listener);
+  return id;
+}
+
+void GraphOptimiser::unsubscribe(std::uint64_t id) {
+  std::lock_guard lock(listeners_mutex_);
+  listeners_.erase(id);
 }
 
 }  // namespace sglc::server

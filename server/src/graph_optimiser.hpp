@@ -5,11 +5,17 @@
 // solution, and writes the poses and session frames back to the database in one transaction. Bursts of loops
 // are batched (one optimisation per `debounce`). On start every map that has loops is optimised once, so a
 // restarted server serves the same poses and picks up loops recorded just before a crash.
+//
+// Nothing from outside can take the process down through here: scans whose odometry pose is not a rigid
+// motion and loops with a damaged pose or information are left out of the graph (with a log line), the
+// problem is checked to be finite before Ceres sees it, and a solve that fails or ends non-finite marks the
+// map's graph failed (GraphEvent::failed) and keeps its last good poses, while every other map carries on.
 #pragma once
 
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -28,6 +34,10 @@ struct GraphEvent {
   std::int64_t nodes = 0;
   int rejected_loops = 0;
   double optimise_ms = 0;
+  // The solve failed (non-finite or diverged): the map keeps its last good poses (graph_version is theirs) and
+  // `error` says what happened. The next successful solve clears it.
+  bool failed = false;
+  std::string error;
 };
 
 struct GraphOptimiserOptions {
@@ -62,6 +72,13 @@ class GraphOptimiser {
   // Optimises now on the calling thread (tests, tools); returns the event. A graph already solved to
   // convergence with no new scans or loops is not solved again: its last event comes back, no new version.
   GraphEvent optimiseNow(const std::string& map);
+  // The map's last event (failed or not), if any.
+  std::optional<GraphEvent> latest(const std::string& map) const;
+  // Listeners get every new event (a new graph version, or a failure) of every map, on the thread that made
+  // it. They must not block. After unsubscribe() returns, the listener is never called again.
+  using Listener = std::function<void(const std::string& map, const GraphEvent& event)>;
+  std::uint64_t subscribe(Listener listener);
+  void unsubscribe(std::uint64_t id);
   // Ends waits and the worker.
   void stop();
   bool stopping() const;
@@ -70,6 +87,8 @@ class GraphOptimiser {
   struct MapGraph;
   void run();
   GraphEvent optimise(const std::string& map);
+  GraphEvent solve(const std::string& map);
+  void publish(const std::string& map, const GraphEvent& event);
 
   storage::MapStore& store_;
   GraphOptimiserOptions options_;
@@ -82,6 +101,9 @@ class GraphOptimiser {
   std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
   std::mutex optimise_mutex_;  // one optimisation at a time
   bool stop_ = false;
+  std::mutex listeners_mutex_;  // held while listeners run
+  std::map<std::uint64_t, Listener> listeners_;
+  std::uint64_t next_listener_ = 1;
   std::thread worker_;
 };
 

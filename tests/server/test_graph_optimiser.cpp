@@ -2,6 +2,8 @@
 // false loop, and a restart that continues from the stored poses.
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <mutex>
 #include <random>
 
 #include "../storage/storage_test_util.hpp"
@@ -226,6 +228,84 @@ TEST(GraphOptimiser, DeletedScansAndReplacedLoopsLeaveTheGraph) {
   for (std::size_t i = 0; i < after.size(); ++i)
     moved = std::max(moved, (after[i].block<3, 1>(0, 3) - solved[i].block<3, 1>(0, 3)).norm());
   EXPECT_LT(moved, 0.01);  // back where it was without the deleted robot
+  graph.stop();
+}
+
+// A database written before the server checked poses may hold scans whose odometry pose is no rigid motion
+// (the all-zero rotation that crashed the server in a loop) and loops with a damaged transform: the optimiser
+// leaves them out and solves the rest; it never aborts.
+TEST(GraphOptimiser, PosesThatAreNotRigidMotionsAreLeftOut) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  const auto d = drive(*store);
+  Mat4d zero = Mat4d::Zero();
+  zero(3, 3) = 1;
+  Mat4d tiny = Mat4d::Identity() * 1e-300;
+  tiny(3, 3) = 1;
+  Mat4d sheared = Mat4d::Identity();
+  sheared(0, 1) = 0.5;
+  std::vector<std::int64_t> bad;
+  int seq = 0;
+  for (const Mat4d& T : {zero, zero, tiny, sheared}) {
+    const auto fp = randomFingerprint(500 + seq);
+    storage::NewScan ns{.map = "m", .robot = "bad", .session = "s", .seq = seq++, .odometry_pose = T,
+                        .fingerprint = &fp};
+    bad.push_back(store->addScan(ns));
+  }
+  store->addLoop("m", {0, bad[1], bad[0], zero, 0.9, 0.9, 0.02, 30});
+  store->addLoop("m", {0, bad[0], d.ids[3], pose(0, 1, 0), 0.9, 0.9, 0.02, 30});
+  store->addLoop("m", {0, d.ids[200], d.ids[7], zero, 0.9, 0.9, 0.02, 30});  // good scans, damaged loop
+  GraphOptimiser graph(*store, {.debounce = std::chrono::milliseconds(10)});
+  const auto e = graph.optimiseNow("m");
+  EXPECT_FALSE(e.failed) << e.error;
+  EXPECT_EQ(e.nodes, 240);  // the four bad scans are no nodes
+  EXPECT_EQ(e.loops, 39);   // nor are the loops that touch them or carry a damaged transform
+  const auto est = optimised(*store);
+  ASSERT_EQ(est.size(), 240u);
+  for (const auto& T : est) EXPECT_TRUE(T.allFinite());
+  EXPECT_LT(ate(est, d.gt), ate(d.odom, d.gt));
+  graph.stop();
+}
+
+// A solve whose result cannot be written (here: the database reached its size limit) marks the map's graph
+// failed, tells its watchers, keeps the last good poses, and the next successful solve clears it.
+TEST(GraphOptimiser, AFailedSolveIsReportedAndTheMapKeepsItsPoses) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  {
+    auto store = storage::MapStore::open(options(path));
+    drive(*store);
+  }
+  auto limited = options(path);
+  limited.max_db_mb = static_cast<double>(std::filesystem::file_size(path)) / (1024 * 1024);
+  {
+    auto store = storage::MapStore::open(limited);
+    GraphOptimiser graph(*store, {.debounce = std::chrono::hours(1)});  // only the start-up solve runs itself
+    std::vector<GraphEvent> heard;
+    std::mutex m;
+    const auto id = graph.subscribe([&](const std::string& map, const GraphEvent& e) {
+      std::lock_guard lock(m);
+      if (map == "m") heard.push_back(e);
+    });
+    const auto e = graph.optimiseNow("m");
+    EXPECT_TRUE(e.failed);
+    EXPECT_NE(e.error.find("full"), std::string::npos) << e.error;
+    EXPECT_EQ(e.graph_version, 0);
+    EXPECT_EQ(store->graphVersion("m"), 0);
+    EXPECT_TRUE(store->optimisedPoses("m", "", "", 0, 10).empty());
+    ASSERT_TRUE(graph.latest("m").has_value());
+    EXPECT_TRUE(graph.latest("m")->failed);
+    graph.unsubscribe(id);
+    std::lock_guard lock(m);
+    ASSERT_FALSE(heard.empty());
+    EXPECT_TRUE(heard.back().failed);
+    graph.stop();
+  }
+  auto store = storage::MapStore::open(options(path));
+  GraphOptimiser graph(*store, {.debounce = std::chrono::hours(1)});
+  const auto e = graph.optimiseNow("m");
+  EXPECT_FALSE(e.failed) << e.error;
+  EXPECT_GE(e.graph_version, 1);
   graph.stop();
 }
 
