@@ -14,6 +14,7 @@
 #include "descriptor_index.hpp"
 #include "fair_shared_mutex.hpp"
 #include "fingerprint_cache.hpp"
+#include "process_lock.hpp"
 #include "sqlite.hpp"
 
 namespace sglc::storage {
@@ -346,6 +347,10 @@ class SqliteMapStore final : public MapStore {
       auto it = m.sessions.find({robotId(s.substr(0, slash)), s.substr(slash + 1)});
       filter.sessions.insert(it == m.sessions.end() ? -2 : it->second);
     }
+    for (const auto& [robot, session] : req.session_refs) {
+      auto it = m.sessions.find({robotId(robot), session});
+      filter.sessions.insert(it == m.sessions.end() ? -2 : it->second);
+    }
     filter.exclude_scans.insert(req.exclude_scan_ids.begin(), req.exclude_scan_ids.end());
     if (!req.self_robot.empty()) {
       filter.self_robot = robotId(req.self_robot);
@@ -470,11 +475,19 @@ class SqliteMapStore final : public MapStore {
   }
 
   void backup(const std::string& dest) const override {
-    if (fs::exists(dest)) throw StorageError(Code::kAlreadyExists, dest + ": backup target already exists");
+    if (fs::exists(dest)) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
     auto reader = acquireReader();
-    sql::Stmt st(*reader, "VACUUM INTO ?");
-    st.bind(1, dest);
-    st.run();
+    try {
+      sql::Stmt st(*reader, "VACUUM INTO ?");
+      st.bind(1, dest);
+      st.run();
+    } catch (const StorageError& e) {
+      // A failed backup leaves nothing behind that would block the retry.
+      std::error_code ec;
+      fs::remove(dest, ec);
+      throw StorageError(e.code(), std::string("the backup could not be written: ") + e.what(),
+                         e.detail().empty() ? std::string(e.what()) : e.detail());
+    }
   }
 
   // ---- Pose graph
@@ -774,6 +787,7 @@ class SqliteMapStore final : public MapStore {
     } else if (::access(options_.path.c_str(), W_OK) != 0) {
       throw StorageError(Code::kReadOnly, options_.path + ": database file is not writable");
     }
+    lock_ = ProcessLock(options_.path);
     writer_ = sql::Db(options_.path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, options_.busy_timeout_ms);
 
     std::int64_t app_id = 0, version = 0, objects = 0;
@@ -955,6 +969,7 @@ class SqliteMapStore final : public MapStore {
   MapState& mutableMapLocked(const std::string& name) { return const_cast<MapState&>(mapLocked(name)); }
 
   StoreOptions options_;
+  ProcessLock lock_;  // before writer_: released after the database is closed
   sql::Db writer_;
   std::string token_;
   mutable std::mutex write_mutex_;

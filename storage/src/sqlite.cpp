@@ -1,5 +1,7 @@
 #include "sqlite.hpp"
 
+#include <cerrno>
+
 namespace sglc::storage::sql {
 
 StorageError::Code classify(int rc) {
@@ -17,13 +19,40 @@ StorageError::Code classify(int rc) {
   }
 }
 
-void fail(sqlite3* db, int rc, const std::string& what) {
-  std::string msg = what + ": " + sqlite3_errstr(rc);
-  if (db) {
-    const char* detail = sqlite3_errmsg(db);
-    if (detail && msg.find(detail) == std::string::npos) msg += " (" + std::string(detail) + ")";
+namespace {
+
+// A read-only file system shows up as an I/O error (EROFS) rather than SQLITE_READONLY.
+StorageError::Code classify(sqlite3* db, int rc) {
+  if (db && (rc & 0xFF) == SQLITE_IOERR) {
+    const int e = sqlite3_system_errno(db);
+    if (e == EROFS || e == EACCES || e == EPERM) return StorageError::Code::kReadOnly;
+    if (e == ENOSPC || e == EDQUOT) return StorageError::Code::kFull;
   }
-  throw StorageError(classify(rc), msg);
+  return sql::classify(rc);
+}
+
+}  // namespace
+
+std::string meaning(StorageError::Code code) {
+  switch (code) {
+    case StorageError::Code::kFull: return "the map database's disk is full (or the database reached its size limit)";
+    case StorageError::Code::kReadOnly:
+      return "the map database cannot be written (read-only file or file system, or no permission)";
+    case StorageError::Code::kCorrupt: return "the map database is damaged";
+    case StorageError::Code::kBusy: return "the map database is locked by another process";
+    case StorageError::Code::kAlreadyExists: return "the record already exists";
+    default: return "the map database had an I/O error";
+  }
+}
+
+void fail(sqlite3* db, int rc, const std::string& what) {
+  std::string detail = what + ": " + sqlite3_errstr(rc);
+  if (db) {
+    const char* msg = sqlite3_errmsg(db);
+    if (msg && detail.find(msg) == std::string::npos) detail += " (" + std::string(msg) + ")";
+  }
+  const auto code = classify(db, rc);
+  throw StorageError(code, meaning(code), detail);
 }
 
 Db::Db(const std::string& path, int flags, int busy_timeout_ms) {
@@ -57,7 +86,8 @@ void Db::exec(const std::string& sql) const {
   if (rc != SQLITE_OK) {
     std::string msg = err ? err : "";
     sqlite3_free(err);
-    throw StorageError(classify(rc), "sqlite: " + sql.substr(0, 60) + ": " + msg);
+    const auto code = classify(db_, rc);
+    throw StorageError(code, meaning(code), "sqlite: " + sql.substr(0, 60) + ": " + msg);
   }
 }
 

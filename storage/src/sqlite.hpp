@@ -14,6 +14,9 @@ namespace sglc::storage::sql {
 
 // Maps an SQLite result code to a StorageError code.
 StorageError::Code classify(int rc);
+// What a failure of that kind means for the caller, in words without SQL or paths.
+std::string meaning(StorageError::Code code);
+// Throws StorageError(code, meaning(code), detail: `what` and SQLite's message).
 [[noreturn]] void fail(sqlite3* db, int rc, const std::string& what);
 
 class Db {

@@ -1,5 +1,6 @@
 // MapStore: round trips, search filters, deletions, backups, and every error the issue lists.
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <fstream>
@@ -317,6 +318,45 @@ TEST(MapStore, BackupIsACompleteMapAndNeverOverwrites) {
     EXPECT_EQ(serialize(*fp), serialize(s.fp));
   }
   EXPECT_EQ(copy->integrityCheck(), "ok");
+}
+
+// A backup that fails (here: into a directory that does not exist) leaves no file and no internals in its
+// message, so the retry is not blocked and the caller learns nothing about the server's files.
+TEST(MapStore, AFailedBackupLeavesNothingBehind) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  fill(*store, 1, 1, 2);
+  const auto dest = dir.file("missing-dir/backup.db");
+  try {
+    store->backup(dest);
+    ADD_FAILURE() << "backup into a missing directory succeeded";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(std::string(e.what()).find("VACUUM"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find(dir.file("")), std::string::npos) << e.what();
+    EXPECT_NE(e.detail().find("VACUUM"), std::string::npos) << e.detail();  // the operator's log has it
+  }
+  EXPECT_FALSE(std::filesystem::exists(dest));
+  store->backup(dir.file("backup.db"));
+  EXPECT_TRUE(std::filesystem::exists(dir.file("backup.db")));
+}
+
+// One process per database: a second open (another server, or this process again) is refused with the owner's
+// pid, and the lock goes with the store.
+TEST(MapStore, ADatabaseIsOpenedByOneStoreAtATime) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  {
+    auto store = MapStore::open(options(path));
+    try {
+      MapStore::open(options(path));
+      ADD_FAILURE() << "a second store opened the same database";
+    } catch (const StorageError& e) {
+      EXPECT_EQ(e.code(), StorageError::Code::kBusy);
+      EXPECT_NE(std::string(e.what()).find("in use by process " + std::to_string(::getpid())), std::string::npos)
+          << e.what();
+    }
+  }
+  EXPECT_NO_THROW(MapStore::open(options(path)));  // released on close
 }
 
 TEST(MapStore, RefusesForeignCorruptAndNewerFilesWithoutTouchingThem) {

@@ -12,6 +12,7 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "sglc/fingerprint.hpp"
@@ -34,10 +35,16 @@ class StorageError : public std::runtime_error {
     kIo,               // any other I/O failure
   };
   StorageError(Code code, const std::string& message) : std::runtime_error(message), code_(code) {}
+  // A failure of the database engine: `message` says what it means for the caller (no SQL, no paths), `detail`
+  // what the engine said, for the operator's log.
+  StorageError(Code code, const std::string& message, std::string detail)
+      : std::runtime_error(message), code_(code), detail_(std::move(detail)) {}
   Code code() const { return code_; }
+  const std::string& detail() const { return detail_; }
 
  private:
   Code code_;
+  std::string detail_;
 };
 
 struct IndexOptions {
@@ -112,7 +119,8 @@ struct SearchRequest {
   int k = 50;
   std::vector<std::string> robots;    // only these robots (empty: all)
   std::vector<std::string> exclude_robots;
-  std::vector<std::string> sessions;  // only these sessions, as "robot/session" (empty: all)
+  std::vector<std::string> sessions;  // only these sessions, as "robot/session" (split at the first '/')
+  std::vector<std::pair<std::string, std::string>> session_refs;  // and these (robot, session) (both empty: all)
   // Exclusion of the querying robot's own recent scans: scans of `self_robot` whose seq is within
   // `exclude_recent` of `self_seq` in the same session, or whose stamp is within `exclude_seconds` of
   // `self_stamp` (any session of that robot).
