@@ -34,7 +34,7 @@ TokenTable TokenTable::load(const std::string& path) {
   return table;
 }
 
-TokenTable::Grant TokenTable::authenticate(const grpc::ServerContext& ctx) const {
+TokenTable::Grant TokenTable::authenticate(const grpc::ServerContextBase& ctx) const {
   Grant grant;
   if (!enabled_) {
     grant.all = true;

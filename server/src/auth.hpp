@@ -23,7 +23,7 @@ class TokenTable {
     const std::set<std::string>* maps = nullptr;
     bool allows(const std::string& map) const { return all || (maps && maps->count(map)); }
   };
-  Grant authenticate(const grpc::ServerContext& ctx) const;
+  Grant authenticate(const grpc::ServerContextBase& ctx) const;
   // Throws RpcError(PERMISSION_DENIED) unless the grant covers the map ("" = the whole database).
   static void require(const Grant& grant, const std::string& map);
 

@@ -50,7 +50,7 @@ class ComputePool {
   // deadline passes while waiting (both are checked every 20 ms).
   Slot acquire(std::chrono::system_clock::time_point deadline, const std::function<bool()>& cancelled);
   // The call's deadline and cancellation; `ctx` may be null (wait as long as it takes).
-  Slot acquire(const grpc::ServerContext* ctx) {
+  Slot acquire(const grpc::ServerContextBase* ctx) {
     if (!ctx) return acquire(std::chrono::system_clock::time_point::max(), [] { return false; });
     return acquire(ctx->deadline(), [ctx] { return ctx->IsCancelled(); });
   }

@@ -2,6 +2,7 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <malloc.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
 #include <yaml-cpp/yaml.h>
@@ -16,6 +17,7 @@
 #include <sstream>
 #include <thread>
 
+#include "call.hpp"
 #include "service.hpp"
 
 namespace {
@@ -40,6 +42,8 @@ struct Settings {
   std::size_t max_points = 2'000'000;
   std::string tls_cert, tls_key, tokens, backup_dir;
   double shutdown_grace_s = 10;
+  double max_inflight_mb = 1024;  // scan memory in flight (wire bytes x 3)
+  sglc::server::StreamLimits streams;
   sglc::Config engine;
   sglc::storage::StoreOptions store;
   sglc::server::GraphOptimiserOptions graph;
@@ -131,6 +135,11 @@ void applyConfigFile(Settings& s, const std::string& path) {
         else if (key == "server.tokens") s.tokens = v.as<std::string>();
         else if (key == "server.backup_dir") s.backup_dir = v.as<std::string>();
         else if (key == "server.shutdown_grace_s") s.shutdown_grace_s = v.as<double>();
+        else if (key == "server.max_inflight_mb") s.max_inflight_mb = v.as<double>();
+        else if (key == "server.max_streams_per_client") s.streams.max_per_client = v.as<int>();
+        else if (key == "server.max_streams") s.streams.max_total = v.as<int>();
+        else if (key == "server.stream_idle_timeout_s")
+          s.streams.idle_timeout = std::chrono::milliseconds(static_cast<long>(v.as<double>() * 1000));
         else if (key.rfind("pose_graph.", 0) == 0) setGraphOption(s.graph, key, v.as<double>());
         else throw std::runtime_error("unknown parameter '" + key + "'");
       } catch (const YAML::Exception& e) {
@@ -150,6 +159,9 @@ void applyConfigFile(Settings& s, const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Scans are large, short-lived buffers: allocate them with mmap, so freeing one returns its memory at once
+  // (glibc's adaptive threshold would otherwise move them onto the heap, which keeps a burst's peak).
+  mallopt(M_MMAP_THRESHOLD, 1 << 20);
   CLI::App app{"SGLC loop-closure service: gRPC (sglc.v1) on a persistent SQLite map database."};
   Settings s;
   std::string config_path;
@@ -162,6 +174,18 @@ int main(int argc, char** argv) {
   auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
   auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
   auto* msg_opt = app.add_option("--max-message-mb", s.max_message_mb, "largest accepted message (MB)");
+  double idle_timeout_s = 120;
+  auto* inflight_opt = app.add_option("--max-inflight-mb", s.max_inflight_mb,
+                                      "scan memory in flight (MB, counted as 3 x wire bytes); calls beyond wait")
+                           ->capture_default_str();
+  auto* per_client_opt = app.add_option("--max-streams-per-client", s.streams.max_per_client,
+                                        "open streams of each kind per client (bearer token, else IP address)")
+                             ->capture_default_str();
+  auto* streams_opt =
+      app.add_option("--max-streams", s.streams.max_total, "open streams of each kind in total")->capture_default_str();
+  auto* idle_opt = app.add_option("--stream-idle-timeout-s", idle_timeout_s,
+                                  "close an ingest stream that sends nothing for this long")
+                       ->capture_default_str();
   bool sync_normal = false;
   app.add_flag("--sync-normal", sync_normal, "SQLite synchronous=NORMAL (survives process crashes, not power loss)");
   try {
@@ -187,7 +211,16 @@ int main(int argc, char** argv) {
     if (*cert_opt) s.tls_cert = flags.tls_cert;
     if (*key_opt) s.tls_key = flags.tls_key;
     if (*msg_opt) s.max_message_mb = flags.max_message_mb;
+    if (*inflight_opt) s.max_inflight_mb = flags.max_inflight_mb;
+    if (*per_client_opt) s.streams.max_per_client = flags.streams.max_per_client;
+    if (*streams_opt) s.streams.max_total = flags.streams.max_total;
+    if (*idle_opt) s.streams.idle_timeout = std::chrono::milliseconds(static_cast<long>(idle_timeout_s * 1000));
     if (sync_normal) s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
+    if (!(s.max_inflight_mb >= 1 && s.max_inflight_mb <= 1 << 20))
+      throw std::runtime_error("--max-inflight-mb must be in [1, 1048576]");
+    if (s.streams.max_per_client < 1 || s.streams.max_total < 1)
+      throw std::runtime_error("--max-streams-per-client and --max-streams must be >= 1");
+    if (s.streams.idle_timeout.count() < 100) throw std::runtime_error("--stream-idle-timeout-s must be >= 0.1");
     if (s.threads < 0 || s.threads > 256) throw std::runtime_error("--threads must be 0..256");
     if (s.threads == 0) s.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     if (s.max_calls < 1 || s.max_calls > 4096) throw std::runtime_error("--max-calls must be 1..4096");
@@ -196,7 +229,8 @@ int main(int argc, char** argv) {
     s.store.path = s.db;
     if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();
 
-    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir, s.threads};
+    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir, s.threads,
+                                       static_cast<std::size_t>(s.max_inflight_mb * 1024 * 1024), s.streams};
     state = std::make_unique<sglc::server::ServiceState>(sglc::Pipeline(s.engine),
                                                          sglc::server::TokenTable::load(s.tokens), limits);
     sglc::server::LoopClosureService loop_service(*state);
@@ -213,6 +247,15 @@ int main(int argc, char** argv) {
     }
     int port = 0;
     builder.AddListeningPort(s.listen, creds, &port);
+    // A second server must not share the port (gRPC sets SO_REUSEPORT by default: clients would be split
+    // between two processes with diverging indexes).
+    builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+    // Dead peers are found by keepalive pings, so their streams do not linger; clients may ping every 10 s.
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 60'000);
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, 20'000);
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 10'000);
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PING_STRIKES, 5);
     builder.RegisterService(&loop_service);
     builder.RegisterService(&admin_service);
     sglc::server::PoseGraphService graph_service(*state);
@@ -222,8 +265,12 @@ int main(int argc, char** argv) {
     builder.SetMaxSendMessageSize(max_bytes);
     grpc::ResourceQuota quota("sglc");
     // One gRPC thread per call in flight (the sync server); CPU work is bounded separately (ComputePool).
+    // Streams are callback reactors and hold no thread while idle; unary calls hold one while they run.
     quota.SetMaxThreads(s.max_calls + 2);
     builder.SetResourceQuota(quota);
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+    interceptors.push_back(sglc::server::makeBadRequestInterceptorFactory());
+    builder.experimental().SetInterceptorCreators(std::move(interceptors));
     builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2);
 
     // SIGTERM / SIGINT are taken by a dedicated thread (blocked everywhere else).
@@ -234,7 +281,9 @@ int main(int argc, char** argv) {
     pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
     server = builder.BuildAndStart();
-    if (!server || port == 0) throw std::runtime_error("cannot listen on " + s.listen);
+    if (!server || port == 0)
+      throw std::runtime_error("cannot listen on " + s.listen +
+                               ": the address is in use (another sglc-server?) or not valid for this machine");
     auto* health = server->GetHealthCheckService();
     health->SetServingStatus(false);  // NOT_SERVING until the map database is loaded
     spdlog::info("{{\"event\":\"listening\",\"address\":\"{}\",\"port\":{},\"tls\":{},\"auth\":{}}}", s.listen, port,
@@ -261,7 +310,9 @@ int main(int argc, char** argv) {
     sigwait(&signals, &sig);
     spdlog::info("{{\"event\":\"shutdown\",\"signal\":{}}}", sig);
     health->SetServingStatus(false);
-    graph->stop();  // ends WatchMap streams; loops recorded from now on are optimised after the next start
+    graph->stop();  // loops recorded from now on are optimised after the next start
+    // Watchers end; ingest streams end after the request they are working on; new streams are refused.
+    state->streams().closeAll(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     // Refuse new calls, let in-flight ones finish (up to the grace period), then close the database cleanly.
     server->Shutdown(std::chrono::system_clock::now() +
                      std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));

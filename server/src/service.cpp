@@ -9,87 +9,12 @@
 #include <unordered_set>
 #include <nlohmann/json.hpp>
 
+#include "call.hpp"
 #include "codec.hpp"
+#include "log_line.hpp"
 
 namespace sglc::server {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-using storage::StorageError;
-
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
-
-grpc::StatusCode toGrpc(StorageError::Code code) {
-  switch (code) {
-    case StorageError::Code::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
-    case StorageError::Code::kNotFound: return grpc::StatusCode::NOT_FOUND;
-    case StorageError::Code::kAlreadyExists: return grpc::StatusCode::ALREADY_EXISTS;
-    case StorageError::Code::kFull: return grpc::StatusCode::RESOURCE_EXHAUSTED;
-    case StorageError::Code::kBusy: return grpc::StatusCode::UNAVAILABLE;
-    case StorageError::Code::kCorrupt: return grpc::StatusCode::DATA_LOSS;
-    default: return grpc::StatusCode::INTERNAL;
-  }
-}
-
-const char* codeName(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK: return "OK";
-    case grpc::StatusCode::CANCELLED: return "CANCELLED";
-    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
-    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
-    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
-    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
-    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
-    case grpc::StatusCode::INTERNAL: return "INTERNAL";
-    default: return "OTHER";
-  }
-}
-
-// One structured log line per RPC (never the cloud), and exceptions turned into statuses.
-struct CallLog {
-  const char* method;
-  std::string map, robot;
-  Clock::time_point start = Clock::now();
-};
-
-template <typename F>
-grpc::Status run(const grpc::ServerContext* ctx, CallLog log, F&& body) {
-  grpc::Status status;
-  try {
-    body(log);
-  } catch (const RpcError& e) {
-    status = grpc::Status(e.code(), e.what());
-  } catch (const StorageError& e) {
-    status = grpc::Status(toGrpc(e.code()), e.what());
-  } catch (const InputError& e) {
-    status = grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, e.what());
-  } catch (const std::bad_alloc&) {
-    status = grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, "out of memory");
-  } catch (const std::exception& e) {
-    status = grpc::Status(grpc::StatusCode::INTERNAL, e.what());
-  }
-  nlohmann::ordered_json line = {{"method", log.method},
-                         {"map", log.map},
-                         {"robot", log.robot},
-                         {"code", codeName(status.error_code())},
-                         {"ms", std::round(msSince(log.start) * 1000.0) / 1000.0},
-                         {"peer", ctx->peer()}};
-  if (!status.ok()) line["error"] = status.error_message();
-  if (status.ok()) spdlog::info("{}", line.dump());
-  else spdlog::warn("{}", line.dump());
-  return status;
-}
-
-// Deadline and cancellation, checked between expensive steps.
-void checkAlive(const grpc::ServerContext* ctx) {
-  if (ctx->IsCancelled()) throw RpcError(grpc::StatusCode::CANCELLED, "the client cancelled the call");
-  if (std::chrono::system_clock::now() > ctx->deadline())
-    throw RpcError(grpc::StatusCode::DEADLINE_EXCEEDED, "deadline exceeded during processing; nothing was stored");
-}
 
 // Who is asking and what they may see.
 struct Asker {
@@ -99,7 +24,7 @@ struct Asker {
   std::int64_t self_scan = 0;  // a stored query scan never matches itself
 };
 
-void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const Fingerprint& query, const Asker& who,
+void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, const Fingerprint& query, const Asker& who,
                const v1::QueryOptions& opt, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
                v1::Timing* timing) {
   const auto top_k = opt.top_k() ? opt.top_k() : 5u;
@@ -112,6 +37,8 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   if (opt.known_loops() && !refine)
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "known_loops asks for poses: it cannot go with refine = false");
   const bool include_rejected = opt.include_rejected() || opt.known_loops();
+  if (opt.has_min_score() && !std::isfinite(opt.min_score()))
+    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "min_score is not finite");
 
   storage::SearchRequest req;
   req.map = who.map;
@@ -134,9 +61,16 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
       (opt.scope() == v1::SCOPE_SAME_ROBOT ? req.robots : req.exclude_robots).push_back(who.robot);
       break;
     case v1::SCOPE_SESSIONS:
-      if (opt.sessions().empty())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scope SESSIONS needs at least one 'robot/session'");
-      req.sessions.assign(opt.sessions().begin(), opt.sessions().end());
+      if (opt.sessions().empty() && opt.session_refs().empty())
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
+                       "scope SESSIONS needs at least one 'robot/session' in sessions or one session_refs entry");
+      for (const auto& s : opt.sessions()) {
+        const auto slash = s.find('/');
+        if (slash == std::string::npos)
+          throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "sessions entry '" + s + "' is not 'robot/session'");
+        req.session_refs.emplace_back(s.substr(0, slash), s.substr(slash + 1));
+      }
+      for (const auto& r : opt.session_refs()) req.session_refs.emplace_back(r.robot(), r.session());
       break;
     default: throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "unknown scope");
   }
@@ -218,10 +152,28 @@ void findLoops(const ServiceState& state, const grpc::ServerContext* ctx, const 
   }
 }
 
-// The shared body of the three ingest RPCs.
-void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const TokenTable::Grant& grant,
-            const v1::IngestRequest& req, const std::string& points, const std::string& labels,
-            v1::IngestResponse* resp) {
+// Throws ALREADY_EXISTS unless the stored scan `id` is what this request would have stored (a retry).
+void requireSameScan(const storage::MapStore& store, std::int64_t id, const Fingerprint& fp,
+                     const v1::IngestRequest& req, const std::optional<Mat4d>& pose) {
+  const auto& key = req.key();
+  const auto info = store.scanInfo(id);
+  const auto stored = store.fingerprint(id);
+  const bool same = info && stored && serialize(*stored) == serialize(fp) &&
+                    info->stamp == (req.has_stamp() ? std::optional<double>(req.stamp()) : std::nullopt) &&
+                    info->odometry_pose.has_value() == pose.has_value() &&
+                    (!pose || *info->odometry_pose == *pose) && info->has_raw == req.store_raw();
+  if (!same)
+    throw RpcError(grpc::StatusCode::ALREADY_EXISTS,
+                   "robot '" + key.robot() + "' session '" + key.session() + "' seq " + std::to_string(key.seq()) +
+                       " already holds a different scan (scan " + std::to_string(id) +
+                       "); an identical retry would answer OK");
+}
+
+}  // namespace
+
+void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, const TokenTable::Grant& grant,
+                const v1::IngestRequest& req, const std::string& points, const std::string& labels,
+                v1::IngestResponse* resp, MemoryBudget::Lease* held) {
   const auto t_start = Clock::now();
   const auto& key = req.key();
   checkName("key.map", key.map());
@@ -235,6 +187,10 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
     pose = decodeTransform(req.odometry_pose(), "odometry_pose");
   auto& store = state.store();
   if (!store.findMap(key.map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + key.map() + "'");
+  MemoryBudget::Lease own;
+  if (!held)
+    own = state.memory().acquire((points.size() + labels.size()) * kScanCostFactor, ctx->deadline(),
+                                 [ctx] { return ctx->IsCancelled(); });
   const auto scan = decodeScan(points, labels, state.limits().max_points);
   checkAlive(ctx);
 
@@ -243,26 +199,48 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
   auto t0 = Clock::now();
   const auto fp = state.pipeline().fingerprint(scan);
   resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
+  // A retry of a stored scan answers as the first call did (its loops exclude the stored copy of itself).
+  auto stored = store.findScan(key.map(), key.robot(), key.session(), key.seq());
+  if (stored) requireSameScan(store, *stored, fp, req, pose);
   if (req.query()) {
-    Asker who{key.map(), key.robot(), key.session(), key.seq(), std::nullopt, 0};
+    Asker who{key.map(), key.robot(), key.session(), key.seq(), std::nullopt, stored.value_or(0)};
     if (req.has_stamp()) who.stamp = req.stamp();
     findLoops(state, ctx, fp, who, req.query_options(), resp->mutable_loops(), resp->mutable_timing());
   }
   slot.release();
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
-  storage::NewScan ns;
-  ns.map = key.map();
-  ns.robot = key.robot();
-  ns.session = key.session();
-  ns.seq = key.seq();
-  if (req.has_stamp()) ns.stamp = req.stamp();
-  ns.odometry_pose = pose;
-  ns.fingerprint = &fp;
-  ns.raw = req.store_raw() ? &scan : nullptr;
   t0 = Clock::now();
-  resp->set_scan_id(state.store().addScan(ns));
+  if (!stored) {
+    storage::NewScan ns;
+    ns.map = key.map();
+    ns.robot = key.robot();
+    ns.session = key.session();
+    ns.seq = key.seq();
+    if (req.has_stamp()) ns.stamp = req.stamp();
+    ns.odometry_pose = pose;
+    ns.fingerprint = &fp;
+    ns.raw = req.store_raw() ? &scan : nullptr;
+    try {
+      resp->set_scan_id(store.addScan(ns));
+    } catch (const storage::StorageError& e) {
+      // The same request on another connection (a client retrying before its first call answered) may have
+      // stored it first.
+      if (e.code() != storage::StorageError::Code::kAlreadyExists) throw;
+      stored = store.findScan(key.map(), key.robot(), key.session(), key.seq());
+      if (!stored) throw;
+      requireSameScan(store, *stored, fp, req, pose);
+      auto* loops = resp->mutable_loops();
+      for (int i = loops->size() - 1; i >= 0; --i)
+        if (loops->Get(i).scan_id() == *stored) loops->DeleteSubrange(i, 1);
+    }
+  }
+  if (stored) {
+    resp->set_scan_id(*stored);
+    resp->set_already_stored(true);
+  }
   resp->mutable_timing()->set_store_ms(msSince(t0));
-  // Verified loops join the map's pose graph (the scan is stored: a failure here must not fail the call).
+  // Verified loops join the map's pose graph (the scan is stored: a failure here must not fail the call; a
+  // loop recorded again for the same pair replaces the first).
   if (auto* graph = state.graph(); graph && pose) {
     bool added = false;
     for (const auto& loop : resp->loops()) {
@@ -280,7 +258,7 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
         state.store().addLoop(key.map(), r);
         added = true;
       } catch (const std::exception& e) {
-        spdlog::warn("{{\"event\":\"loop_not_recorded\",\"scan\":{},\"error\":\"{}\"}}", resp->scan_id(), e.what());
+        spdlog::warn("{}", logLine({{"event", "loop_not_recorded"}, {"scan", resp->scan_id()}, {"error", e.what()}}));
       }
     }
     if (added) graph->loopsAdded(key.map());
@@ -289,7 +267,6 @@ void ingest(const ServiceState& state, const grpc::ServerContext* ctx, const Tok
   resp->mutable_timing()->set_total_ms(msSince(t_start));
 }
 
-}  // namespace
 
 storage::MapStore& ServiceState::store() const {
   auto* s = store_.load();
@@ -299,62 +276,19 @@ storage::MapStore& ServiceState::store() const {
 
 // ------------------------------------------------------------------------------------------------ LoopClosure
 
-grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req,
-                                        v1::IngestResponse* resp) {
-  return run(ctx, {"Ingest", req->key().map(), req->key().robot()}, [&](CallLog&) {
+grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req, v1::IngestResponse* resp) {
+  return run(ctx, {"Ingest", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->key().map();
+    log.robot = req->key().robot();
     const auto grant = state_.tokens().authenticate(*ctx);
-    ingest(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), resp);
+    ingestScan(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), resp);
   });
 }
 
-grpc::Status LoopClosureService::IngestChunked(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestChunk>* reader,
-                                               v1::IngestResponse* resp) {
-  return run(ctx, {"IngestChunked", "", ""}, [&](CallLog& log) {
-    const auto grant = state_.tokens().authenticate(*ctx);
-    v1::IngestChunk chunk;
-    if (!reader->Read(&chunk)) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "no chunks received");
-    if (!chunk.has_header()) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "the first chunk must carry the header");
-    v1::IngestRequest header = chunk.header();
-    log.map = header.key().map();
-    log.robot = header.key().robot();
-    TokenTable::require(grant, header.key().map());
-    std::string points = std::move(*header.mutable_scan()->mutable_points());
-    std::string labels = std::move(*header.mutable_scan()->mutable_labels());
-    const std::size_t limit = state_.limits().max_points * 16 + 16;
-    bool first = true;
-    do {
-      if (!first && chunk.has_header())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "only the first chunk may carry a header");
-      first = false;
-      points += chunk.points();
-      labels += chunk.labels();
-      if (points.size() + labels.size() > limit)
-        throw RpcError(grpc::StatusCode::RESOURCE_EXHAUSTED, "chunked scan exceeds the server's point limit (" +
-                                                                 std::to_string(state_.limits().max_points) + ")");
-      chunk.Clear();
-    } while (reader->Read(&chunk));
-    ingest(state_, ctx, grant, header, points, labels, resp);
-  });
-}
-
-grpc::Status LoopClosureService::IngestStream(grpc::ServerContext* ctx,
-                                              grpc::ServerReaderWriter<v1::IngestResponse, v1::IngestRequest>* stream) {
-  return run(ctx, {"IngestStream", "", ""}, [&](CallLog& log) {
-    const auto grant = state_.tokens().authenticate(*ctx);
-    v1::IngestRequest req;
-    while (stream->Read(&req)) {
-      log.map = req.key().map();
-      log.robot = req.key().robot();
-      v1::IngestResponse resp;
-      ingest(state_, ctx, grant, req, req.scan().points(), req.scan().labels(), &resp);
-      if (!stream->Write(resp)) throw RpcError(grpc::StatusCode::CANCELLED, "the client closed the stream");
-    }
-  });
-}
-
-grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::QueryRequest* req,
-                                       v1::QueryResponse* resp) {
-  return run(ctx, {"Query", req->map(), req->robot()}, [&](CallLog&) {
+grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::QueryRequest* req, v1::QueryResponse* resp) {
+  return run(ctx, {"Query", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
+    log.robot = req->robot();
     const auto t_start = Clock::now();
     const auto grant = state_.tokens().authenticate(*ctx);
     checkName("map", req->map());
@@ -399,7 +333,8 @@ void fillMap(const storage::MapInfo& m, v1::MapInfo* out) {
 }  // namespace
 
 grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::CreateMapRequest* req, v1::MapInfo* resp) {
-  return run(ctx, {"CreateMap", req->name(), ""}, [&](CallLog&) {
+  return run(ctx, {"CreateMap", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->name();
     const auto grant = state_.tokens().authenticate(*ctx);
     checkName("name", req->name());
     TokenTable::require(grant, req->name());
@@ -410,9 +345,8 @@ grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::Crea
   });
 }
 
-grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest*,
-                                       v1::ListMapsResponse* resp) {
-  return run(ctx, {"ListMaps", "", ""}, [&](CallLog&) {
+grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest* req, v1::ListMapsResponse* resp) {
+  return run(ctx, {"ListMaps", "", ""}, [&]([[maybe_unused]] CallLog& log) {
     // UNAVAILABLE while loading comes before authentication: clients probe readiness with ListMaps.
     auto& store = state_.store();
     const auto grant = state_.tokens().authenticate(*ctx);
@@ -421,9 +355,9 @@ grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListM
   });
 }
 
-grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::ListRobotsRequest* req,
-                                         v1::ListRobotsResponse* resp) {
-  return run(ctx, {"ListRobots", req->map(), ""}, [&](CallLog&) {
+grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::ListRobotsRequest* req, v1::ListRobotsResponse* resp) {
+  return run(ctx, {"ListRobots", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     for (const auto& r : state_.store().listRobots(req->map())) {
       auto* o = resp->add_robots();
@@ -434,9 +368,10 @@ grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::Lis
   });
 }
 
-grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::ListSessionsRequest* req,
-                                           v1::ListSessionsResponse* resp) {
-  return run(ctx, {"ListSessions", req->map(), req->robot()}, [&](CallLog&) {
+grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::ListSessionsRequest* req, v1::ListSessionsResponse* resp) {
+  return run(ctx, {"ListSessions", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
+    log.robot = req->robot();
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     for (const auto& s : state_.store().listSessions(req->map(), req->robot())) {
       auto* o = resp->add_sessions();
@@ -449,16 +384,17 @@ grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::L
   });
 }
 
-grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetScanRequest* req,
-                                      v1::GetScanResponse* resp) {
-  return run(ctx, {"GetScan", "", ""}, [&](CallLog& log) {
+grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetScanRequest* req, v1::GetScanResponse* resp) {
+  return run(ctx, {"GetScan", "", ""}, [&]([[maybe_unused]] CallLog& log) {
     const auto grant = state_.tokens().authenticate(*ctx);
     auto& store = state_.store();
     const auto info = store.scanInfo(req->scan_id());
-    if (!info) throw RpcError(grpc::StatusCode::NOT_FOUND, "no scan " + std::to_string(req->scan_id()));
+    // A scan of a map the token does not cover is answered as a missing one: probing ids must not reveal which
+    // ids exist or what other maps are called.
+    if (!info || !grant.allows(info->map))
+      throw RpcError(grpc::StatusCode::NOT_FOUND, "no scan " + std::to_string(req->scan_id()));
     log.map = info->map;
     log.robot = info->robot;
-    TokenTable::require(grant, info->map);
     resp->set_scan_id(info->id);
     auto* key = resp->mutable_key();
     key->set_map(info->map);
@@ -488,9 +424,10 @@ grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetSca
   });
 }
 
-grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::DeleteSessionRequest* req,
-                                            v1::DeleteResponse* resp) {
-  return run(ctx, {"DeleteSession", req->map(), req->robot()}, [&](CallLog&) {
+grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::DeleteSessionRequest* req, v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteSession", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
+    log.robot = req->robot();
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteSession(req->map(), req->robot(), req->session()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
@@ -498,9 +435,10 @@ grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::
   });
 }
 
-grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req,
-                                          v1::DeleteResponse* resp) {
-  return run(ctx, {"DeleteRobot", req->map(), req->robot()}, [&](CallLog&) {
+grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req, v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteRobot", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
+    log.robot = req->robot();
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteRobot(req->map(), req->robot()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
@@ -508,9 +446,9 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
   });
 }
 
-grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req,
-                                       v1::GetStatsResponse* resp) {
-  return run(ctx, {"GetStats", req->map(), ""}, [&](CallLog&) {
+grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req, v1::GetStatsResponse* resp) {
+  return run(ctx, {"GetStats", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     const auto s = state_.store().stats(req->map());
     resp->set_maps(s.maps);
@@ -521,22 +459,32 @@ grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetSt
     resp->set_db_bytes(s.db_bytes);
     resp->set_fingerprint_bytes(s.fingerprint_bytes);
     resp->set_cache_mb(s.cache_mb);
+    if (auto* graph = state_.graph(); graph && !req->map().empty())
+      if (const auto event = graph->latest(req->map()); event && event->failed) {
+        resp->set_pose_graph_failed(true);
+        resp->set_pose_graph_error(event->error);
+      }
   });
 }
 
 grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) {
-  return run(ctx, {"Backup", "", ""}, [&](CallLog&) {
+  return run(ctx, {"Backup", "", ""}, [&]([[maybe_unused]] CallLog& log) {
     TokenTable::require(state_.tokens().authenticate(*ctx), "");
     namespace fs = std::filesystem;
-    const fs::path name(req->path());
-    if (req->path().empty() || name.is_absolute() || name.has_parent_path() || name.filename() != name ||
-        req->path() == "." || req->path() == "..")
+    const std::string& path = req->path();
+    const bool control = std::any_of(path.begin(), path.end(), [](unsigned char c) { return c < 0x20 || c == 0x7f; });
+    if (path.empty() || path.size() > 255 || control || path.find('/') != std::string::npos || path == "." ||
+        path == "..")
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
-                     "backup path must be a plain file name; it is written into the server's backup directory");
+                     "backup path must be a plain file name (1..255 bytes, no '/', no control characters, not . or "
+                     "..); it is written into the server's backup directory");
+    const fs::path name(path);
     const auto dir = fs::path(state_.limits().backup_dir);
     std::error_code ec;
     fs::create_directories(dir, ec);
-    if (ec) throw RpcError(grpc::StatusCode::INTERNAL, dir.string() + ": " + ec.message());
+    if (ec)
+      throw storage::StorageError(storage::StorageError::Code::kIo, "the server's backup directory cannot be created",
+                                  dir.string() + ": " + ec.message());
     const auto dest = (dir / name).string();
     state_.store().backup(dest);
     resp->set_path(dest);
@@ -551,23 +499,18 @@ grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupR
 namespace sglc::server {
 namespace {
 
-GraphOptimiser& graphOf(const ServiceState& state) {
-  auto* g = state.graph();
-  if (!g) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is shutting down");
-  return *g;
-}
+}  // namespace
 
-void requireMap(const ServiceState& state, const grpc::ServerContext* ctx, const std::string& map) {
+void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
   checkName("map", map);
   TokenTable::require(state.tokens().authenticate(*ctx), map);
   if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
 }
 
-}  // namespace
-
-grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
-                                        v1::GetPosesResponse* resp) {
-  return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
+grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req, v1::GetPosesResponse* resp) {
+  return run(ctx, {"GetPoses", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
+    log.robot = req->robot();
     requireMap(state_, ctx, req->map());
     if (!req->session().empty() && req->robot().empty())
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
@@ -625,9 +568,9 @@ grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetP
   });
 }
 
-grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
-                                                v1::GetSessionFramesResponse* resp) {
-  return run(ctx, {"GetSessionFrames", req->map(), ""}, [&](CallLog&) {
+grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req, v1::GetSessionFramesResponse* resp) {
+  return run(ctx, {"GetSessionFrames", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    log.map = req->map();
     requireMap(state_, ctx, req->map());
     auto& store = state_.store();
     resp->set_graph_version(store.graphVersion(req->map()));
@@ -640,28 +583,6 @@ grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const 
       const auto f = frames.find({s.robot, s.name});
       o->set_connected(f != frames.end() && f->second.connected);
       encodeTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
-    }
-  });
-}
-
-grpc::Status PoseGraphService::WatchMap(grpc::ServerContext* ctx, const v1::WatchMapRequest* req,
-                                        grpc::ServerWriter<v1::MapEvent>* writer) {
-  return run(ctx, {"WatchMap", req->map(), ""}, [&](CallLog&) {
-    requireMap(state_, ctx, req->map());
-    std::int64_t after = req->after_version();
-    while (!ctx->IsCancelled()) {
-      auto& graph = graphOf(state_);
-      if (graph.stopping()) return;
-      const auto event = graph.waitForVersion(req->map(), after, std::chrono::milliseconds(500));
-      if (!event) continue;
-      v1::MapEvent e;
-      e.set_graph_version(event->graph_version);
-      e.set_loops(event->loops);
-      e.set_nodes(event->nodes);
-      e.set_rejected_loops(event->rejected_loops);
-      e.set_optimise_ms(event->optimise_ms);
-      if (!writer->Write(e)) return;  // the client went away
-      after = event->graph_version;
     }
   });
 }

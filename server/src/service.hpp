@@ -8,7 +8,10 @@
 
 #include "auth.hpp"
 #include "compute_pool.hpp"
+#include "executor.hpp"
 #include "graph_optimiser.hpp"
+#include "memory_budget.hpp"
+#include "stream_registry.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
@@ -19,6 +22,8 @@ struct ServiceLimits {
   std::size_t max_points = 2'000'000;      // per scan
   std::string backup_dir;                  // Backup paths are resolved inside it
   int compute_threads = 1;                 // engine work runs on at most this many threads at once
+  std::size_t max_inflight_bytes = std::size_t{1} << 30;  // scan memory in flight (MemoryBudget)
+  StreamLimits streams;
 };
 
 // State shared by both services. The store is attached once it is loaded; until then calls get UNAVAILABLE.
@@ -28,7 +33,10 @@ class ServiceState {
       : pipeline_(std::move(pipeline)),
         tokens_(std::move(tokens)),
         limits_(std::move(limits)),
-        compute_(std::make_unique<ComputePool>(limits_.compute_threads)) {}
+        compute_(std::make_unique<ComputePool>(limits_.compute_threads)),
+        memory_(std::make_unique<MemoryBudget>(limits_.max_inflight_bytes)),
+        executor_(std::make_unique<Executor>(limits_.compute_threads + 2)),
+        streams_(std::make_unique<StreamRegistry>(limits_.streams, [m = memory_.get()] { m->trim(); })) {}
 
   void attach(storage::MapStore* store, GraphOptimiser* graph = nullptr) {
     graph_.store(graph);
@@ -44,6 +52,9 @@ class ServiceState {
   const TokenTable& tokens() const { return tokens_; }
   const ServiceLimits& limits() const { return limits_; }
   ComputePool& compute() const { return *compute_; }
+  MemoryBudget& memory() const { return *memory_; }
+  Executor& executor() const { return *executor_; }
+  StreamRegistry& streams() const { return *streams_; }
   GraphOptimiser* graph() const { return graph_.load(); }  // null: no pose graph (tests, loading)
 
  private:
@@ -51,19 +62,28 @@ class ServiceState {
   TokenTable tokens_;
   ServiceLimits limits_;
   std::unique_ptr<ComputePool> compute_;
+  std::unique_ptr<MemoryBudget> memory_;
+  std::unique_ptr<Executor> executor_;
+  std::unique_ptr<StreamRegistry> streams_;
   std::atomic<storage::MapStore*> store_{nullptr};
   std::atomic<GraphOptimiser*> graph_{nullptr};
 };
 
-class LoopClosureService final : public v1::LoopClosure::Service {
+// Unary methods run on gRPC's sync thread pool; the streams are callback reactors on raw bytes (streams.cpp)
+// that hold no thread while they wait for their client and parse each message themselves, so one that is not
+// valid protobuf fails the call with INVALID_ARGUMENT instead of passing for the client's half-close. A unary
+// request that does not parse is answered INVALID_ARGUMENT by the interceptor in call.hpp.
+using LoopClosureBase = v1::LoopClosure::WithRawCallbackMethod_IngestChunked<
+    v1::LoopClosure::WithRawCallbackMethod_IngestStream<v1::LoopClosure::Service>>;
+
+class LoopClosureService final : public LoopClosureBase {
  public:
   explicit LoopClosureService(ServiceState& state) : state_(state) {}
   grpc::Status Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req, v1::IngestResponse* resp) override;
-  grpc::Status IngestChunked(grpc::ServerContext* ctx, grpc::ServerReader<v1::IngestChunk>* reader,
-                             v1::IngestResponse* resp) override;
-  grpc::Status IngestStream(grpc::ServerContext* ctx,
-                            grpc::ServerReaderWriter<v1::IngestResponse, v1::IngestRequest>* stream) override;
   grpc::Status Query(grpc::ServerContext* ctx, const v1::QueryRequest* req, v1::QueryResponse* resp) override;
+  grpc::ServerReadReactor<grpc::ByteBuffer>* IngestChunked(grpc::CallbackServerContext* ctx,
+                                                           grpc::ByteBuffer* resp) override;
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* IngestStream(grpc::CallbackServerContext* ctx) override;
 
  private:
   ServiceState& state_;
@@ -90,17 +110,28 @@ class MapAdminService final : public v1::MapAdmin::Service {
   ServiceState& state_;
 };
 
-class PoseGraphService final : public v1::PoseGraph::Service {
+using PoseGraphBase = v1::PoseGraph::WithRawCallbackMethod_WatchMap<v1::PoseGraph::Service>;
+
+class PoseGraphService final : public PoseGraphBase {
  public:
   explicit PoseGraphService(ServiceState& state) : state_(state) {}
   grpc::Status GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req, v1::GetPosesResponse* resp) override;
   grpc::Status GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
                                 v1::GetSessionFramesResponse* resp) override;
-  grpc::Status WatchMap(grpc::ServerContext* ctx, const v1::WatchMapRequest* req,
-                        grpc::ServerWriter<v1::MapEvent>* writer) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* WatchMap(grpc::CallbackServerContext* ctx,
+                                                       const grpc::ByteBuffer* req) override;
 
  private:
   ServiceState& state_;
 };
+
+// The shared body of the three ingest RPCs: validates, fingerprints, optionally queries, stores (idempotently:
+// the identical scan re-sent for a stored key answers as the first time did). `held` is the caller's
+// reservation of scan memory (chunked uploads reserve as chunks arrive); without one the call reserves its own.
+void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, const TokenTable::Grant& grant,
+                const v1::IngestRequest& req, const std::string& points, const std::string& labels,
+                v1::IngestResponse* resp, MemoryBudget::Lease* held = nullptr);
+// Checks the map name and the caller's access, and that the map exists (NOT_FOUND).
+void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map);
 
 }  // namespace sglc::server

@@ -163,7 +163,10 @@ TEST_F(EndToEnd, AdminCallsAndErrors) {
   };
   EXPECT_EQ(code([&] { client.listRobots("nosuchmap"); }), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(code([&] { client.queryScanId("m1", 999999); }), grpc::StatusCode::NOT_FOUND);
+  // The identical scan again is a retry (OK, the stored scan); another scan under a stored key is refused.
   EXPECT_EQ(code([&] { client.ingest(sc::makeKey("m1", "a", "run1", 52), t::realScan("000052")); }),
+            grpc::StatusCode::OK);
+  EXPECT_EQ(code([&] { client.ingest(sc::makeKey("m1", "a", "run1", 52), t::realScan("000088")); }),
             grpc::StatusCode::ALREADY_EXISTS);
   EXPECT_EQ(code([&] { client.ingest(sc::makeKey("m1", "a", "run1", 53), sglc::LabelledScan{}); }),
             grpc::StatusCode::INVALID_ARGUMENT);
@@ -218,10 +221,10 @@ TEST_F(EndToEnd, ChunkedIngestAndStreamSession) {
   ASSERT_NE(loop, nullptr) << "the chunked scan 52 was not found from 4501";
   expectPose(sc::toMatrix(loop->t_query_candidate()), T_a_b_.inverse(), "stream 4501 vs chunked 52");
 
-  // A duplicate ends the stream with ALREADY_EXISTS; the scan before it is stored.
+  // Another scan under a stored key ends the stream with ALREADY_EXISTS; the scan before it is stored.
   auto again = client.openSession();
   again.send(sc::makeKey("c", "a", "02", 850), t::realScan("000850"));
-  again.send(sc::makeKey("c", "a", "01", 88), t::realScan("000088"));
+  again.send(sc::makeKey("c", "a", "01", 88), t::realScan("000850"));
   EXPECT_EQ(again.next().seq(), 850);
   try {
     again.next();
@@ -368,7 +371,7 @@ TEST_F(EndToEnd, CommandLine) {
   for (const auto& args : std::vector<std::vector<std::string>>{
            {"robots", "--map", "nosuchmap"},
            {"query", "--map", "cli", "--scan-id", "987654"},
-           {"ingest", "--map", "cli", "--robot", "a", "--frames", "52", dir}}) {
+           {"query", "--map", "nosuchmap", "--scan-id", "1"}}) {
     r = cli(args);
     EXPECT_NE(r.exit_code, 0) << args[0];
     const auto err = t::lines(r.err);

@@ -80,9 +80,18 @@ check(raises(ValueError, sglc_client.pack_labels, np.float32([1.5])) is not None
 check(raises(ValueError, sglc_client.pack_labels, [-1]) is not None, "negative labels rejected")
 check(raises(ValueError, sglc_client.unpack_scan, b"\0" * 24, b"\0" * 4) is not None, "unpack count mismatch rejected")
 M = np.eye(4)
-M[0, 3], M[1, 0] = 5.0, 0.25
+M[:3, :3] = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]  # 90 deg about z
+M[0, 3] = 5.0
 vals = sglc_client.transform_values(M)
-check(vals[3] == 5.0 and vals[4] == 0.25 and len(vals) == 16, "transforms are row-major")
+check(vals[3] == 5.0 and vals[4] == 1.0 and vals[1] == -1.0 and len(vals) == 16, "transforms are row-major")
+zero = np.zeros((4, 4))
+zero[3, 3] = 1.0
+for name, bad in (("all-zero rotation", zero), ("scaled", np.diag([2.0, 2.0, 2.0, 1.0])),
+                  ("reflection", np.diag([1.0, 1.0, -1.0, 1.0])), ("NaN", np.full((4, 4), np.nan))):
+    err = raises(ValueError, sglc_client.transform_values, bad)
+    check(err is not None and "rigid" in str(err), f"{name} transform rejected before sending")
+check(sglc_client.rigid_motion_error(list(np.eye(4).astype(np.float32).astype(float).ravel())) is None,
+      "float-rounded identity accepted")
 check(np.array_equal(sglc_client.to_matrix(vals), M), "transform round trip")
 check(raises(ValueError, sglc_client.to_matrix, [0.0] * 15) is not None, "15-value transform rejected")
 
@@ -242,10 +251,10 @@ try:
         check(s.finish() == [], "finish with nothing outstanding")
     with c.open_session() as s:
         s.send("py", "d", "run2", 850, *read_bytes("000850"))
-        s.send("py", "d", "run", 88, *read_bytes("000088"))  # duplicate
+        s.send("py", "d", "run", 88, *read_bytes("000850"))  # another scan under a stored key
         check(s.next().seq == 850, "scan before the failure is answered")
         e = raises(sglc_client.SglcError, s.next)
-        check(e is not None and e.code_name == "ALREADY_EXISTS", f"duplicate ends the stream with ALREADY_EXISTS ({e})")
+        check(e is not None and e.code_name == "ALREADY_EXISTS", f"a key's second scan ends the stream with ALREADY_EXISTS ({e})")
 
     # Admin.
     st = c.stats()
@@ -261,8 +270,11 @@ try:
     check(bk.bytes > 0, "backup")
     e = raises(sglc_client.SglcError, c.list_robots, "nosuch")
     check(e is not None and e.code_name == "NOT_FOUND", "unknown map gives NOT_FOUND")
-    e = raises(sglc_client.SglcError, c.ingest, "py", "a", "00", 52, p52, l52)
-    check(e is not None and e.code_name == "ALREADY_EXISTS", "duplicate ingest gives ALREADY_EXISTS")
+    again = c.ingest("py", "a", "00", 52, p52, l52)
+    check(again.already_stored and again.scan_id == a.scan_id, "the identical ingest again is a retry: the stored scan")
+    p88, l88 = read_bytes("000088")
+    e = raises(sglc_client.SglcError, c.ingest, "py", "a", "00", 52, p88, l88)
+    check(e is not None and e.code_name == "ALREADY_EXISTS", "another scan under a stored key gives ALREADY_EXISTS")
     c.close()
 
     # The example runs and finds the loop.

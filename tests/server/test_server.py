@@ -254,10 +254,12 @@ def test_bad_inputs(tmp):
         big = pb.Scan(points=b"\0" * (12 * 100000), labels=b"\0" * (4 * 100000))
         expect_code(C.RESOURCE_EXHAUSTED, lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 1), scan=big)),
                     "oversized message")
-        # Duplicate key.
-        s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good))
-        expect_code(C.ALREADY_EXISTS, lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good)),
-                    "duplicate key")
+        # Duplicate key: the identical request again is a retry (OK, the stored scan); anything else is refused.
+        first = s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good, stamp=1.5))
+        again = s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good, stamp=1.5))
+        assert not first.already_stored and again.already_stored and again.scan_id == first.scan_id, (first, again)
+        expect_code(C.ALREADY_EXISTS, lambda: s.loop.Ingest(pb.IngestRequest(key=key("r", 7), scan=good, stamp=2.5)),
+                    "duplicate key, another stamp")
         expect_code(C.NOT_FOUND, lambda: s.loop.Query(pb.QueryRequest(map="m", scan_id=999999)), "unknown scan")
         expect_code(C.INVALID_ARGUMENT, lambda: s.loop.Query(pb.QueryRequest(map="m")), "query without source")
         expect_code(C.INVALID_ARGUMENT, lambda: s.loop.Query(pb.QueryRequest(

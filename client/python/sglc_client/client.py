@@ -178,12 +178,9 @@ class Client:
         return self._call(self._admin.CreateMap, "MapAdmin.CreateMap", self.pb2.CreateMapRequest(name=name), timeout)
 
     def ensure_map(self, name, timeout=None):
-        """Creates the map unless it exists."""
-        try:
-            self.create_map(name, timeout)
-        except SglcError as e:
-            if e.code != grpc.StatusCode.ALREADY_EXISTS:
-                raise
+        """Creates the map unless it exists (CreateMap is idempotent; ALREADY_EXISTS means the map exists with
+        another descriptor layout, i.e. another engine configuration, and is raised)."""
+        self.create_map(name, timeout)
 
     def list_maps(self, timeout=None):
         return list(self._call(self._admin.ListMaps, "MapAdmin.ListMaps", self.pb2.ListMapsRequest(), timeout).maps)

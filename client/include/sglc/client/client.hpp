@@ -174,7 +174,7 @@ class Client {
 
   // ---- MapAdmin
   v1::MapInfo createMap(const std::string& name, const CallOptions& call = {}) const;
-  // Creates the map unless it exists (ALREADY_EXISTS is not an error here).
+  // Creates the map unless it exists (CreateMap is idempotent; ALREADY_EXISTS: it exists with another layout).
   void ensureMap(const std::string& name, const CallOptions& call = {}) const;
   std::vector<v1::MapInfo> listMaps(const CallOptions& call = {}) const;
   std::vector<v1::RobotInfo> listRobots(const std::string& map, const CallOptions& call = {}) const;

@@ -1,0 +1,140 @@
+#include "call.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+
+#include "log_line.hpp"
+#include "sglc/storage/map_store.hpp"
+#include "sglc/types.hpp"
+
+namespace sglc::server {
+namespace {
+
+using storage::StorageError;
+
+grpc::StatusCode toGrpc(StorageError::Code code) {
+  switch (code) {
+    case StorageError::Code::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
+    case StorageError::Code::kNotFound: return grpc::StatusCode::NOT_FOUND;
+    case StorageError::Code::kAlreadyExists: return grpc::StatusCode::ALREADY_EXISTS;
+    case StorageError::Code::kFull: return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case StorageError::Code::kBusy: return grpc::StatusCode::UNAVAILABLE;
+    case StorageError::Code::kReadOnly: return grpc::StatusCode::UNAVAILABLE;
+    case StorageError::Code::kCorrupt: return grpc::StatusCode::DATA_LOSS;
+    default: return grpc::StatusCode::INTERNAL;
+  }
+}
+
+const char* codeName(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return "OK";
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case grpc::StatusCode::ABORTED: return "ABORTED";
+    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
+    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
+    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    default: return "OTHER";
+  }
+}
+
+}  // namespace
+
+grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
+  try {
+    std::rethrow_exception(error);
+  } catch (const RpcError& e) {
+    return grpc::Status(e.code(), e.what());
+  } catch (const StorageError& e) {
+    *detail = e.detail();
+    return grpc::Status(toGrpc(e.code()), e.what());
+  } catch (const InputError& e) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, e.what());
+  } catch (const std::bad_alloc&) {
+    return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED, "the server is out of memory");
+  } catch (const std::exception& e) {
+    *detail = e.what();
+    return grpc::Status(grpc::StatusCode::INTERNAL, "internal error (the server's log has the details)");
+  } catch (...) {
+    return grpc::Status(grpc::StatusCode::INTERNAL, "internal error");
+  }
+}
+
+grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, const grpc::Status& status,
+                     const std::string& detail) {
+  nlohmann::ordered_json line = {{"method", log.method},
+                                 {"map", log.map},
+                                 {"robot", log.robot},
+                                 {"code", codeName(status.error_code())},
+                                 {"ms", std::round(msSince(log.start) * 1000.0) / 1000.0},
+                                 {"peer", ctx.peer()}};
+  if (log.messages >= 0) line["messages"] = log.messages;
+  if (!status.ok()) line["error"] = status.error_message();
+  if (!detail.empty()) line["detail"] = detail;
+  if (status.ok()) spdlog::info("{}", logLine(line));
+  else spdlog::warn("{}", logLine(line));
+  return status;
+}
+
+void checkAlive(const grpc::ServerContextBase* ctx) {
+  // The deadline first: past it gRPC also reports the call cancelled, and the log should say which it was.
+  if (std::chrono::system_clock::now() > ctx->deadline())
+    throw RpcError(grpc::StatusCode::DEADLINE_EXCEEDED, "deadline exceeded during processing; nothing was stored");
+  if (ctx->IsCancelled()) throw RpcError(grpc::StatusCode::CANCELLED, "the client cancelled the call");
+}
+
+}  // namespace sglc::server
+
+namespace sglc::server {
+namespace {
+
+namespace gx = grpc::experimental;
+
+class BadRequestInterceptor final : public gx::Interceptor {
+ public:
+  explicit BadRequestInterceptor(gx::ServerRpcInfo* info) : info_(info) {}
+  void Intercept(gx::InterceptorBatchMethods* methods) override {
+    if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::POST_RECV_MESSAGE) &&
+        methods->GetRecvMessage() == nullptr)
+      unparsed_ = true;
+    if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::PRE_SEND_STATUS)) {
+      const auto status = methods->GetSendStatus();
+      // Handlers always give a message; an INTERNAL without one is gRPC's own parse failure.
+      if (unparsed_ || (status.error_code() == grpc::StatusCode::INTERNAL && status.error_message().empty()))
+        methods->ModifySendStatus(grpc::Status(
+            grpc::StatusCode::INVALID_ARGUMENT,
+            std::string("the request is not a valid protobuf message for ") + info_->method()));
+    }
+    methods->Proceed();
+  }
+
+ private:
+  gx::ServerRpcInfo* info_;
+  bool unparsed_ = false;
+};
+
+class BadRequestInterceptorFactory final : public gx::ServerInterceptorFactoryInterface {
+ public:
+  gx::Interceptor* CreateServerInterceptor(gx::ServerRpcInfo* info) override {
+    return info->type() == gx::ServerRpcInfo::Type::UNARY ? new BadRequestInterceptor(info) : nullptr;
+  }
+};
+
+}  // namespace
+
+std::unique_ptr<gx::ServerInterceptorFactoryInterface> makeBadRequestInterceptorFactory() {
+  return std::make_unique<BadRequestInterceptorFactory>();
+}
+
+}  // namespace sglc::server
