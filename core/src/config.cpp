@@ -182,11 +182,16 @@ Config parseConfig(const std::string& yaml_text) {
   if (root.IsNull()) return config;
   if (!root.IsMap()) throw InputError("config: the top level must be a mapping of sections");
   auto table = fields(config);
+  // Keys must be plain scalars ("{}: ..." or "? [a]" would make yaml-cpp throw from the conversion).
+  auto keyOf = [](const YAML::Node& key, const std::string& where) {
+    if (!key.IsScalar()) throw InputError("config: " + where + " has a key that is not a plain name");
+    return key.Scalar();
+  };
   for (const auto& section : root) {
-    const auto section_name = section.first.as<std::string>();
+    const auto section_name = keyOf(section.first, "the top level");
     if (!section.second.IsMap()) throw InputError("config: section '" + section_name + "' must be a mapping");
     for (const auto& item : section.second) {
-      const auto key = section_name + "." + item.first.as<std::string>();
+      const auto key = section_name + "." + keyOf(item.first, "section '" + section_name + "'");
       try {
         if (key == "labels.node_classes") {
           config.labels.node_classes.clear();
