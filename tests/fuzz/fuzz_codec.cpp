@@ -1,0 +1,204 @@
+// Fuzzing the server's wire decoding (server/src/codec.hpp): decodeScan, decodeTransform and checkName see
+// every request's bytes and throw RpcError, which becomes the call's status; decodeInformation reads a
+// candidate's 36 values. A rejection must be an RpcError with code INVALID_ARGUMENT or RESOURCE_EXHAUSTED and a
+// message. An accepted scan has as many labels as points (at least one, at most max_points), finite coordinates
+// and the bytes it came from; an accepted transform is 16 finite values that decode again to (nearly) the same.
+#include "codec.hpp"
+#include "fuzz_util.hpp"
+#include "fuzz_wire.hpp"
+
+namespace sglc {
+namespace {
+
+using fuzz::Outcome;
+using fuzz::Rng;
+using server::RpcError;
+
+enum Kind : std::uint8_t { kScan, kTransform, kName, kInformation, kKinds };
+const char* const kKindNames[] = {"decodeScan", "decodeTransform", "checkName", "decodeInformation"};
+
+struct CodecCase {
+  Kind kind = kScan;
+  fuzz::WireScan scan;
+  std::uint64_t max_points = 0;
+  v1::Transform transform;
+  std::string text;  // decodeTransform's `what`, checkName's name
+  v1::Candidate candidate;
+};
+
+std::string bytesOf(const CodecCase& c) {
+  std::string out(1, static_cast<char>(c.kind));
+  switch (c.kind) {
+    case kScan:
+      out.append(reinterpret_cast<const char*>(&c.max_points), 8);
+      return out + fuzz::wireScanBytes(c.scan);
+    case kTransform:
+      return out + c.transform.SerializeAsString();
+    case kName:
+      return out + c.text;
+    default:
+      return out + c.candidate.SerializeAsString();
+  }
+}
+
+std::string describe(const CodecCase& c) {
+  std::string out = std::string(kKindNames[c.kind]) + " on ";
+  switch (c.kind) {
+    case kScan:
+      return out + "max_points " + std::to_string(c.max_points) + ", points " + fuzz::hexPreview(c.scan.points) +
+             ", labels " + fuzz::hexPreview(c.scan.labels);
+    case kTransform:
+      return out + fuzz::describeTransform(c.transform);
+    case kName:
+      return out + fuzz::textPreview(c.text);
+    default:
+      return out + std::to_string(c.candidate.information_size()) + " information values";
+  }
+}
+
+void checkRejection(const RpcError& e, fuzz::Verdict& v) {
+  if (e.code() != grpc::StatusCode::INVALID_ARGUMENT && e.code() != grpc::StatusCode::RESOURCE_EXHAUSTED)
+    v.fail("RpcError with status code " + std::to_string(static_cast<int>(e.code())) + ": " + e.what());
+  if (!*e.what()) v.fail("RpcError with an empty message");
+}
+
+TEST(Fuzz, ServerCodec) {
+  const fuzz::Mutator mutator;
+  const fuzz::Mutator name_mutator({"/", "..", "\x7f", "\t", "\n", " ", "\xc3\xa9", "\xff", std::string("\0", 1)});
+  constexpr std::uint64_t kSeeds = kKinds;
+  auto make = [&](Rng& rng, std::uint64_t i) -> CodecCase {
+    CodecCase c;
+    c.kind = static_cast<Kind>(i < kSeeds ? i : fuzz::below(rng, kKinds));
+    if (i < kSeeds) {  // one valid case of each kind first
+      const float pts[6] = {1, 2, 3, -4.5f, 0.25f, 1e-3f};
+      const std::uint32_t labels[2] = {40, 10};
+      c.scan = {std::string(reinterpret_cast<const char*>(pts), sizeof(pts)),
+                std::string(reinterpret_cast<const char*>(labels), sizeof(labels))};
+      c.max_points = 100;
+      const Mat4d T = fuzz::randomRigid(rng);
+      for (int k = 0; k < 16; ++k) c.transform.add_m(T(k / 4, k % 4));
+      c.text = "robot-1";
+      for (int k = 0; k < 36; ++k) c.candidate.add_information(k % 7 == 0 ? 1.0 : 0.0);
+      return c;
+    }
+    switch (c.kind) {
+      case kScan: {
+        c.scan = fuzz::randomWireScan(rng, mutator);
+        const std::uint64_t n = c.scan.points.size() / 12;
+        const std::uint64_t choices[] = {0, 1, n, n ? n - 1 : 0, n + 1, 1000000, ~0ULL, fuzz::below(rng, 400)};
+        c.max_points = choices[fuzz::below(rng, std::size(choices))];
+        break;
+      }
+      case kTransform:
+        c.transform = fuzz::randomTransform(rng);
+        c.text = "odometry_pose";
+        if (fuzz::chance(rng, 10)) {  // any printable `what` (a NUL would end what() early)
+          c.text.resize(fuzz::below(rng, 40));
+          for (auto& ch : c.text) ch = static_cast<char>(0x20 + fuzz::below(rng, 95));
+        }
+        break;
+      case kName: {
+        static const std::vector<std::string> names = {"m", "robot-1", "session 2024-01-01", std::string(256, 'x'),
+                                                       "caf\xc3\xa9"};
+        c.text = names[fuzz::below(rng, names.size())];
+        if (fuzz::chance(rng, 10))
+          c.text = mutator.random(rng, 300);
+        else
+          name_mutator.mutate(rng, c.text, names, 400);
+        break;
+      }
+      default: {
+        const int n = fuzz::chance(rng, 50) ? 36 : static_cast<int>(fuzz::below(rng, 80));
+        for (int k = 0; k < n; ++k)
+          c.candidate.add_information(fuzz::chance(rng, 10) ? fuzz::interestingReal(rng)
+                                                            : std::uniform_real_distribution<double>(-1e3, 1e3)(rng));
+        break;
+      }
+    }
+    return c;
+  };
+  auto check = [&](const CodecCase& c, fuzz::Verdict& v) -> Outcome {
+    try {
+      switch (c.kind) {
+        case kScan: {
+          const LabelledScan s = server::decodeScan(c.scan.points, c.scan.labels, c.max_points);
+          if (s.points.size() != s.labels.size() || s.points.empty())
+            v.fail("accepted scan has " + std::to_string(s.points.size()) + " points and " +
+                   std::to_string(s.labels.size()) + " labels");
+          if (s.points.size() > c.max_points) v.fail("accepted scan exceeds max_points");
+          for (std::size_t k = 0; k < s.points.size(); ++k)
+            if (!s.points[k].allFinite()) {
+              v.fail("accepted scan has a non-finite point " + std::to_string(k));
+              break;
+            }
+          if (s.points.size() * 12 != c.scan.points.size() ||
+              std::memcmp(s.points.data(), c.scan.points.data(), c.scan.points.size()) != 0 ||
+              s.labels.size() * 4 != c.scan.labels.size() ||
+              std::memcmp(s.labels.data(), c.scan.labels.data(), c.scan.labels.size()) != 0)
+            v.fail("decoded scan differs from its bytes");
+          break;
+        }
+        case kTransform: {
+          const Mat4d T = server::decodeTransform(c.transform, c.text);
+          if (c.transform.m_size() != 16)
+            v.fail("decodeTransform accepted " + std::to_string(c.transform.m_size()) + " values");
+          if (!T.allFinite()) v.fail("decodeTransform returned non-finite values");
+          for (int k = 0; k < c.transform.m_size(); ++k)
+            if (!std::isfinite(c.transform.m(k))) {
+              v.fail("decodeTransform accepted a non-finite value");
+              break;
+            }
+          // What the server decoded (and may store or send back) decodes again to (nearly) the same matrix.
+          v1::Transform again;
+          server::encodeTransform(T, &again);
+          try {
+            const Mat4d T2 = server::decodeTransform(again, c.text);
+            if (!((T2 - T).array().abs() <= 1e-9 * (1.0 + T.array().abs())).all())
+              v.fail("decoding the decoded transform again changes it");
+          } catch (const RpcError& e) {
+            v.fail(std::string("the decoded transform is rejected when decoded again: ") + e.what());
+          }
+          break;
+        }
+        case kName: {
+          server::checkName("robot", c.text);
+          if (c.text.empty() || c.text.size() > 256)
+            v.fail("checkName accepted a name of " + std::to_string(c.text.size()) + " bytes");
+          for (unsigned char ch : c.text)
+            if (ch < 0x20 || ch == 0x7f) {
+              v.fail("checkName accepted a control character");
+              break;
+            }
+          break;
+        }
+        default: {
+          const auto I = server::decodeInformation(c.candidate);
+          if (I.has_value() != (c.candidate.information_size() == 36))
+            v.fail("decodeInformation: value present iff 36 values is violated");
+          if (I) {
+            for (int k = 0; k < 36; ++k)
+              if (!((*I)(k / 6, k % 6) == c.candidate.information(k) ||
+                    (std::isnan((*I)(k / 6, k % 6)) && std::isnan(c.candidate.information(k))))) {
+                v.fail("decodeInformation changes value " + std::to_string(k));
+                break;
+              }
+            return Outcome::kAccepted;
+          }
+          return Outcome::kRejected;
+        }
+      }
+    } catch (const RpcError& e) {
+      checkRejection(e, v);
+      return Outcome::kRejected;
+    }
+    return Outcome::kAccepted;
+  };
+  const auto r = fuzz::runFuzz<CodecCase>("ServerCodec", 1000000, kSeeds, make, check, bytesOf, describe);
+  if (!fuzz::onlyIteration()) {
+    EXPECT_GE(r.accepted, kSeeds) << "the valid seeds must decode";
+    EXPECT_GT(r.rejected, 0u);
+  }
+}
+
+}  // namespace
+}  // namespace sglc
