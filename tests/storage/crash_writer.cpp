@@ -1,5 +1,7 @@
-// Child process of the crash test: stores scans into a map and prints each acknowledged scan id on its own
-// line (flushed) as soon as addScan returns. The parent kills it with SIGKILL at a random moment.
+// Child process of the crash test: creates (or opens) map "m", prints "ready" on its own line once the map
+// exists, then stores scans into it and prints "<scan id> <seq>" for each acknowledged scan on its own line
+// (flushed) as soon as addScan returns. The parent waits for "ready" (and possibly some acknowledgements)
+// before it kills the writer with SIGKILL at a random moment, so the map always exists when it checks.
 // Usage: storage_crash_writer DB_PATH ROBOT FIRST_SEQ COUNT
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +17,9 @@ int main(int argc, char** argv) {
   opts.sync = StoreOptions::Sync::kFull;
   auto store = MapStore::open(opts);
   store->createMap("m", sglc::DescriptorLayout{}.scanDim());
+  // Not an acknowledgement: the parent tells this line from "<id> <seq>" lines.
+  std::printf("ready\n");
+  std::fflush(stdout);
   const long first = std::atol(argv[3]), count = std::atol(argv[4]);
   for (long seq = first; seq < first + count; ++seq) {
     const auto fp = sglc::storage::testing::randomFingerprint(static_cast<std::uint64_t>(seq) * 31 + 7, 20);
