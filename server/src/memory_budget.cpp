@@ -54,6 +54,7 @@ void MemoryBudget::take(std::size_t bytes, std::size_t held, std::chrono::system
   queue_.pop_front();
   used_ += bytes;
   peak_ = std::max(peak_, used_);
+  high_water_ = std::max(high_water_, used_);
   lock.unlock();
   changed_.notify_all();
 }
@@ -80,6 +81,7 @@ bool MemoryBudget::tryGrow(Lease& lease, std::size_t bytes) {
     if (!queue_.empty() || !fits(bytes, lease.budget_ ? lease.bytes_ : 0)) return false;
     used_ += bytes;
     peak_ = std::max(peak_, used_);
+    high_water_ = std::max(high_water_, used_);
   }
   lease.budget_ = this;
   lease.bytes_ += bytes;
@@ -90,7 +92,7 @@ void MemoryBudget::give(std::size_t bytes) {
   {
     std::lock_guard lock(mutex_);
     used_ -= std::min(used_, bytes);
-    dirty_ = true;
+    if (used_ == 0) idle_since_ = std::chrono::steady_clock::now();
   }
   changed_.notify_all();
 }
@@ -108,8 +110,9 @@ std::size_t MemoryBudget::peak() const {
 void MemoryBudget::trim() {
   {
     std::lock_guard lock(mutex_);
-    if (!dirty_ || used_ > 0) return;
-    dirty_ = false;
+    if (used_ > 0 || high_water_ < kTrimAfterBytes || std::chrono::steady_clock::now() - idle_since_ < kTrimIdle)
+      return;
+    high_water_ = 0;
   }
   ::malloc_trim(0);
 }

@@ -54,8 +54,12 @@ class MemoryBudget {
   std::size_t capacity() const { return capacity_; }
   std::size_t inUse() const;
   std::size_t peak() const;
-  // Returns freed heap to the system if a burst has ended since the last trim (no lease open); cheap otherwise.
+  // Returns freed heap to the system once a burst has ended: more than kTrimAfterBytes were in flight at once
+  // since the last trim, and nothing has been for kTrimIdle. Cheap otherwise. Steady traffic of ordinary scans
+  // never trims (trimming gives pages back that the next call would fault in again).
   void trim();
+  static constexpr std::size_t kTrimAfterBytes = std::size_t{64} << 20;
+  static constexpr std::chrono::milliseconds kTrimIdle{1500};
 
  private:
   // `held`: what the caller's lease already holds (a lease alone in flight may grow past the budget).
@@ -70,7 +74,8 @@ class MemoryBudget {
   std::size_t used_ = 0, peak_ = 0;
   std::deque<std::uint64_t> queue_;  // waiting callers, oldest first
   std::uint64_t next_ticket_ = 0;
-  bool dirty_ = false;  // large allocations were freed since the last trim
+  std::size_t high_water_ = 0;  // most in flight at once since the last trim
+  std::chrono::steady_clock::time_point idle_since_ = std::chrono::steady_clock::now();
 };
 
 }  // namespace sglc::server

@@ -107,6 +107,9 @@ def run(tmp):
                 break
             time.sleep(0.5)
         h.note(f"RSS {time.monotonic() - t0:.1f} s after the burst {after_mb:.0f} MB (before {before_mb:.0f} MB)")
+        time.sleep(3)
+        settled_mb = s.rss_kb()["VmRSS"] / 1024
+        h.note(f"RSS {time.monotonic() - t0:.1f} s after the burst {settled_mb:.0f} MB")
         if SANITIZED:
             h.note("sanitizer build: the RSS bound is not checked")
         else:
