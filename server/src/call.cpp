@@ -110,8 +110,9 @@ class BadRequestInterceptor final : public gx::Interceptor {
       unparsed_ = true;
     if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::PRE_SEND_STATUS)) {
       const auto status = methods->GetSendStatus();
-      // Handlers always give a message; an INTERNAL without one is gRPC's own parse failure.
-      if (unparsed_ || (status.error_code() == grpc::StatusCode::INTERNAL && status.error_message().empty()))
+      // Handlers always give a message; an INTERNAL without one is gRPC's own parse failure. Other codes with no
+      // message parsed (RESOURCE_EXHAUSTED when the thread pool is full) stay as they are.
+      if (status.error_code() == grpc::StatusCode::INTERNAL && (unparsed_ || status.error_message().empty()))
         methods->ModifySendStatus(grpc::Status(
             grpc::StatusCode::INVALID_ARGUMENT,
             std::string("the request is not a valid protobuf message for ") + info_->method()));

@@ -89,6 +89,7 @@ Mat6 loopSqrtInformation(const Mat6& information, double floor_t, double floor_r
 
 // Why a stored loop cannot be an edge, or nullopt.
 std::optional<std::string> loopError(const storage::LoopRecord& l) {
+  if (l.query_scan == l.candidate_scan) return std::string("joins a scan to itself");
   if (const auto error = rigidMotionError(l.T)) return "transform " + *error;
   if (l.information && !l.information->allFinite()) return std::string("information is not finite");
   if (!std::isfinite(l.rmse)) return std::string("rmse is not finite");
@@ -208,7 +209,11 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
     graphs_.erase(map);
     GraphEvent event = latest(map).value_or(GraphEvent{});
-    if (!event.graph_version) event.graph_version = store_.graphVersion(map);
+    try {
+      if (!event.graph_version) event.graph_version = store_.graphVersion(map);
+    } catch (const std::exception&) {
+      // the database failed too: the event says 0
+    }
     event.failed = true;
     event.error = e.what();
     spdlog::error("{}", logLine({{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version},
@@ -428,8 +433,9 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
       if (!std::isfinite(v)) throw std::runtime_error("a node's initial pose is not finite");
   if (!g.nodes.empty()) {
     double cost = 0;
-    problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr);
-    if (!std::isfinite(cost)) throw std::runtime_error("the graph's initial cost is not finite");
+    if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
+        !std::isfinite(cost))
+      throw std::runtime_error("the graph's initial cost is not finite");
   }
   if (!g.nodes.empty()) {
     if (wide) {

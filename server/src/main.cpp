@@ -161,6 +161,13 @@ void applyConfigFile(Settings& s, const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // SIGTERM / SIGINT are blocked before any thread starts (every thread inherits the mask) and taken by
+  // sigwait below; a thread started earlier would take them with the default action and kill the process.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
   // Buffers of 16 MB and more (scans of a million points and up) are mmapped, so each returns to the system
   // when freed instead of growing the heap (glibc's adaptive threshold would move them onto it after the first
   // free). Ordinary keyframes (~2 MB) stay on the heap: mmapping those too cost 3-5 ms per ingest in page faults.
@@ -172,7 +179,7 @@ int main(int argc, char** argv) {
   auto* db_opt = app.add_option("--db", s.db, "map database (SQLite file; created if missing)");
   auto* listen_opt = app.add_option("--listen", s.listen, "address to serve on");
   auto* threads_opt = app.add_option("--threads", s.threads, "compute threads (0: the machine's cores)");
-  auto* calls_opt = app.add_option("--max-calls", s.max_calls, "calls served at once, open streams included");
+  auto* calls_opt = app.add_option("--max-calls", s.max_calls, "unary calls served at once (open streams hold no thread)");
   auto* tokens_opt = app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
   auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
   auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
@@ -275,13 +282,6 @@ int main(int argc, char** argv) {
     interceptors.push_back(sglc::server::makeBadRequestInterceptorFactory());
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
     builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2);
-
-    // SIGTERM / SIGINT are taken by a dedicated thread (blocked everywhere else).
-    sigset_t signals;
-    sigemptyset(&signals);
-    sigaddset(&signals, SIGTERM);
-    sigaddset(&signals, SIGINT);
-    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
     sglc::server::IoPoller io_poller(builder);  // see io_poller.hpp
     server = builder.BuildAndStart();

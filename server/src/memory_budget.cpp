@@ -88,6 +88,12 @@ bool MemoryBudget::tryGrow(Lease& lease, std::size_t bytes) {
   return true;
 }
 
+void MemoryBudget::shrink(Lease& lease, std::size_t bytes) {
+  if (lease.budget_ != this || lease.bytes_ <= bytes) return;
+  give(lease.bytes_ - bytes);
+  lease.bytes_ = bytes;
+}
+
 void MemoryBudget::give(std::size_t bytes) {
   {
     std::lock_guard lock(mutex_);

@@ -50,6 +50,9 @@ class MemoryBudget {
             const std::function<bool()>& cancelled, std::chrono::milliseconds max_wait = std::chrono::seconds(30));
   // Adds `bytes` at once if they fit without waiting; false otherwise.
   bool tryGrow(Lease& lease, std::size_t bytes);
+  // Returns what a lease holds beyond `bytes` (a reservation made for the largest case, once the real size is
+  // known).
+  void shrink(Lease& lease, std::size_t bytes);
 
   std::size_t capacity() const { return capacity_; }
   std::size_t inUse() const;

@@ -245,16 +245,17 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
     bool added = false;
     for (const auto& loop : resp->loops()) {
       if (!loop.verified()) continue;
-      storage::LoopRecord r;
-      r.query_scan = resp->scan_id();
-      r.candidate_scan = loop.scan_id();
-      r.T = decodeTransform(loop.t_query_candidate(), "loop");
-      r.score = loop.score();
-      r.inliers = loop.inliers();
-      r.fitness = loop.fitness();
-      r.rmse = loop.rmse();
-      r.information = decodeInformation(loop);
       try {
+        // The engine's own pose (the rigid check guards what clients send; a loop it fails is only logged).
+        storage::LoopRecord r;
+        r.query_scan = resp->scan_id();
+        r.candidate_scan = loop.scan_id();
+        r.T = decodeTransform(loop.t_query_candidate(), "loop");
+        r.score = loop.score();
+        r.inliers = loop.inliers();
+        r.fitness = loop.fitness();
+        r.rmse = loop.rmse();
+        r.information = decodeInformation(loop);
         state.store().addLoop(key.map(), r);
         added = true;
       } catch (const std::exception& e) {

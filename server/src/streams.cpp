@@ -31,7 +31,7 @@ class StreamReactor : public Base, public RegisteredStream {
   void close(const grpc::Status& status) override { finish(status); }
   std::optional<SteadyTime> idleSince() override {
     std::lock_guard lock(mutex_);
-    if (busy_ || writing_ || finishing_) return std::nullopt;
+    if (busy_ || writing_ || starting_ || finishing_) return std::nullopt;
     return last_;
   }
 
@@ -53,23 +53,26 @@ class StreamReactor : public Base, public RegisteredStream {
     }
   }
 
-  // Asks the stream to end with `status`; deferred while work or a write is in flight (they end it).
+  // Asks the stream to end with `status`; deferred while work, a write or a read being started is in flight
+  // (they end it).
   void finish(const grpc::Status& status) {
     {
       std::lock_guard lock(mutex_);
       if (finishing_) return;
       finishing_ = true;
       status_ = status;
-      if (busy_ || writing_) return;
+      if (busy_ || writing_ || starting_) return;
     }
     finishNow();
   }
-  // The work in flight ended with this status, which is final (it overrides a deferred request to end).
+  // The work in flight ended with this status, which is final (it overrides a deferred request to end, but not
+  // a Finish already sent).
   void complete(const grpc::Status& status, const std::string& detail = "") {
     {
       std::lock_guard lock(mutex_);
-      finishing_ = true;
       busy_ = false;
+      if (finished_) return;
+      finishing_ = true;
       status_ = status;
       detail_ = detail;
     }
@@ -80,9 +83,38 @@ class StreamReactor : public Base, public RegisteredStream {
     const auto status = statusOf(error, &detail);
     complete(status, detail);
   }
+  // Sends Finish once (a second Finish would abort the process inside gRPC). Never with mutex_ held.
   void finishNow() {
+    {
+      std::lock_guard lock(mutex_);
+      if (finished_) return;
+      finished_ = true;
+    }
     logCall(*ctx_, log_, status_, detail_);
     this->Finish(status_);
+  }
+  // Starts the next read from outside a gRPC reaction (an executor thread): the stream counts as starting a
+  // read meanwhile, so a request to end it waits for the read to be started and then ends it here.
+  void startReadFromWorker(Bytes* into) {
+    bool end_now;
+    {
+      std::lock_guard lock(mutex_);
+      busy_ = false;
+      end_now = finishing_;
+      if (!end_now) starting_ = true;
+    }
+    if (end_now) {
+      finishNow();
+      return;
+    }
+    this->StartRead(into);
+    bool end;
+    {
+      std::lock_guard lock(mutex_);
+      starting_ = false;
+      end = finishing_ && !busy_ && !writing_;
+    }
+    if (end) finishNow();
   }
   // Posts blocking work; the reactor stays alive until it has run.
   template <typename F>
@@ -100,7 +132,7 @@ class StreamReactor : public Base, public RegisteredStream {
   TokenTable::Grant grant_;
   std::uint64_t id_ = 0;
   std::mutex mutex_;
-  bool busy_ = false, writing_ = false, finishing_ = false;
+  bool busy_ = false, writing_ = false, starting_ = false, finishing_ = false, finished_ = false;
   SteadyTime last_ = std::chrono::steady_clock::now();
   grpc::Status status_;
   std::string detail_;
@@ -120,20 +152,14 @@ class IngestStreamReactor final : public StreamReactor<grpc::ServerBidiReactor<B
       finish(ctx_->IsCancelled() ? grpc::Status(grpc::StatusCode::CANCELLED, "the stream broke") : grpc::Status::OK);
       return;
     }
-    v1::IngestRequest req;
-    try {
-      req = parseMessage<v1::IngestRequest>(
-          in_, "message " + std::to_string(log_.messages + 1) + " of the stream (earlier scans are stored)");
-    } catch (...) {
-      complete(std::current_exception());
-      return;
-    }
     {
       std::lock_guard lock(mutex_);
       if (finishing_) return;  // ended meanwhile (idle timeout, shutdown): Finish was called
       busy_ = true;
     }
-    post([this, req = std::move(req)] { process(req); });
+    // The message's memory is reserved before it is parsed (a parsed copy doubles it), on a worker: waiting for
+    // memory must not block a gRPC thread.
+    post([this] { process(); });
   }
 
   void OnWriteDone(bool ok) override {
@@ -154,12 +180,17 @@ class IngestStreamReactor final : public StreamReactor<grpc::ServerBidiReactor<B
   }
 
  private:
-  void process(const v1::IngestRequest& req) {
+  void process() {
     v1::IngestResponse resp;
     try {
+      auto lease = state_.memory().acquire(in_.Length() * kScanCostFactor, ctx_->deadline(),
+                                           [this] { return ctx_->IsCancelled(); });
+      const auto req = parseMessage<v1::IngestRequest>(
+          in_, "message " + std::to_string(log_.messages + 1) + " of the stream (earlier scans are stored)");
+      in_.Clear();
       log_.map = req.key().map();
       log_.robot = req.key().robot();
-      ingestScan(state_, ctx_, grant_, req, req.scan().points(), req.scan().labels(), &resp);
+      ingestScan(state_, ctx_, grant_, req, req.scan().points(), req.scan().labels(), &resp, &lease);
     } catch (...) {
       complete(std::current_exception());
       return;
@@ -199,46 +230,41 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
       post([this] { process(); });
       return;
     }
-    std::size_t added = 0;
+    bool progress = false;
     try {
-      added = append();
+      progress = append();
     } catch (...) {
       complete(std::current_exception());
       return;
     }
-    // Scan memory is reserved as chunks arrive; when the budget is busy, the next read waits (and with it the
-    // client, through flow control).
-    if (state_.memory().tryGrow(lease_, added)) {
-      {
-        std::lock_guard lock(mutex_);
-        last_ = std::chrono::steady_clock::now();
-        if (finishing_) return;
-      }
-      StartRead(&in_);
-      return;
-    }
-    if (!begin()) return;
-    post([this, added] {
-      try {
-        state_.memory().grow(lease_, added, ctx_->deadline(), [this] { return ctx_->IsCancelled(); });
-      } catch (...) {
-        complete(std::current_exception());
-        return;
-      }
-      {
-        std::lock_guard lock(mutex_);
-        busy_ = false;
-        last_ = std::chrono::steady_clock::now();
-        if (finishing_) {
-          finishNow();
+    if (log_.messages == 1) {
+      // The whole scan's memory is reserved once, up front (the most the server accepts; returned down to the
+      // real size when the scan is complete): an upload that grew chunk by chunk could hold part of the budget
+      // while waiting behind a call that waits for it. Waiting happens on a worker, never on a gRPC thread.
+      if (!begin()) return;
+      post([this] {
+        try {
+          lease_ = state_.memory().acquire(maxBytes() * kScanCostFactor, ctx_->deadline(),
+                                           [this] { return ctx_->IsCancelled(); });
+        } catch (...) {
+          complete(std::current_exception());
           return;
         }
-      }
-      StartRead(&in_);
-    });
+        startReadFromWorker(&in_);
+      });
+      return;
+    }
+    {
+      std::lock_guard lock(mutex_);
+      if (progress) last_ = std::chrono::steady_clock::now();  // empty chunks do not keep a stream alive
+      if (finishing_) return;
+    }
+    StartRead(&in_);
   }
 
  private:
+  std::size_t maxBytes() const { return state_.limits().max_points * 16 + 16; }
+
   // Marks work in flight; false when the stream is ending (Finish was called).
   bool begin() {
     std::lock_guard lock(mutex_);
@@ -247,12 +273,13 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
     return true;
   }
 
-  // Parses the chunk just read and appends it; returns the scan memory it adds.
-  std::size_t append() {
+  // Parses the chunk just read and appends it; returns whether it carried any bytes.
+  bool append() {
     ++log_.messages;
     auto chunk = parseMessage<v1::IngestChunk>(in_, "chunk " + std::to_string(log_.messages) +
                                                         " of the stream (nothing of the scan was stored)");
-    std::size_t before = points_.size() + labels_.size();
+    in_.Clear();
+    const std::size_t before = points_.size() + labels_.size();
     if (log_.messages == 1) {
       if (!chunk.has_header())
         throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "the first chunk must carry the header");
@@ -262,22 +289,21 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
       TokenTable::require(grant_, header_.key().map());
       points_ = std::move(*header_.mutable_scan()->mutable_points());
       labels_ = std::move(*header_.mutable_scan()->mutable_labels());
-      before = 0;
     } else if (chunk.has_header()) {
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "only the first chunk may carry a header");
     }
     points_ += chunk.points();
     labels_ += chunk.labels();
-    const std::size_t limit = state_.limits().max_points * 16 + 16;
-    if (points_.size() + labels_.size() > limit)
+    if (points_.size() + labels_.size() > maxBytes())
       throw RpcError(grpc::StatusCode::RESOURCE_EXHAUSTED, "chunked scan exceeds the server's point limit (" +
                                                                std::to_string(state_.limits().max_points) + ")");
-    return (points_.size() + labels_.size() - before) * kScanCostFactor;
+    return points_.size() + labels_.size() > before || log_.messages == 1;
   }
 
   void process() {
     v1::IngestResponse resp;
     try {
+      state_.memory().shrink(lease_, (points_.size() + labels_.size()) * kScanCostFactor);
       ingestScan(state_, ctx_, grant_, header_, points_, labels_, &resp, &lease_);
     } catch (...) {
       complete(std::current_exception());

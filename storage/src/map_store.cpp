@@ -1,6 +1,9 @@
 #include "sglc/storage/map_store.hpp"
 
+#include <fcntl.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <chrono>
 #include <cmath>
@@ -475,14 +478,24 @@ class SqliteMapStore final : public MapStore {
   }
 
   void backup(const std::string& dest) const override {
-    if (fs::exists(dest)) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
+    // Claim the name first (O_EXCL): of two backups to one name only one proceeds, and a failure removes only
+    // the file this call created. VACUUM INTO accepts an existing empty file.
+    const int fd = ::open(dest.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd < 0) {
+      const int e = errno;
+      if (e == EEXIST) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
+      throw StorageError(e == EACCES || e == EROFS || e == EPERM ? Code::kReadOnly
+                         : e == ENOSPC || e == EDQUOT            ? Code::kFull
+                                                                 : Code::kIo,
+                         "the backup file cannot be created", dest + ": " + std::strerror(e));
+    }
+    ::close(fd);
     auto reader = acquireReader();
     try {
       sql::Stmt st(*reader, "VACUUM INTO ?");
       st.bind(1, dest);
       st.run();
     } catch (const StorageError& e) {
-      // A failed backup leaves nothing behind that would block the retry.
       std::error_code ec;
       fs::remove(dest, ec);
       throw StorageError(e.code(), std::string("the backup could not be written: ") + e.what(),

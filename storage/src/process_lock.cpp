@@ -6,13 +6,18 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 
 #include "sglc/storage/map_store.hpp"
 
 namespace sglc::storage {
 
 ProcessLock::ProcessLock(const std::string& database) {
-  const std::string path = database + ".lock";
+  // One lock per file, however it is named (relative, with "..", through a symlink). Hard links still name
+  // another path: one server per path is what the lock promises.
+  std::error_code ec;
+  auto canonical = std::filesystem::weakly_canonical(database, ec);
+  const std::string path = (ec ? database : canonical.string()) + ".lock";
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) {
     const int e = errno;

@@ -216,6 +216,9 @@ def idle_timeout(tmp):
         ev = threading.Event()
         t0 = time.monotonic()
         silent = s.loop.IngestStream(h.blocking_requests(ev), timeout=120)
+        # An IngestChunked that sends nothing is ended the same way (it once made the server Finish twice and
+        # abort).
+        silent_chunked = s.loop.IngestChunked.future(h.blocking_requests(ev), timeout=120)
         # One that sent a scan and then fell silent is ended too; its scan stays stored.
         req = pb.IngestRequest(key=h.key("idle", 1), scan=h.synthetic_scan(1500, seed=34))
         after_one = s.loop.IngestStream(h.blocking_requests(ev, [req]), timeout=120)
@@ -230,11 +233,12 @@ def idle_timeout(tmp):
                 h.record(e)
                 raise AssertionError(f"expected an answer to the one scan sent, got {h.status_of(e)}")
             t_end = time.monotonic() + 30
-            while time.monotonic() < t_end and not (silent.done() and after_one.done()):
+            while time.monotonic() < t_end and not (silent.done() and after_one.done() and silent_chunked.done()):
                 time.sleep(0.1)
             elapsed = time.monotonic() - t0
             problems = []
-            for what, c in (("a silent IngestStream", silent), ("an IngestStream silent after one scan", after_one)):
+            for what, c in (("a silent IngestStream", silent), ("an IngestStream silent after one scan", after_one),
+                            ("a silent IngestChunked", silent_chunked)):
                 if not c.done():
                     problems.append(f"expected {what} to be ended (UNAVAILABLE, 'idle'), still open after 30 s")
                     continue
@@ -246,10 +250,12 @@ def idle_timeout(tmp):
                 h.note(f"idle IngestStreams ended after {elapsed:.1f} s")
                 assert elapsed >= 1.0, f"expected the streams to live ~2 s, they ended after {elapsed:.1f} s"
             assert not problems, "; ".join(problems)
+            s.assert_alive()
             st = s.admin.GetStats(pb.GetStatsRequest(map="m"), timeout=DEADLINE)
             assert st.scans == 1, f"expected the scan sent before the silence to stay stored, the map has {st.scans}"
         finally:
             ev.set()
+            silent_chunked.cancel()
             silent.cancel()
             after_one.cancel()
 
