@@ -2,6 +2,7 @@
 
 #include <string>
 
+#include "sglc/labeller.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc {
@@ -32,6 +33,32 @@ LabelMap::LabelMap(const LabelConfig& config) : role_(65536, -1) {
     if (id > 0xFFFFu) throw InputError("labels: moving id " + std::to_string(id) + " exceeds 65535");
     role_[id] = -1;
   }
+  // The labeller's reserved ids (sglc/labeller.hpp) mean the same in every configuration. Its landmark roles go
+  // to the node classes of those names; without a "trunk" class trunks count as poles and the other way round,
+  // and without either they are vegetation; without "vehicle", vehicles are ignored.
+  auto nodeIndex = [&](const std::string& name) {
+    for (int c = 0; c < num_node_classes_; ++c)
+      if (config.node_classes[c].name == name) return c;
+    return -1;
+  };
+  const int vehicle = nodeIndex("vehicle");
+  int trunk = nodeIndex("trunk"), pole = nodeIndex("pole");
+  if (trunk < 0) trunk = pole;
+  if (pole < 0) pole = trunk;
+  const int vegetation = -static_cast<int>(Background::kVegetation) - 1;
+  role_[labeller_ids::kNone] = -1;
+  role_[labeller_ids::kGround] = static_cast<std::int8_t>(-static_cast<int>(Background::kRoad) - 1);
+  role_[labeller_ids::kVegetation] = static_cast<std::int8_t>(vegetation);
+  role_[labeller_ids::kBuilding] = static_cast<std::int8_t>(-static_cast<int>(Background::kBuilding) - 1);
+  role_[labeller_ids::kFence] = static_cast<std::int8_t>(-static_cast<int>(Background::kFence) - 1);
+  role_[labeller_ids::kVehicle] = static_cast<std::int8_t>(vehicle);
+  role_[labeller_ids::kTrunk] = static_cast<std::int8_t>(trunk >= 0 ? trunk : vegetation);
+  role_[labeller_ids::kPole] = static_cast<std::int8_t>(pole >= 0 ? pole : vegetation);
+  // Which roles the configured ids cover (the labeller fills the others in "auto" mode).
+  has_vehicle_ids_ = vehicle >= 0 && !config.node_classes[vehicle].ids.empty();
+  has_trunk_ids_ = nodeIndex("trunk") >= 0 && !config.node_classes[nodeIndex("trunk")].ids.empty();
+  has_pole_ids_ = nodeIndex("pole") >= 0 && !config.node_classes[nodeIndex("pole")].ids.empty();
+  has_background_ids_ = !config.road.empty() || !config.building.empty() || !config.vegetation.empty();
 }
 
 }  // namespace sglc

@@ -1,0 +1,46 @@
+// A built-in scene labeller for raw LiDAR (x, y, z only): each point gets one of the roles the engine uses.
+//
+// Loop closing needs labels that are repeatable more than correct: the same street must cluster into the same
+// objects on every visit. The labeller is geometric, deterministic and O(N), and assumes no beam model, ring
+// index or sensor height, so it serves 16 to 128 beams, non-repetitive patterns and downsampled clouds:
+//  1. Ground: the two lowest points of each 2 m column give a robust floor; the floor of a column is the lowest
+//     of its 3 x 3 neighbourhood (a column under a car sees the road beside it); the points within
+//     `ground_band_m` of that floor fit the column's ground plane. Points within `ground_tolerance_m` of it are
+//     ground (road role).
+//  2. Objects: points between `ground_tolerance_m` and `low_band_m` above the ground (the band where trunks,
+//     poles, cars, walls and hedges all appear, below canopies) are binned into `cell_m` columns; 8-connected
+//     columns are objects, classified by their footprint (principal extents), height and what stands above:
+//     thin and tall -> pole-like (trunk when a canopy spreads above it, else pole); car-sized, touching the
+//     ground, nothing above 2.6 m -> vehicle; long and thin and tall -> building (wall); long, thin and low ->
+//     fence; anything else -> vegetation.
+//  3. Points above the band take their column's role (walls rise into buildings, poles into poles, car roofs
+//     stay vehicle); elsewhere building next to a wall, else vegetation (canopy, overhangs).
+// Labels are written as the reserved ids below, which every LabelMap knows, so nothing downstream changes.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "sglc/config.hpp"
+#include "sglc/types.hpp"
+
+namespace sglc {
+
+// Reserved label ids the labeller writes (low 16 bits); LabelMap maps them to roles in every configuration.
+namespace labeller_ids {
+inline constexpr std::uint32_t kNone = 0xFF00;  // beyond range or below the ground: ignored
+inline constexpr std::uint32_t kGround = 0xFF01;
+inline constexpr std::uint32_t kVegetation = 0xFF02;
+inline constexpr std::uint32_t kBuilding = 0xFF03;
+inline constexpr std::uint32_t kFence = 0xFF04;
+inline constexpr std::uint32_t kVehicle = 0xFF10;
+inline constexpr std::uint32_t kTrunk = 0xFF11;
+inline constexpr std::uint32_t kPole = 0xFF12;
+inline bool isReserved(std::uint32_t label) { return (label & 0xFF00u) == 0xFF00u && (label & 0xFFFFu) <= 0xFF12u; }
+}  // namespace labeller_ids
+
+// One reserved id per point (labeller_ids). Deterministic; throws nothing for finite input (non-finite points
+// get kNone).
+std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig& config);
+
+}  // namespace sglc

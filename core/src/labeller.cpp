@@ -1,0 +1,273 @@
+#include "sglc/labeller.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "fast_math.hpp"
+#include "sglc/voxel_map.hpp"
+
+namespace sglc {
+namespace {
+
+namespace id = labeller_ids;
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
+// Ground: per column of ground_cell_m, the floor (second-lowest point, robust to one stray return below the
+// road), the floor of the 3 x 3 neighbourhood, and a plane z = a x + b y + c through the points just above it.
+class Ground {
+ public:
+  Ground(const Points& points, const LabellerConfig& c) : cell_(static_cast<float>(c.ground_cell_m)) {
+    half_ = static_cast<int>(std::ceil(c.max_range_m / c.ground_cell_m)) + 1;
+    side_ = 2 * half_ + 1;
+    const std::size_t n_cells = static_cast<std::size_t>(side_) * static_cast<std::size_t>(side_);
+    low1_.assign(n_cells, kInf);
+    low2_.assign(n_cells, kInf);
+    const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
+    for (const auto& p : points) {
+      if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
+      const int k = index(p);
+      if (p.z() < low1_[k]) {
+        low2_[k] = low1_[k];
+        low1_[k] = p.z();
+      } else if (p.z() < low2_[k]) {
+        low2_[k] = p.z();
+      }
+    }
+    // A column's own floor: its second-lowest point (or its only one).
+    std::vector<float> own(n_cells, kInf);
+    for (std::size_t k = 0; k < n_cells; ++k) own[k] = std::isfinite(low2_[k]) ? low2_[k] : low1_[k];
+    floor_.assign(n_cells, kInf);
+    for (int y = 0; y < side_; ++y)
+      for (int x = 0; x < side_; ++x) {
+        float f = kInf;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if (xx >= 0 && yy >= 0 && xx < side_ && yy < side_) f = std::min(f, own[cellAt(xx, yy)]);
+          }
+        floor_[cellAt(x, y)] = f;
+      }
+    // Plane per column through the points within ground_band_m of the floor (only this column's points).
+    struct Sums {
+      double n = 0, x = 0, y = 0, z = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
+    };
+    std::vector<Sums> sums(n_cells);
+    const float band = static_cast<float>(c.ground_band_m);
+    for (const auto& p : points) {
+      if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
+      const int k = index(p);
+      if (!(p.z() <= floor_[k] + band)) continue;
+      auto& s = sums[k];
+      const double x = p.x(), y = p.y(), z = p.z();
+      s.n += 1;
+      s.x += x, s.y += y, s.z += z;
+      s.xx += x * x, s.xy += x * y, s.yy += y * y, s.xz += x * z, s.yz += y * z;
+    }
+    plane_.assign(n_cells, Eigen::Vector3f(0, 0, kInf));
+    for (std::size_t k = 0; k < n_cells; ++k) {
+      const auto& s = sums[k];
+      if (s.n < 1) {
+        if (std::isfinite(floor_[k])) plane_[k] = Eigen::Vector3f(0, 0, floor_[k]);
+        continue;
+      }
+      Eigen::Vector3d sol(0, 0, s.z / s.n);
+      if (s.n >= 6) {
+        Eigen::Matrix3d A;
+        A << s.xx, s.xy, s.x, s.xy, s.yy, s.y, s.x, s.y, s.n;
+        const Eigen::Vector3d b(s.xz, s.yz, s.z);
+        const Eigen::Vector3d fit = A.ldlt().solve(b);
+        // Accept a tilted plane only when it is well conditioned and no steeper than 30 %.
+        const double spread = (s.xx - s.x * s.x / s.n) + (s.yy - s.y * s.y / s.n);
+        if (fit.allFinite() && std::hypot(fit.x(), fit.y()) < 0.3 && spread / s.n > 0.1) sol = fit;
+      }
+      plane_[k] = sol.cast<float>();
+    }
+  }
+
+  // Height of p above the ground of its column (+inf where the column has no ground estimate).
+  float height(const Vec3f& p) const {
+    const auto& g = plane_[index(p)];
+    if (!std::isfinite(g.z())) return kInf;
+    return p.z() - (g.x() * p.x() + g.y() * p.y() + g.z());
+  }
+
+ private:
+  int index(const Vec3f& p) const {
+    const int x = std::clamp(detail::floorInt(p.x() / cell_) + half_, 0, side_ - 1);
+    const int y = std::clamp(detail::floorInt(p.y() / cell_) + half_, 0, side_ - 1);
+    return cellAt(x, y);
+  }
+  int cellAt(int x, int y) const { return y * side_ + x; }
+
+  float cell_;
+  int half_ = 0, side_ = 0;
+  std::vector<float> low1_, low2_, floor_;
+  std::vector<Eigen::Vector3f> plane_;  // a, b, c of z = a x + b y + c
+};
+
+struct Column {
+  int low = 0, high = 0;  // points in the object band / above it
+  float high_max = 0;     // highest point above the ground
+  int component = -1;     // object (union-find root after the pass)
+};
+
+int findRoot(std::vector<int>& parent, int i) {
+  while (parent[i] != i) i = parent[i] = parent[parent[i]];
+  return i;
+}
+
+struct Object {
+  double n = 0, x = 0, y = 0, xx = 0, xy = 0, yy = 0;
+  float h_min = kInf, h_max = -kInf;  // of its band points
+  float top = 0;                      // highest point of its columns (band and above)
+  int columns = 0;
+  std::uint32_t label = id::kVegetation;
+};
+
+}  // namespace
+
+std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig& c) {
+  const std::size_t n = points.size();
+  std::vector<std::uint32_t> out(n, id::kNone);
+  if (n == 0) return out;
+  const Ground ground(points, c);
+  const float tol = static_cast<float>(c.ground_tolerance_m), band = static_cast<float>(c.low_band_m);
+  const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
+  const float inv_cell = static_cast<float>(1.0 / c.cell_m);
+
+  // Heights, ground, and object columns.
+  std::vector<float> h(n, kInf);
+  std::vector<int> col_of(n, -1);
+  VoxelMap map(n / 4 + 64);
+  std::vector<Column> cols;
+  std::vector<std::pair<int, int>> col_xy;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Vec3f& p = points[i];
+    if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
+    h[i] = ground.height(p);
+    if (!std::isfinite(h[i]) || h[i] < -0.5f) continue;  // no ground estimate, or far below it: ignored
+    if (h[i] <= tol) {
+      out[i] = id::kGround;
+      continue;
+    }
+    const int cx = detail::floorInt(p.x() * inv_cell), cy = detail::floorInt(p.y() * inv_cell);
+    bool inserted = false;
+    const int k = map.findOrInsert(packCell(cx, cy, 0), static_cast<int>(cols.size()), &inserted);
+    if (inserted) {
+      cols.push_back({});
+      col_xy.emplace_back(cx, cy);
+    }
+    col_of[i] = k;
+    auto& col = cols[static_cast<std::size_t>(k)];
+    if (h[i] <= band) ++col.low;
+    else ++col.high;
+    col.high_max = std::max(col.high_max, h[i]);
+  }
+
+  // Objects: columns with band points linked within link_m (at least the 8 neighbours): sparse or downsampled
+  // clouds leave gaps between the columns of one wall.
+  const int reach = std::max(1, static_cast<int>(std::lround(c.link_m / c.cell_m)));
+  std::vector<int> parent(cols.size());
+  for (std::size_t k = 0; k < cols.size(); ++k) parent[k] = static_cast<int>(k);
+  for (std::size_t k = 0; k < cols.size(); ++k) {
+    if (!cols[k].low) continue;
+    const auto [cx, cy] = col_xy[k];
+    for (int dy = 0; dy <= reach; ++dy)
+      for (int dx = -reach; dx <= reach; ++dx) {
+        if (dy == 0 && dx <= 0) continue;  // each neighbour pair once
+        const int j = map.find(packCell(cx + dx, cy + dy, 0));
+        if (j < 0 || !cols[static_cast<std::size_t>(j)].low) continue;
+        const int a = findRoot(parent, static_cast<int>(k)), b = findRoot(parent, j);
+        if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
+      }
+  }
+  std::vector<int> object_of(cols.size(), -1);
+  std::vector<Object> objects;
+  for (std::size_t k = 0; k < cols.size(); ++k) {
+    if (!cols[k].low) continue;
+    const int root = findRoot(parent, static_cast<int>(k));
+    if (object_of[static_cast<std::size_t>(root)] < 0) {
+      object_of[static_cast<std::size_t>(root)] = static_cast<int>(objects.size());
+      objects.emplace_back();
+    }
+    object_of[k] = object_of[static_cast<std::size_t>(root)];
+    auto& o = objects[static_cast<std::size_t>(object_of[k])];
+    ++o.columns;
+    o.top = std::max(o.top, cols[k].high_max);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (col_of[i] < 0 || h[i] > band) continue;
+    auto& o = objects[static_cast<std::size_t>(object_of[static_cast<std::size_t>(col_of[i])])];
+    const double x = points[i].x(), y = points[i].y();
+    o.n += 1;
+    o.x += x, o.y += y, o.xx += x * x, o.xy += x * y, o.yy += y * y;
+    o.h_min = std::min(o.h_min, h[i]);
+    o.h_max = std::max(o.h_max, h[i]);
+  }
+
+  // Points above the band around a place (canopy test for pole-like objects).
+  auto highAround = [&](double x, double y, double radius) {
+    const int r = static_cast<int>(std::ceil(radius * inv_cell));
+    const int cx = detail::floorInt(static_cast<float>(x) * inv_cell), cy = detail::floorInt(static_cast<float>(y) * inv_cell);
+    int count = 0, cells = 0;
+    for (int dy = -r; dy <= r; ++dy)
+      for (int dx = -r; dx <= r; ++dx) {
+        const int j = map.find(packCell(cx + dx, cy + dy, 0));
+        if (j >= 0 && cols[static_cast<std::size_t>(j)].high > 0) {
+          count += cols[static_cast<std::size_t>(j)].high;
+          ++cells;
+        }
+      }
+    return std::make_pair(count, cells);
+  };
+
+  for (auto& o : objects) {
+    if (o.n < 3) continue;  // a stray point or two: vegetation
+    const double mx = o.x / o.n, my = o.y / o.n;
+    Eigen::Matrix2d cov;
+    cov << o.xx / o.n - mx * mx, o.xy / o.n - mx * my, o.xy / o.n - mx * my, o.yy / o.n - my * my;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
+    // Extents of a uniform spread: sqrt(12) standard deviations; a column alone is one cell wide.
+    const double length = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[1], 0.0)), c.cell_m);
+    const double width = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[0], 0.0)), c.cell_m);
+    const double height = std::max<double>(o.h_max, o.top);
+    const bool grounded = o.h_min <= 0.7f;
+    if (length <= c.pole_max_width_m && height >= c.pole_min_height_m && grounded) {
+      // A trunk carries a canopy: many points above the band spread around it, beyond its own columns.
+      const auto [high, cells] = highAround(mx, my, 2.0);
+      o.label = cells >= 12 && high >= 40 ? id::kTrunk : id::kPole;
+    } else if (length >= c.wall_min_length_m && width <= c.wall_max_width_m) {
+      o.label = height >= c.wall_min_height_m ? id::kBuilding : id::kFence;
+    } else if (length >= c.vehicle_min_length_m && length <= c.vehicle_max_length_m &&
+               width <= c.vehicle_max_width_m && o.h_max >= c.vehicle_min_height_m &&
+               o.top <= c.vehicle_max_height_m && grounded) {
+      o.label = id::kVehicle;
+    } else if (length >= 2 * c.wall_min_length_m && height >= c.wall_min_height_m) {
+      o.label = id::kBuilding;  // large and tall: a building's corner or front
+    }
+  }
+
+  // Labels: band points take their object's; points above it their column's object where that continues
+  // upwards (walls, poles; vehicles up to their height), else vegetation.
+  for (std::size_t i = 0; i < n; ++i) {
+    if (col_of[i] < 0) continue;
+    const auto k = static_cast<std::size_t>(col_of[i]);
+    const int obj = object_of[k];
+    if (h[i] <= band) {
+      out[i] = objects[static_cast<std::size_t>(obj)].label;
+      continue;
+    }
+    std::uint32_t label = id::kVegetation;
+    if (obj >= 0) {
+      const auto l = objects[static_cast<std::size_t>(obj)].label;
+      if (l == id::kBuilding || l == id::kPole || l == id::kFence) label = l == id::kFence ? id::kBuilding : l;
+      else if (l == id::kVehicle && h[i] <= c.vehicle_max_height_m) label = id::kVehicle;
+    }
+    out[i] = label;
+  }
+  return out;
+}
+
+}  // namespace sglc
