@@ -14,7 +14,7 @@
 namespace sglc {
 namespace {
 
-using FieldRef = std::variant<double*, int*, bool*, std::uint64_t*, std::vector<std::uint32_t>*>;
+using FieldRef = std::variant<double*, int*, bool*, std::uint64_t*, std::vector<std::uint32_t>*, std::string*>;
 
 // Every scalar parameter, by "section.key". The YAML reader and the validator both use this table, so a
 // new field only has to be added here to become configurable.
@@ -25,6 +25,25 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"labels.fence", &c.labels.fence},
       {"labels.vegetation", &c.labels.vegetation},
       {"labels.moving", &c.labels.moving},
+      {"labels.preset", &c.labels.preset},
+      {"labeller.mode", &c.labeller.mode},
+      {"labeller.max_range_m", &c.labeller.max_range_m},
+      {"labeller.ground_cell_m", &c.labeller.ground_cell_m},
+      {"labeller.ground_band_m", &c.labeller.ground_band_m},
+      {"labeller.ground_tolerance_m", &c.labeller.ground_tolerance_m},
+      {"labeller.cell_m", &c.labeller.cell_m},
+      {"labeller.link_m", &c.labeller.link_m},
+      {"labeller.low_band_m", &c.labeller.low_band_m},
+      {"labeller.pole_max_width_m", &c.labeller.pole_max_width_m},
+      {"labeller.pole_min_height_m", &c.labeller.pole_min_height_m},
+      {"labeller.vehicle_min_length_m", &c.labeller.vehicle_min_length_m},
+      {"labeller.vehicle_max_length_m", &c.labeller.vehicle_max_length_m},
+      {"labeller.vehicle_max_width_m", &c.labeller.vehicle_max_width_m},
+      {"labeller.vehicle_min_height_m", &c.labeller.vehicle_min_height_m},
+      {"labeller.vehicle_max_height_m", &c.labeller.vehicle_max_height_m},
+      {"labeller.wall_min_length_m", &c.labeller.wall_min_length_m},
+      {"labeller.wall_max_width_m", &c.labeller.wall_max_width_m},
+      {"labeller.wall_min_height_m", &c.labeller.wall_min_height_m},
       {"cluster.azimuth_deg", &c.cluster.azimuth_deg},
       {"cluster.range_m", &c.cluster.range_m},
       {"cluster.elevation_deg", &c.cluster.elevation_deg},
@@ -88,6 +107,15 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"bev_search.max_range_m", &c.bev_search.max_range_m},
       {"bev_search.keep", &c.bev_search.keep},
   };
+}
+
+bool sameLists(const LabelConfig& a, const LabelConfig& b) {
+  if (a.node_classes.size() != b.node_classes.size()) return false;
+  for (std::size_t i = 0; i < a.node_classes.size(); ++i)
+    if (a.node_classes[i].name != b.node_classes[i].name || a.node_classes[i].ids != b.node_classes[i].ids)
+      return false;
+  return a.road == b.road && a.building == b.building && a.fence == b.fence && a.vegetation == b.vegetation &&
+         a.moving == b.moving;
 }
 
 void require(bool ok, const std::string& field, const std::string& rule) {
@@ -163,12 +191,57 @@ void validateConfig(const Config& config) {
   require(c.refine.cauchy_m > 0, "refine.cauchy_m", "> 0");
   require(c.refine.instance_weight >= 0, "refine.instance_weight", ">= 0");
   require(c.refine.min_information >= 0, "refine.min_information", ">= 0");
+  const auto& l = c.labeller;
+  require(l.mode == "off" || l.mode == "auto" || l.mode == "always", "labeller.mode", "off, auto or always");
+  require(l.max_range_m > 0 && l.max_range_m <= 320, "labeller.max_range_m", "in (0, 320]");
+  require(l.ground_cell_m >= 0.5 && l.ground_cell_m <= 10 && l.max_range_m / l.ground_cell_m <= 1000,
+          "labeller.ground_cell_m", "in [0.5, 10] with max_range_m / ground_cell_m <= 1000");
+  require(l.cell_m >= 0.05 && l.cell_m <= 2, "labeller.cell_m", "in [0.05, 2]");
+  require(l.link_m >= 0 && l.link_m <= 10 * l.cell_m, "labeller.link_m", "in [0, 10 x cell_m]");
+  require(l.ground_band_m > 0 && l.ground_tolerance_m > 0 && l.low_band_m > l.ground_tolerance_m,
+          "labeller.ground_band_m/ground_tolerance_m/low_band_m", "> 0 with low_band_m > ground_tolerance_m");
+  require(l.vehicle_min_length_m <= l.vehicle_max_length_m && l.vehicle_min_height_m <= l.vehicle_max_height_m,
+          "labeller.vehicle_*", "min <= max");
+  for (const auto& [name, ref] : fields(copy))
+    if (name.rfind("labeller.", 0) == 0)
+      if (auto d = std::get_if<double*>(&ref)) require(**d >= 0, name, ">= 0");
+  labelPreset(c.labels.preset == "custom" ? "semantickitti" : c.labels.preset);  // throws for unknown names
   const auto& b = c.bev_search;
   require(b.cell_m >= 0.25 && b.cell_m <= 5, "bev_search.cell_m", "in [0.25, 5]");
   require(b.max_shift_m >= 0 && b.max_shift_m <= 50, "bev_search.max_shift_m", "in [0, 50]");
   require(b.yaw_step_deg > 0.1 && b.yaw_step_deg <= 30, "bev_search.yaw_step_deg", "in (0.1, 30]");
   require(b.max_range_m > 0 && b.max_range_m <= 100, "bev_search.max_range_m", "in (0, 100]");
   require(b.keep >= 1 && b.keep <= 20, "bev_search.keep", "in [1, 20]");
+}
+
+LabelConfig labelPreset(const std::string& name) {
+  LabelConfig c;  // SemanticKITTI raw ids
+  c.preset = name;
+  if (name == "semantickitti") return c;
+  if (name == "semantickitti-train") {
+    // SemanticKITTI's learning map (19 classes): 1 car, 4 truck, 5 other-vehicle, 9 road, 13 building,
+    // 14 fence, 15 vegetation, 16 trunk, 18 pole; moving objects are merged into their static classes.
+    c.node_classes = {{"vehicle", {1, 4, 5}}, {"trunk", {16}}, {"pole", {18}}};
+    c.road = {9};
+    c.building = {13};
+    c.fence = {14};
+    c.vegetation = {15};
+    c.moving = {};
+    return c;
+  }
+  if (name == "nuscenes") {
+    // nuScenes-lidarseg (32 classes): vehicles 15-20, 22, 23 (bus, car, construction, emergency, trailer,
+    // truck); 24 driveable surface; 28 static.manmade; 9 barrier; 30 vegetation. No pole or trunk class: they
+    // are part of manmade and vegetation, and the labeller fills them in "auto" mode.
+    c.node_classes = {{"vehicle", {15, 16, 17, 18, 19, 20, 22, 23}}, {"trunk", {}}, {"pole", {}}};
+    c.road = {24};
+    c.building = {28};
+    c.fence = {9};
+    c.vegetation = {30};
+    c.moving = {};
+    return c;
+  }
+  throw InputError("labels.preset: unknown preset '" + name + "' (known: semantickitti, semantickitti-train, nuscenes)");
 }
 
 Config parseConfig(const std::string& yaml_text) {
@@ -187,12 +260,22 @@ Config parseConfig(const std::string& yaml_text) {
     if (!key.IsScalar()) throw InputError("config: " + where + " has a key that is not a plain name");
     return key.Scalar();
   };
+  // A preset replaces the label lists; lists given beside it then edit the preset (and make it "custom").
+  // "custom" (what dumpConfig writes for edited lists) names no preset: the lists beside it are the labels.
+  if (const auto labels = root["labels"]; labels && labels.IsMap() && labels["preset"]) {
+    try {
+      if (const auto name = labels["preset"].as<std::string>(); name != "custom") config.labels = labelPreset(name);
+    } catch (const YAML::Exception& e) {
+      throw InputError(std::string("config: bad value for 'labels.preset': ") + e.what());
+    }
+  }
   for (const auto& section : root) {
     const auto section_name = keyOf(section.first, "the top level");
     if (!section.second.IsMap()) throw InputError("config: section '" + section_name + "' must be a mapping");
     for (const auto& item : section.second) {
       const auto key = section_name + "." + keyOf(item.first, "section '" + section_name + "'");
       try {
+        if (key == "labels.preset") continue;  // applied above
         if (key == "labels.node_classes") {
           config.labels.node_classes.clear();
           for (const auto& cls : item.second)
@@ -209,6 +292,9 @@ Config parseConfig(const std::string& yaml_text) {
       }
     }
   }
+  // The preset's name stays while the lists are the preset's; edited lists are "custom".
+  if (!sameLists(config.labels, labelPreset(config.labels.preset == "custom" ? "semantickitti" : config.labels.preset)))
+    config.labels.preset = "custom";
   validateConfig(config);
   return config;
 }

@@ -59,20 +59,39 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
   return points;
 }
 
-std::vector<std::uint32_t> readLabels(const std::string& path) {
+std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points) {
   const auto data = readAll(path);
-  if (data.size() % 4 != 0)
+  std::size_t width = 4;
+  if (points > 0) {
+    // One label per point, 1, 2 or 4 bytes wide (nuScenes-lidarseg uint8, uint16 sets, SemanticKITTI uint32).
+    if (data.size() % points != 0 || (data.size() / points != 1 && data.size() / points != 2 &&
+                                      data.size() / points != 4))
+      throw InputError(path + ": " + std::to_string(data.size()) + " bytes for " + std::to_string(points) +
+                       " points: not 1, 2 or 4 bytes per point");
+    width = data.size() / points;
+  } else if (data.size() % 4 != 0) {
     throw InputError(path + ": size " + std::to_string(data.size()) +
                      " bytes is not a multiple of 4 (uint32 per point); truncated file?");
-  std::vector<std::uint32_t> labels(data.size() / 4);
-  if (!labels.empty()) std::memcpy(labels.data(), data.data(), data.size());
+  }
+  std::vector<std::uint32_t> labels(data.size() / width);
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+  for (std::size_t i = 0; i < labels.size(); ++i) {  // little-endian, whatever the width
+    std::uint32_t v = 0;
+    for (std::size_t b = 0; b < width; ++b) v |= static_cast<std::uint32_t>(bytes[i * width + b]) << (8 * b);
+    labels[i] = v;
+  }
   return labels;
 }
 
 LabelledScan readScan(const std::string& bin_path, const std::string& label_path) {
   LabelledScan scan;
   scan.points = readKittiBin(bin_path);
-  scan.labels = readLabels(label_path);
+  if (label_path.empty()) return scan;  // unlabelled: the engine's labeller labels it
+  if (scan.points.empty()) {
+    scan.labels = readLabels(label_path);
+  } else {
+    scan.labels = readLabels(label_path, scan.points.size());
+  }
   if (scan.points.size() != scan.labels.size())
     throw InputError(label_path + ": " + std::to_string(scan.labels.size()) + " labels for " +
                      std::to_string(scan.points.size()) + " points in " + bin_path);

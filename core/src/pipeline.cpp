@@ -5,6 +5,7 @@
 
 #include "fast_math.hpp"
 #include "sglc/bev_search.hpp"
+#include "sglc/labeller.hpp"
 #include "sglc/voxel_map.hpp"
 
 namespace sglc {
@@ -53,11 +54,37 @@ double rotationAngleDeg(const Mat3d& R) {
 
 Pipeline::Pipeline(Config config) : config_(std::move(config)), labels_((validateConfig(config_), config_.labels)) {}
 
-Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
+Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report) const {
   const auto& c = config_;
-  const std::size_t n = scan.points.size();
-  if (scan.labels.size() != n)
-    throw InputError("scan has " + std::to_string(n) + " points but " + std::to_string(scan.labels.size()) + " labels");
+  const std::size_t n = input.points.size();
+  if (!input.labels.empty() && input.labels.size() != n)
+    throw InputError("scan has " + std::to_string(n) + " points but " + std::to_string(input.labels.size()) + " labels");
+  ScanReport local;
+  ScanReport& rep = report ? *report : local;
+  rep = {};
+  // Labels: given, computed by the labeller, or given and completed by it (roles the label set has no ids for).
+  LabelledScan labelled;  // only its labels are used
+  const bool missing_roles = !labels_.hasVehicleIds() || !labels_.hasTrunkIds() || !labels_.hasPoleIds();
+  if (n > 0 && (input.labels.empty() || c.labeller.mode == "always")) {
+    if (c.labeller.mode == "off")
+      throw InputError("scan has no labels and the built-in labeller is off (labeller.mode: off)");
+    labelled.labels = labelScene(input.points, c.labeller);
+    rep.label_source = ScanReport::LabelSource::kComputed;
+  } else if (n > 0 && c.labeller.mode == "auto" && missing_roles) {
+    labelled.labels = input.labels;
+    const auto computed = labelScene(input.points, c.labeller);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto l = computed[i];
+      const bool fill = (l == labeller_ids::kVehicle && !labels_.hasVehicleIds()) ||
+                        (l == labeller_ids::kTrunk && !labels_.hasTrunkIds()) ||
+                        (l == labeller_ids::kPole && !labels_.hasPoleIds());
+      // Only points the given labels do not make landmarks of (a given vehicle stays a vehicle).
+      if (fill && labels_.role(input.labels[i]) < 0) labelled.labels[i] = l;
+    }
+    rep.label_source = ScanReport::LabelSource::kCompleted;
+  }
+  const auto& labels = labelled.labels.empty() ? input.labels : labelled.labels;
+  const auto& points = input.points;
   // One pass splits the scan by role into compact arrays, so every later stage streams over just its points.
   Points node_points, bg_points;
   std::vector<std::int8_t> node_class;
@@ -67,11 +94,11 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
   bg_points.reserve(n);
   background.reserve(n);
   for (std::size_t i = 0; i < n; ++i) {
-    const Vec3f& p = scan.points[i];
+    const Vec3f& p = points[i];
     if (!p.allFinite()) throw InputError("point " + std::to_string(i) + " has a non-finite coordinate");
     // Fingerprints keep centimetres in 16 bits: points beyond +-320 m on any axis cannot be landmarks.
     if (p.cwiseAbs().maxCoeff() > kMaxCoordinate) continue;
-    const int role = labels_.role(scan.labels[i]);
+    const int role = labels_.role(labels[i]);
     if (role >= 0) {
       node_points.push_back(p);
       node_class.push_back(static_cast<std::int8_t>(role));
@@ -103,6 +130,12 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& scan) const {
   fp.descriptor = scanDescriptor(fp.nodes, ringKey(bg_points, background, c.descriptor), fp.layout, fp.d_max,
                                  fp.d_i);
   fp.finalize();
+  if (n > 0 && node_points.empty() && bg_points.empty())
+    rep.warnings.push_back("no point carries a label the active label map (labels.preset: " + c.labels.preset +
+                           ") uses: check the label set, or send the scan without labels");
+  else if (fp.nodes.size() < 3)
+    rep.warnings.push_back("only " + std::to_string(fp.nodes.size()) +
+                           " landmarks (vehicle, trunk and pole instances): loops cannot be verified from this scan");
   return fp;
 }
 

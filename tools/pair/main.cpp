@@ -22,9 +22,9 @@ int main(int argc, char** argv) {
   bool dump = false, known_loop = false;
   app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
   app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)");
-  app.add_option("--labels-a", labels_a, "SemanticKITTI .label of scan A");
+  app.add_option("--labels-a", labels_a, ".label of scan A (1, 2 or 4 bytes per point; absent: the labeller labels it)");
   app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)");
-  app.add_option("--labels-b", labels_b, "SemanticKITTI .label of scan B");
+  app.add_option("--labels-b", labels_b, ".label of scan B (absent: the labeller labels it)");
   app.add_flag("--known-loop", known_loop,
                "The scans are known to show the same place: estimate T_a_b even when verification rejects the pair "
                "(is_loop keeps the decision, refined says whether a pose was found)");
@@ -43,15 +43,15 @@ int main(int argc, char** argv) {
       std::cout << sglc::dumpConfig(pipeline.config());
       return 0;
     }
-    if (scan_a.empty() || labels_a.empty() || scan_b.empty() || labels_b.empty())
-      throw sglc::InputError("--scan-a, --labels-a, --scan-b and --labels-b are required");
+    if (scan_a.empty() || scan_b.empty()) throw sglc::InputError("--scan-a and --scan-b are required");
     const auto a = sglc::readScan(scan_a, labels_a);
     const auto b = sglc::readScan(scan_b, labels_b);
     auto t0 = std::chrono::steady_clock::now();
-    const auto fa = pipeline.fingerprint(a);
+    sglc::ScanReport report_a, report_b;
+    const auto fa = pipeline.fingerprint(a, &report_a);
     const double t_fa = msSince(t0);
     t0 = std::chrono::steady_clock::now();
-    const auto fb = pipeline.fingerprint(b);
+    const auto fb = pipeline.fingerprint(b, &report_b);
     const double t_fb = msSince(t0);
     t0 = std::chrono::steady_clock::now();
     auto result = pipeline.verify(fa, fb);
@@ -74,6 +74,19 @@ int main(int argc, char** argv) {
     out["fitness"] = result.fitness;
     out["rmse"] = result.rmse;
     if (!result.is_loop) out["reason"] = std::string(result.reason);
+    auto source = [](const sglc::ScanReport& r) {
+      return r.label_source == sglc::ScanReport::LabelSource::kComputed    ? "computed"
+             : r.label_source == sglc::ScanReport::LabelSource::kCompleted ? "completed"
+                                                                            : "provided";
+    };
+    out["labels_a"] = source(report_a);
+    out["labels_b"] = source(report_b);
+    out["nodes_a"] = fa.nodes.size();
+    out["nodes_b"] = fb.nodes.size();
+    std::vector<std::string> warnings;
+    for (const auto& w : report_a.warnings) warnings.push_back("scan A: " + w);
+    for (const auto& w : report_b.warnings) warnings.push_back("scan B: " + w);
+    if (!warnings.empty()) out["warnings"] = warnings;
     auto& timings = out["timings_ms"];
     timings["fingerprint_a"] = t_fa;
     timings["fingerprint_b"] = t_fb;

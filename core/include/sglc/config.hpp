@@ -22,7 +22,14 @@ struct LabelConfig {
   std::vector<std::uint32_t> vegetation{70};
   // Ids that are never landmarks nor background, even if listed above (moving objects).
   std::vector<std::uint32_t> moving{252, 253, 254, 255, 256, 257, 258, 259};
+  // The named set these lists came from ("semantickitti", "semantickitti-train", "nuscenes"), or "custom".
+  std::string preset = "semantickitti";
 };
+
+// The label sets this build knows: SemanticKITTI raw ids (the default), SemanticKITTI's 19 training ids,
+// nuScenes-lidarseg's 32 classes (no pole or trunk class: the labeller fills them in "auto" mode). Throws
+// InputError naming the known presets for any other name.
+LabelConfig labelPreset(const std::string& name);
 
 struct ClusterConfig {
   // Range-adaptive ("curved") voxels: azimuth x range x elevation. Not tied to any sensor's beam layout.
@@ -144,8 +151,28 @@ struct BevSearchConfig {
   int keep = 3;               // distinct overlays refined
 };
 
+// Ours: the built-in labeller for scans without labels (sglc/labeller.hpp). mode: "off" (labels required),
+// "auto" (label unlabelled scans; in labelled ones fill the roles the label map has no ids for, e.g. poles and
+// trunks for nuScenes-lidarseg), "always" (ignore given labels).
+struct LabellerConfig {
+  std::string mode = "auto";
+  double max_range_m = 80.0;         // points farther (horizontally) are not labelled
+  double ground_cell_m = 2.0;        // ground columns
+  double ground_band_m = 0.3;        // points this close above a column's floor fit its ground plane
+  double ground_tolerance_m = 0.2;   // ground = within this of the plane (curbs included)
+  double cell_m = 0.25;              // object columns
+  double link_m = 0.25;              // columns this close belong to one object (raise for sparse clouds)
+  double low_band_m = 2.0;           // objects are found in the band below this height (under canopies)
+  double pole_max_width_m = 1.0;     // pole-like: footprint at most this long ...
+  double pole_min_height_m = 1.2;    // ... and at least this tall
+  double vehicle_min_length_m = 1.5, vehicle_max_length_m = 6.5, vehicle_max_width_m = 3.0;
+  double vehicle_min_height_m = 0.8, vehicle_max_height_m = 2.6;
+  double wall_min_length_m = 3.0, wall_max_width_m = 0.8, wall_min_height_m = 1.8;
+};
+
 struct Config {
   LabelConfig labels;
+  LabellerConfig labeller;
   ClusterConfig cluster;
   GraphConfig graph;
   DescriptorConfig descriptor;

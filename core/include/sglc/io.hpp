@@ -11,9 +11,11 @@ namespace sglc {
 
 // KITTI velodyne .bin: float32 little-endian x, y, z, reflectance per point.
 Points readKittiBin(const std::string& path, std::vector<float>* intensities = nullptr);
-// SemanticKITTI .label: uint32 per point.
-std::vector<std::uint32_t> readLabels(const std::string& path);
-// Both, checked against each other and for finite coordinates.
+// A .label file: uint32 per point (SemanticKITTI); given the scan's point count, also 1 or 2 bytes per point
+// (nuScenes-lidarseg's uint8), chosen by the file's size. Little-endian.
+std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points = 0);
+// Both, checked against each other and for finite coordinates. An empty label_path reads the points only
+// (labels empty: the engine's labeller labels the scan).
 LabelledScan readScan(const std::string& bin_path, const std::string& label_path);
 
 // KITTI poses file: one row-major 3x4 matrix per line (12 numbers).

@@ -7,6 +7,9 @@
 #include "sglc/fingerprint.hpp"
 #include "sglc/labels.hpp"
 
+#include <string>
+#include <vector>
+
 namespace sglc {
 
 struct LoopResult {
@@ -33,14 +36,24 @@ struct LoopResult {
   std::vector<Match> inlier_pairs;  // node matches consistent with the coarse T (query node, candidate node)
 };
 
+// Where a scan's labels came from, and what may keep it from closing loops (for the caller to show).
+struct ScanReport {
+  enum class LabelSource { kProvided, kComputed, kCompleted };
+  LabelSource label_source = LabelSource::kProvided;  // computed: by the labeller; completed: roles filled in
+  std::vector<std::string> warnings;
+};
+
 class Pipeline {
  public:
   explicit Pipeline(Config config = {});
 
   const Config& config() const { return config_; }
 
-  // Throws InputError on an invalid scan.
-  Fingerprint fingerprint(const LabelledScan& scan) const;
+  // Throws InputError on an invalid scan. A scan without labels (empty `labels`) is labelled by the built-in
+  // labeller unless config.labeller.mode is "off"; in "auto" mode a labelled scan whose label set lacks a
+  // landmark role (no ids for trunk, pole or vehicle) gets those from the labeller; "always" ignores given
+  // labels. `report` (optional) says which happened and warns about scans that cannot close loops.
+  Fingerprint fingerprint(const LabelledScan& scan, ScanReport* report = nullptr) const;
   // Coarse pose and the loop decision.
   LoopResult verify(const Fingerprint& query, const Fingerprint& candidate) const;
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
