@@ -17,7 +17,7 @@ LabelledScan decodeScan(const std::string& points, const std::string& labels, st
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
                    "scan.labels has " + std::to_string(labels.size()) + " bytes, not a multiple of 4 (uint32 per point)");
   const std::size_t n = points.size() / 12;
-  if (labels.size() / 4 != n)
+  if (!labels.empty() && labels.size() / 4 != n)
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scan has " + std::to_string(n) + " points but " +
                                                            std::to_string(labels.size() / 4) + " labels");
   if (n == 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scan is empty");
@@ -27,9 +27,9 @@ LabelledScan decodeScan(const std::string& points, const std::string& labels, st
                                                              std::to_string(max_points));
   LabelledScan scan;
   scan.points.resize(n);
-  scan.labels.resize(n);
+  scan.labels.resize(labels.size() / 4);  // none: the engine's labeller labels the scan
   std::memcpy(static_cast<void*>(scan.points.data()), points.data(), points.size());  // packed float triples
-  std::memcpy(scan.labels.data(), labels.data(), labels.size());
+  if (!labels.empty()) std::memcpy(scan.labels.data(), labels.data(), labels.size());
   for (std::size_t i = 0; i < n; ++i)
     if (!scan.points[i].allFinite())
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,

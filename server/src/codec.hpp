@@ -22,7 +22,8 @@ class RpcError : public std::runtime_error {
   grpc::StatusCode code_;
 };
 
-// Decodes and checks a scan: byte lengths, equal counts, not empty, at most max_points, finite coordinates.
+// Decodes and checks a scan: byte lengths, equal counts (or no labels at all), not empty, at most max_points,
+// finite coordinates.
 LabelledScan decodeScan(const std::string& points, const std::string& labels, std::size_t max_points);
 
 // 16 values that form a rigid motion (sglc/rigid.hpp) -> that motion, re-orthonormalised; throws

@@ -240,7 +240,8 @@ int main(int argc, char** argv) {
     if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();
 
     sglc::server::ServiceLimits limits{s.max_points, s.backup_dir, s.threads,
-                                       static_cast<std::size_t>(s.max_inflight_mb * 1024 * 1024), s.streams};
+                                       static_cast<std::size_t>(s.max_inflight_mb * 1024 * 1024),
+                                       static_cast<std::int64_t>(s.max_message_mb * 1024 * 1024), s.streams};
     state = std::make_unique<sglc::server::ServiceState>(sglc::Pipeline(s.engine),
                                                          sglc::server::TokenTable::load(s.tokens), limits);
     sglc::server::LoopClosureService loop_service(*state);

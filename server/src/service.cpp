@@ -152,6 +152,26 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
   }
 }
 
+v1::LabelSource toWire(ScanReport::LabelSource source) {
+  switch (source) {
+    case ScanReport::LabelSource::kComputed: return v1::LABELS_COMPUTED;
+    case ScanReport::LabelSource::kCompleted: return v1::LABELS_COMPLETED;
+    default: return v1::LABELS_PROVIDED;
+  }
+}
+
+// Where the scan's labels came from and what may keep it from closing loops: into the response, and warnings
+// into the log too.
+template <typename Response>
+void reportScan(const ScanReport& report, const std::string& map, const std::string& robot, std::int64_t seq,
+                Response* resp) {
+  resp->set_label_source(toWire(report.label_source));
+  for (const auto& w : report.warnings) resp->add_warnings(w);
+  if (!report.warnings.empty())
+    spdlog::warn("{}", logLine({{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq},
+                                {"warnings", report.warnings}}));
+}
+
 // Throws ALREADY_EXISTS unless the stored scan `id` is what this request would have stored (a retry).
 void requireSameScan(const storage::MapStore& store, std::int64_t id, const Fingerprint& fp,
                      const v1::IngestRequest& req, const std::optional<Mat4d>& pose) {
@@ -197,8 +217,10 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   // Engine work holds a compute slot; the database write below does not.
   auto slot = state.compute().acquire(ctx);
   auto t0 = Clock::now();
-  const auto fp = state.pipeline().fingerprint(scan);
+  ScanReport report;
+  const auto fp = state.pipeline().fingerprint(scan, &report);
   resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
+  reportScan(report, key.map(), key.robot(), key.seq(), resp);
   // A retry of a stored scan answers as the first call did (its loops exclude the stored copy of itself).
   auto stored = store.findScan(key.map(), key.robot(), key.session(), key.seq());
   if (stored) requireSameScan(store, *stored, fp, req, pose);
@@ -303,7 +325,9 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     if (req->has_scan()) {
       const auto scan = decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
       const auto t0 = Clock::now();
-      fp = std::make_shared<const Fingerprint>(state_.pipeline().fingerprint(scan));
+      ScanReport report;
+      fp = std::make_shared<const Fingerprint>(state_.pipeline().fingerprint(scan, &report));
+      reportScan(report, req->map(), req->robot(), req->seq(), resp);
       resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
     } else if (req->has_scan_id()) {
       const auto info = store.scanInfo(req->scan_id());
@@ -465,6 +489,37 @@ grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetSt
         resp->set_pose_graph_failed(true);
         resp->set_pose_graph_error(event->error);
       }
+  });
+}
+
+grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::GetServerInfoRequest*,
+                                            v1::GetServerInfoResponse* resp) {
+  return run(ctx, {"GetServerInfo", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+    state_.tokens().authenticate(*ctx);  // any valid token may ask
+    const auto& config = state_.pipeline().config();
+    const auto& labels = config.labels;
+    resp->set_version(SGLC_VERSION);
+    resp->set_label_preset(labels.preset);
+    for (const auto& c : labels.node_classes) {
+      auto* o = resp->add_node_classes();
+      o->set_name(c.name);
+      for (auto id : c.ids) o->add_ids(id);
+    }
+    for (auto id : labels.road) resp->add_road(id);
+    for (auto id : labels.building) resp->add_building(id);
+    for (auto id : labels.fence) resp->add_fence(id);
+    for (auto id : labels.vegetation) resp->add_vegetation(id);
+    for (auto id : labels.moving) resp->add_moving(id);
+    resp->set_labeller_mode(config.labeller.mode);
+    resp->set_engine_config(dumpConfig(config));
+    resp->set_descriptor_dim(
+        descriptorLayout(static_cast<int>(labels.node_classes.size()), config.graph, config.descriptor).scanDim());
+    const auto& limits = state_.limits();
+    resp->set_max_points(static_cast<std::int64_t>(limits.max_points));
+    resp->set_max_message_bytes(limits.max_message_bytes);
+    resp->set_max_streams_per_client(limits.streams.max_per_client);
+    resp->set_stream_idle_timeout_s(std::chrono::duration<double>(limits.streams.idle_timeout).count());
+    resp->set_max_inflight_bytes(static_cast<std::int64_t>(limits.max_inflight_bytes));
   });
 }
 

@@ -23,6 +23,7 @@ struct ServiceLimits {
   std::string backup_dir;                  // Backup paths are resolved inside it
   int compute_threads = 1;                 // engine work runs on at most this many threads at once
   std::size_t max_inflight_bytes = std::size_t{1} << 30;  // scan memory in flight (MemoryBudget)
+  std::int64_t max_message_bytes = 64 << 20;
   StreamLimits streams;
 };
 
@@ -104,6 +105,8 @@ class MapAdminService final : public v1::MapAdmin::Service {
   grpc::Status DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req,
                            v1::DeleteResponse* resp) override;
   grpc::Status GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req, v1::GetStatsResponse* resp) override;
+  grpc::Status GetServerInfo(grpc::ServerContext* ctx, const v1::GetServerInfoRequest* req,
+                             v1::GetServerInfoResponse* resp) override;
   grpc::Status Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) override;
 
  private:

@@ -225,6 +225,41 @@ def test_known_loop_pose(tmp):
         assert s.stop() == 0
 
 
+def test_unlabelled_scans(tmp):
+    """Scans sent without labels are labelled by the server; the real loop is found from them; a scan whose
+    labels the label set does not know gets a warning; GetServerInfo says what the server expects."""
+    s = Server(os.path.join(tmp, "raw.db"))
+    try:
+        info = s.admin.GetServerInfo(pb.GetServerInfoRequest())
+        assert info.label_preset == "semantickitti" and info.labeller_mode == "auto", info
+        assert [c.name for c in info.node_classes] == ["vehicle", "trunk", "pole"] and list(info.road) == [40]
+        assert info.descriptor_dim > 0 and info.max_points > 0 and "labeller:" in info.engine_config
+        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+        if HAVE_DATA:
+            a, b = load_scan("000052"), load_scan("004501")
+            a.labels, b.labels = b"", b""
+            r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=a))
+            assert r_a.label_source == pb.LABELS_COMPUTED, r_a.label_source
+            r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=b, query=True))
+            assert r_b.label_source == pb.LABELS_COMPUTED
+            loops = [c for c in r_b.loops if c.scan_id == r_a.scan_id and c.verified]
+            assert loops, f"the unlabelled loop was not found: {r_b.loops}"
+            dt, dr = pose_error(np.linalg.inv(np.array(loops[0].t_query_candidate.m).reshape(4, 4)), reference_pose())
+            assert dt < 0.06 and dr < 0.25, f"unlabelled loop pose error {dt:.3f} m {dr:.3f} deg"
+            print(f"  unlabelled real loop through the server: RTE {dt:.4f} m, RRE {dr:.4f} deg")
+            labelled = s.loop.Ingest(pb.IngestRequest(key=key("c", 52), scan=load_scan("000052")))
+            assert labelled.label_source == pb.LABELS_PROVIDED and not labelled.warnings
+        # Labels of another label set (here: all 3000): stored, with a warning that says why no loop can come.
+        pts = (np.random.default_rng(3).random((2000, 3), dtype=np.float32) * 20).astype("<f4")
+        odd = pb.Scan(points=pts.tobytes(), labels=np.full(2000, 3000, dtype="<u4").tobytes())
+        r = s.loop.Ingest(pb.IngestRequest(key=key("d", 1), scan=odd))
+        assert any("no point carries a label" in w for w in r.warnings), r.warnings
+        log = open(os.path.join(tmp, "raw.db.log"), errors="replace").read()
+        assert "scan_warning" in log, "the warning is not in the server's log"
+    finally:
+        assert s.stop() == 0
+
+
 def test_bad_inputs(tmp):
     s = Server(os.path.join(tmp, "bad.db"), extra=["--max-message-mb", "1"])
     try:
@@ -524,7 +559,7 @@ def test_pose_graph(tmp):
         assert s.stop() == 0
 
 def main():
-    tests = [test_inter_robot_loop_and_restart, test_known_loop_pose, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
+    tests = [test_inter_robot_loop_and_restart, test_known_loop_pose, test_unlabelled_scans, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
              test_pose_graph]
     passed = failed = 0
     for t in tests:
