@@ -69,7 +69,8 @@ std::vector<std::uint32_t> unpackLabels(const std::string& bytes) {
 }
 
 void packScan(const LabelledScan& scan, v1::Scan* out) {
-  if (scan.points.size() != scan.labels.size())
+  // No labels at all is an unlabelled scan (the server's labeller labels it).
+  if (!scan.labels.empty() && scan.points.size() != scan.labels.size())
     throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
                      std::to_string(scan.labels.size()) + " labels");
   *out->mutable_points() = packPoints(scan.points);
@@ -120,7 +121,7 @@ std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, s
   const std::string& points = request.scan().points();
   const std::string& labels = request.scan().labels();
   if (points.size() % kPointBytes != 0 || labels.size() % kLabelBytes != 0 ||
-      points.size() / kPointBytes != labels.size() / kLabelBytes)
+      (!labels.empty() && points.size() / kPointBytes != labels.size() / kLabelBytes))
     throw InputError("cannot chunk a malformed scan: " + std::to_string(points.size()) + " point bytes, " +
                      std::to_string(labels.size()) + " label bytes");
   const std::size_t n = points.size() / kPointBytes;
@@ -136,7 +137,7 @@ std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, s
     const std::size_t count = std::min(per_chunk, n - begin);
     v1::IngestChunk& chunk = chunks.emplace_back();
     chunk.set_points(points.substr(begin * kPointBytes, count * kPointBytes));
-    chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));
+    if (!labels.empty()) chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));  // none: unlabelled
   }
   return chunks;
 }

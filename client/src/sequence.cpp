@@ -139,9 +139,17 @@ Sequence openSequence(const std::string& dir, const FrameRange& range, int every
     throw InputError(velodyne.string() + ": no scans in frame range " + sel + " (scans there go from " +
                      std::to_string(all.front().number) + " to " + std::to_string(max_frame) + ")");
   }
-  for (const auto& f : seq.frames)
-    if (!fs::is_regular_file(f.label_path, ec))
-      throw InputError(f.label_path + ": missing (every scan needs its SemanticKITTI labels)");
+  // Labels are all there or all absent (a directory with velodyne/ only is sent unlabelled: the server's
+  // labeller labels it); a sequence with some label files missing is an error.
+  std::size_t labelled = 0;
+  for (const auto& f : seq.frames) labelled += fs::is_regular_file(f.label_path, ec);
+  if (labelled == 0) {
+    for (auto& f : seq.frames) f.label_path.clear();
+  } else if (labelled != seq.frames.size()) {
+    for (const auto& f : seq.frames)
+      if (!fs::is_regular_file(f.label_path, ec))
+        throw InputError(f.label_path + ": missing (some scans of the sequence have labels, this one has none)");
+  }
   return seq;
 }
 

@@ -76,6 +76,8 @@ check(raises(ValueError, sglc_client.pack_points, b"\0" * 13) is not None, "13 p
 check(raises(ValueError, sglc_client.pack_labels, b"\0" * 6) is not None, "6 label bytes rejected")
 check(raises(ValueError, sglc_client.pack_scan, pts, lab[:-1]) is not None, "point/label count mismatch rejected")
 check(raises(ValueError, sglc_client.pack_points, np.zeros((4, 4))) is not None, "(N, 4) points rejected")
+p_only, l_none = sglc_client.pack_scan(np.zeros((5, 3), dtype=np.float32))
+check(len(p_only) == 60 and l_none == b"", "a scan without labels packs no label bytes (the server labels it)")
 check(raises(ValueError, sglc_client.pack_labels, np.float32([1.5])) is not None, "float labels rejected")
 check(raises(ValueError, sglc_client.pack_labels, [-1]) is not None, "negative labels rejected")
 check(raises(ValueError, sglc_client.unpack_scan, b"\0" * 24, b"\0" * 4) is not None, "unpack count mismatch rejected")

@@ -132,8 +132,14 @@ TEST(Sequence, BadDirectoriesAreRejectedWithTheReason) {
   EXPECT_NE(message(tmp / "novelo").find("velodyne"), std::string::npos);
   std::filesystem::create_directories(tmp.path() / "empty/velodyne");
   EXPECT_NE(message(tmp / "empty").find("no NNNNNN.bin"), std::string::npos);
-  const auto nolabels = makeSequence(tmp, "nolabels", {4}, false);
-  EXPECT_NE(message(nolabels).find("000004.label"), std::string::npos);
+  // Some scans labelled, one not: the missing file is named. None labelled: an unlabelled sequence.
+  const auto partly = makeSequence(tmp, "partly", {4, 5});
+  std::filesystem::remove(partly + "/labels/000004.label");
+  EXPECT_NE(message(partly).find("000004.label"), std::string::npos);
+  const auto nolabels = makeSequence(tmp, "nolabels", {4, 5}, false);
+  const auto seq = sc::openSequence(nolabels);
+  ASSERT_EQ(seq.frames.size(), 2u);
+  EXPECT_TRUE(seq.frames[0].label_path.empty());
 }
 
 TEST(Sequence, RealSequenceDirectory) {

@@ -99,9 +99,10 @@ class Client:
             o.min_score = float(min_score)
         return o
 
-    def ingest_request(self, map, robot, session, seq, points, labels, stamp=None, odometry_pose=None, store_raw=False,
+    def ingest_request(self, map, robot, session, seq, points, labels=None, stamp=None, odometry_pose=None, store_raw=False,
                        query=False, query_options=None, **query_kwargs):
-        """Builds an IngestRequest. points/labels: numpy arrays or packed bytes (see packing).
+        """Builds an IngestRequest. points/labels: numpy arrays or packed bytes (see packing); labels None: the
+        server labels the scan (its labeller mode permitting).
         odometry_pose: 4x4 array-like. query_options: a QueryOptions message, or keyword arguments of query_options()."""
         p, l = packing.pack_scan(points, labels)
         r = self.pb2.IngestRequest(key=self.pb2.ScanKey(map=map, robot=robot, session=session, seq=int(seq)),
@@ -126,12 +127,13 @@ class Client:
         n = len(points) // packing.POINT_BYTES
         for begin in range(0, n, per):
             end = min(n, begin + per)
-            yield self.pb2.IngestChunk(points=points[begin * 12:end * 12], labels=labels[begin * 4:end * 4])
+            yield self.pb2.IngestChunk(points=points[begin * 12:end * 12],
+                                       labels=labels[begin * 4:end * 4] if labels else b"")
 
     # ------------------------------------------------------------------------------------------------
     # LoopClosure
 
-    def ingest(self, map, robot, session, seq, points, labels, timeout=None, **kwargs):
+    def ingest(self, map, robot, session, seq, points, labels=None, timeout=None, **kwargs):
         """Stores one scan; returns the IngestResponse (scan_id, loops when query=True, timing, seq).
 
         Keyword arguments as for ingest_request(). Scans above chunk_bytes go through IngestChunked.

@@ -61,9 +61,13 @@ def pack_labels(labels):
     return np.ascontiguousarray(a, dtype="<u4").tobytes()
 
 
-def pack_scan(points, labels):
-    """Returns (points_bytes, labels_bytes), checked to hold the same number of points."""
-    p, l = pack_points(points), pack_labels(labels)
+def pack_scan(points, labels=None):
+    """Returns (points_bytes, labels_bytes), checked to hold the same number of points. labels None: no labels
+    (the server's labeller labels the scan)."""
+    p = pack_points(points)
+    if labels is None:
+        return p, b""
+    l = pack_labels(labels)
     if len(p) // POINT_BYTES != len(l) // LABEL_BYTES:
         raise ValueError(f"scan has {len(p) // POINT_BYTES} points but {len(l) // LABEL_BYTES} labels")
     return p, l
