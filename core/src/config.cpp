@@ -194,8 +194,9 @@ void validateConfig(const Config& config) {
   const auto& l = c.labeller;
   require(l.mode == "off" || l.mode == "auto" || l.mode == "always", "labeller.mode", "off, auto or always");
   require(l.max_range_m > 0 && l.max_range_m <= 320, "labeller.max_range_m", "in (0, 320]");
-  require(l.ground_cell_m >= 0.5 && l.ground_cell_m <= 10 && l.max_range_m / l.ground_cell_m <= 1000,
-          "labeller.ground_cell_m", "in [0.5, 10] with max_range_m / ground_cell_m <= 1000");
+  // The ground grid is (2 max_range_m / ground_cell_m)^2 columns, allocated per scan.
+  require(l.ground_cell_m >= 0.5 && l.ground_cell_m <= 10 && l.max_range_m / l.ground_cell_m <= 200,
+          "labeller.ground_cell_m", "in [0.5, 10] with max_range_m / ground_cell_m <= 200");
   require(l.cell_m >= 0.05 && l.cell_m <= 2, "labeller.cell_m", "in [0.05, 2]");
   require(l.link_m >= 0 && l.link_m <= 10 * l.cell_m, "labeller.link_m", "in [0, 10 x cell_m]");
   require(l.ground_band_m > 0 && l.ground_tolerance_m > 0 && l.low_band_m > l.ground_tolerance_m,
@@ -241,7 +242,8 @@ LabelConfig labelPreset(const std::string& name) {
     c.moving = {};
     return c;
   }
-  throw InputError("labels.preset: unknown preset '" + name + "' (known: semantickitti, semantickitti-train, nuscenes)");
+  throw InputError("labels.preset: unknown preset '" + name +
+                   "' (known: semantickitti, semantickitti-train, nuscenes)");
 }
 
 Config parseConfig(const std::string& yaml_text) {

@@ -64,8 +64,8 @@ std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t point
   std::size_t width = 4;
   if (points > 0) {
     // One label per point, 1, 2 or 4 bytes wide (nuScenes-lidarseg uint8, uint16 sets, SemanticKITTI uint32).
-    if (data.size() % points != 0 || (data.size() / points != 1 && data.size() / points != 2 &&
-                                      data.size() / points != 4))
+    if (data.size() % points != 0 ||
+        (data.size() / points != 1 && data.size() / points != 2 && data.size() / points != 4))
       throw InputError(path + ": " + std::to_string(data.size()) + " bytes for " + std::to_string(points) +
                        " points: not 1, 2 or 4 bytes per point");
     width = data.size() / points;

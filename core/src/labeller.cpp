@@ -22,23 +22,22 @@ class Ground {
     half_ = static_cast<int>(std::ceil(c.max_range_m / c.ground_cell_m)) + 1;
     side_ = 2 * half_ + 1;
     const std::size_t n_cells = static_cast<std::size_t>(side_) * static_cast<std::size_t>(side_);
-    low1_.assign(n_cells, kInf);
-    low2_.assign(n_cells, kInf);
+    std::vector<float> low1(n_cells, kInf), low2(n_cells, kInf);  // two lowest points per column
     const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
     for (const auto& p : points) {
       if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
       const int k = index(p);
-      if (p.z() < low1_[k]) {
-        low2_[k] = low1_[k];
-        low1_[k] = p.z();
-      } else if (p.z() < low2_[k]) {
-        low2_[k] = p.z();
+      if (p.z() < low1[k]) {
+        low2[k] = low1[k];
+        low1[k] = p.z();
+      } else if (p.z() < low2[k]) {
+        low2[k] = p.z();
       }
     }
     // A column's own floor: its second-lowest point (or its only one).
     std::vector<float> own(n_cells, kInf);
-    for (std::size_t k = 0; k < n_cells; ++k) own[k] = std::isfinite(low2_[k]) ? low2_[k] : low1_[k];
-    floor_.assign(n_cells, kInf);
+    for (std::size_t k = 0; k < n_cells; ++k) own[k] = std::isfinite(low2[k]) ? low2[k] : low1[k];
+    std::vector<float> floor(n_cells, kInf);
     for (int y = 0; y < side_; ++y)
       for (int x = 0; x < side_; ++x) {
         float f = kInf;
@@ -47,7 +46,7 @@ class Ground {
             const int xx = x + dx, yy = y + dy;
             if (xx >= 0 && yy >= 0 && xx < side_ && yy < side_) f = std::min(f, own[cellAt(xx, yy)]);
           }
-        floor_[cellAt(x, y)] = f;
+        floor[cellAt(x, y)] = f;
       }
     // Plane per column through the points within ground_band_m of the floor (only this column's points).
     struct Sums {
@@ -58,7 +57,7 @@ class Ground {
     for (const auto& p : points) {
       if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
       const int k = index(p);
-      if (!(p.z() <= floor_[k] + band)) continue;
+      if (!(p.z() <= floor[k] + band)) continue;
       auto& s = sums[k];
       const double x = p.x(), y = p.y(), z = p.z();
       s.n += 1;
@@ -69,7 +68,7 @@ class Ground {
     for (std::size_t k = 0; k < n_cells; ++k) {
       const auto& s = sums[k];
       if (s.n < 1) {
-        if (std::isfinite(floor_[k])) plane_[k] = Eigen::Vector3f(0, 0, floor_[k]);
+        if (std::isfinite(floor[k])) plane_[k] = Eigen::Vector3f(0, 0, floor[k]);
         continue;
       }
       Eigen::Vector3d sol(0, 0, s.z / s.n);
@@ -103,7 +102,6 @@ class Ground {
 
   float cell_;
   int half_ = 0, side_ = 0;
-  std::vector<float> low1_, low2_, floor_;
   std::vector<Eigen::Vector3f> plane_;  // a, b, c of z = a x + b y + c
 };
 
@@ -161,8 +159,10 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
     }
     col_of[i] = k;
     auto& col = cols[static_cast<std::size_t>(k)];
-    if (h[i] <= band) ++col.low;
-    else ++col.high;
+    if (h[i] <= band)
+      ++col.low;
+    else
+      ++col.high;
     col.high_max = std::max(col.high_max, h[i]);
   }
 
@@ -210,7 +210,8 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
   // Points above the band around a place (canopy test for pole-like objects).
   auto highAround = [&](double x, double y, double radius) {
     const int r = static_cast<int>(std::ceil(radius * inv_cell));
-    const int cx = detail::floorInt(static_cast<float>(x) * inv_cell), cy = detail::floorInt(static_cast<float>(y) * inv_cell);
+    const int cx = detail::floorInt(static_cast<float>(x) * inv_cell),
+              cy = detail::floorInt(static_cast<float>(y) * inv_cell);
     int count = 0, cells = 0;
     for (int dy = -r; dy <= r; ++dy)
       for (int dx = -r; dx <= r; ++dx) {
@@ -240,9 +241,8 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
       o.label = cells >= 12 && high >= 40 ? id::kTrunk : id::kPole;
     } else if (length >= c.wall_min_length_m && width <= c.wall_max_width_m) {
       o.label = height >= c.wall_min_height_m ? id::kBuilding : id::kFence;
-    } else if (length >= c.vehicle_min_length_m && length <= c.vehicle_max_length_m &&
-               width <= c.vehicle_max_width_m && o.h_max >= c.vehicle_min_height_m &&
-               o.top <= c.vehicle_max_height_m && grounded) {
+    } else if (length >= c.vehicle_min_length_m && length <= c.vehicle_max_length_m && width <= c.vehicle_max_width_m &&
+               o.h_max >= c.vehicle_min_height_m && o.top <= c.vehicle_max_height_m && grounded) {
       o.label = id::kVehicle;
     } else if (length >= 2 * c.wall_min_length_m && height >= c.wall_min_height_m) {
       o.label = id::kBuilding;  // large and tall: a building's corner or front
@@ -262,8 +262,10 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
     std::uint32_t label = id::kVegetation;
     if (obj >= 0) {
       const auto l = objects[static_cast<std::size_t>(obj)].label;
-      if (l == id::kBuilding || l == id::kPole || l == id::kFence) label = l == id::kFence ? id::kBuilding : l;
-      else if (l == id::kVehicle && h[i] <= c.vehicle_max_height_m) label = id::kVehicle;
+      if (l == id::kBuilding || l == id::kPole || l == id::kFence)
+        label = l == id::kFence ? id::kBuilding : l;
+      else if (l == id::kVehicle && h[i] <= c.vehicle_max_height_m)
+        label = id::kVehicle;
     }
     out[i] = label;
   }

@@ -58,7 +58,6 @@ LabelMap::LabelMap(const LabelConfig& config) : role_(65536, -1) {
   has_vehicle_ids_ = vehicle >= 0 && !config.node_classes[vehicle].ids.empty();
   has_trunk_ids_ = nodeIndex("trunk") >= 0 && !config.node_classes[nodeIndex("trunk")].ids.empty();
   has_pole_ids_ = nodeIndex("pole") >= 0 && !config.node_classes[nodeIndex("pole")].ids.empty();
-  has_background_ids_ = !config.road.empty() || !config.building.empty() || !config.vegetation.empty();
 }
 
 }  // namespace sglc

@@ -58,7 +58,8 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
   const auto& c = config_;
   const std::size_t n = input.points.size();
   if (!input.labels.empty() && input.labels.size() != n)
-    throw InputError("scan has " + std::to_string(n) + " points but " + std::to_string(input.labels.size()) + " labels");
+    throw InputError("scan has " + std::to_string(n) + " points but " + std::to_string(input.labels.size()) +
+                     " labels");
   ScanReport local;
   ScanReport& rep = report ? *report : local;
   rep = {};

@@ -18,8 +18,7 @@ std::string fmt(double v) {
 std::optional<std::string> rigidMotionError(const Mat4d& T, double tolerance) {
   if (!T.allFinite()) return "has a non-finite value (NaN or inf)";
   const Eigen::RowVector4d last = T.row(3);
-  if ((last - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-9)
-    return "last row is not 0 0 0 1";
+  if ((last - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > 1e-9) return "last row is not 0 0 0 1";
   const Mat3d R = T.block<3, 3>(0, 0);
   const double ortho = (R.transpose() * R - Mat3d::Identity()).cwiseAbs().maxCoeff();
   if (!(ortho <= tolerance))

@@ -15,37 +15,63 @@ using storage::StorageError;
 
 grpc::StatusCode toGrpc(StorageError::Code code) {
   switch (code) {
-    case StorageError::Code::kInvalidArgument: return grpc::StatusCode::INVALID_ARGUMENT;
-    case StorageError::Code::kNotFound: return grpc::StatusCode::NOT_FOUND;
-    case StorageError::Code::kAlreadyExists: return grpc::StatusCode::ALREADY_EXISTS;
-    case StorageError::Code::kFull: return grpc::StatusCode::RESOURCE_EXHAUSTED;
-    case StorageError::Code::kBusy: return grpc::StatusCode::UNAVAILABLE;
-    case StorageError::Code::kReadOnly: return grpc::StatusCode::UNAVAILABLE;
-    case StorageError::Code::kCorrupt: return grpc::StatusCode::DATA_LOSS;
-    default: return grpc::StatusCode::INTERNAL;
+    case StorageError::Code::kInvalidArgument:
+      return grpc::StatusCode::INVALID_ARGUMENT;
+    case StorageError::Code::kNotFound:
+      return grpc::StatusCode::NOT_FOUND;
+    case StorageError::Code::kAlreadyExists:
+      return grpc::StatusCode::ALREADY_EXISTS;
+    case StorageError::Code::kFull:
+      return grpc::StatusCode::RESOURCE_EXHAUSTED;
+    case StorageError::Code::kBusy:
+      return grpc::StatusCode::UNAVAILABLE;
+    case StorageError::Code::kReadOnly:
+      return grpc::StatusCode::UNAVAILABLE;
+    case StorageError::Code::kCorrupt:
+      return grpc::StatusCode::DATA_LOSS;
+    default:
+      return grpc::StatusCode::INTERNAL;
   }
 }
 
 const char* codeName(grpc::StatusCode code) {
   switch (code) {
-    case grpc::StatusCode::OK: return "OK";
-    case grpc::StatusCode::CANCELLED: return "CANCELLED";
-    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
-    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
-    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
-    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
-    case grpc::StatusCode::ABORTED: return "ABORTED";
-    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
-    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
-    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
-    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
-    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
-    case grpc::StatusCode::INTERNAL: return "INTERNAL";
-    default: return "OTHER";
+    case grpc::StatusCode::OK:
+      return "OK";
+    case grpc::StatusCode::CANCELLED:
+      return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN:
+      return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT:
+      return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND:
+      return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS:
+      return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED:
+      return "PERMISSION_DENIED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION:
+      return "FAILED_PRECONDITION";
+    case grpc::StatusCode::ABORTED:
+      return "ABORTED";
+    case grpc::StatusCode::OUT_OF_RANGE:
+      return "OUT_OF_RANGE";
+    case grpc::StatusCode::UNIMPLEMENTED:
+      return "UNIMPLEMENTED";
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return "UNAUTHENTICATED";
+    case grpc::StatusCode::UNAVAILABLE:
+      return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS:
+      return "DATA_LOSS";
+    case grpc::StatusCode::INTERNAL:
+      return "INTERNAL";
+    default:
+      return "OTHER";
   }
 }
 
@@ -82,8 +108,10 @@ grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, con
   if (log.messages >= 0) line["messages"] = log.messages;
   if (!status.ok()) line["error"] = status.error_message();
   if (!detail.empty()) line["detail"] = detail;
-  if (status.ok()) spdlog::info("{}", logLine(line));
-  else spdlog::warn("{}", logLine(line));
+  if (status.ok())
+    spdlog::info("{}", logLine(line));
+  else
+    spdlog::warn("{}", logLine(line));
   return status;
 }
 
@@ -113,9 +141,9 @@ class BadRequestInterceptor final : public gx::Interceptor {
       // Handlers always give a message; an INTERNAL without one is gRPC's own parse failure. Other codes with no
       // message parsed (RESOURCE_EXHAUSTED when the thread pool is full) stay as they are.
       if (status.error_code() == grpc::StatusCode::INTERNAL && (unparsed_ || status.error_message().empty()))
-        methods->ModifySendStatus(grpc::Status(
-            grpc::StatusCode::INVALID_ARGUMENT,
-            std::string("the request is not a valid protobuf message for ") + info_->method()));
+        methods->ModifySendStatus(
+            grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                         std::string("the request is not a valid protobuf message for ") + info_->method()));
     }
     methods->Proceed();
   }

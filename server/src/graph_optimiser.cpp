@@ -216,8 +216,10 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     }
     event.failed = true;
     event.error = e.what();
-    spdlog::error("{}", logLine({{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version},
-                                 {"error", event.error}}));
+    spdlog::error(
+        "{}",
+        logLine(
+            {{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version}, {"error", event.error}}));
     publish(map, event);
     return event;
   }
@@ -254,7 +256,9 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
     // Files written before the server checked poses may hold ones that are not rigid motions: such a scan is
     // no graph node (a pose graph cannot use it), but it stays in the map.
     if (const auto error = rigidMotionError(*n.odometry_pose)) {
-      spdlog::warn("{}", logLine({{"event", "graph_node_skipped"}, {"map", map}, {"scan", n.scan_id},
+      spdlog::warn("{}", logLine({{"event", "graph_node_skipped"},
+                                  {"map", map},
+                                  {"scan", n.scan_id},
                                   {"error", "odometry pose " + *error}}));
       continue;
     }
@@ -262,8 +266,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
     g.index[n.scan_id] = g.nodes.size();
     const auto k = kept.find(n.scan_id);
     const Mat4d odometry = orthonormalised(*n.odometry_pose);
-    g.nodes.push_back({n.scan_id, n.session_id, n.seq, odometry, Pose::of(k != kept.end() ? k->second : odometry),
-                       k != kept.end()});
+    g.nodes.push_back(
+        {n.scan_id, n.session_id, n.seq, odometry, Pose::of(k != kept.end() ? k->second : odometry), k != kept.end()});
     g.map_session = g.map_session < 0 ? n.session_id : std::min(g.map_session, n.session_id);
   }
   for (const auto& l : loops) {
@@ -433,8 +437,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
       if (!std::isfinite(v)) throw std::runtime_error("a node's initial pose is not finite");
   if (!g.nodes.empty()) {
     double cost = 0;
-    if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
-        !std::isfinite(cost))
+    if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) || !std::isfinite(cost))
       throw std::runtime_error("the graph's initial cost is not finite");
   }
   if (!g.nodes.empty()) {
@@ -482,8 +485,12 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   event.nodes = static_cast<std::int64_t>(g.nodes.size());
   event.rejected_loops = rejected;
   event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-  spdlog::info("{}", logLine({{"event", "optimised"}, {"map", map}, {"version", event.graph_version},
-                              {"nodes", event.nodes}, {"loops", event.loops}, {"rejected", rejected},
+  spdlog::info("{}", logLine({{"event", "optimised"},
+                              {"map", map},
+                              {"version", event.graph_version},
+                              {"nodes", event.nodes},
+                              {"loops", event.loops},
+                              {"rejected", rejected},
                               {"iterations", summary.iterations.size()},
                               {"ms", std::round(event.optimise_ms * 10) / 10}}));
   publish(map, event);

@@ -137,9 +137,12 @@ void applyConfigFile(Settings& s, const std::string& path) {
         else if (key == "server.tokens") s.tokens = v.as<std::string>();
         else if (key == "server.backup_dir") s.backup_dir = v.as<std::string>();
         else if (key == "server.shutdown_grace_s") s.shutdown_grace_s = v.as<double>();
-        else if (key == "server.max_inflight_mb") s.max_inflight_mb = v.as<double>();
-        else if (key == "server.max_streams_per_client") s.streams.max_per_client = v.as<int>();
-        else if (key == "server.max_streams") s.streams.max_total = v.as<int>();
+        else if (key == "server.max_inflight_mb")
+          s.max_inflight_mb = v.as<double>();
+        else if (key == "server.max_streams_per_client")
+          s.streams.max_per_client = v.as<int>();
+        else if (key == "server.max_streams")
+          s.streams.max_total = v.as<int>();
         else if (key == "server.stream_idle_timeout_s")
           s.streams.idle_timeout = std::chrono::milliseconds(static_cast<long>(v.as<double>() * 1000));
         else if (key.rfind("pose_graph.", 0) == 0) setGraphOption(s.graph, key, v.as<double>());
@@ -179,7 +182,8 @@ int main(int argc, char** argv) {
   auto* db_opt = app.add_option("--db", s.db, "map database (SQLite file; created if missing)");
   auto* listen_opt = app.add_option("--listen", s.listen, "address to serve on");
   auto* threads_opt = app.add_option("--threads", s.threads, "compute threads (0: the machine's cores)");
-  auto* calls_opt = app.add_option("--max-calls", s.max_calls, "unary calls served at once (open streams hold no thread)");
+  auto* calls_opt =
+      app.add_option("--max-calls", s.max_calls, "unary calls served at once (open streams hold no thread)");
   auto* tokens_opt = app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
   auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
   auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
@@ -239,9 +243,12 @@ int main(int argc, char** argv) {
     s.store.path = s.db;
     if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();
 
-    sglc::server::ServiceLimits limits{s.max_points, s.backup_dir, s.threads,
+    sglc::server::ServiceLimits limits{s.max_points,
+                                       s.backup_dir,
+                                       s.threads,
                                        static_cast<std::size_t>(s.max_inflight_mb * 1024 * 1024),
-                                       static_cast<std::int64_t>(s.max_message_mb * 1024 * 1024), s.streams};
+                                       static_cast<std::int64_t>(s.max_message_mb * 1024 * 1024),
+                                       s.streams};
     state = std::make_unique<sglc::server::ServiceState>(sglc::Pipeline(s.engine),
                                                          sglc::server::TokenTable::load(s.tokens), limits);
     sglc::server::LoopClosureService loop_service(*state);
@@ -294,8 +301,11 @@ int main(int argc, char** argv) {
     io_poller.start();
     auto* health = server->GetHealthCheckService();
     health->SetServingStatus(false);  // NOT_SERVING until the map database is loaded
-    spdlog::info("{}", sglc::server::logLine({{"event", "listening"}, {"address", s.listen}, {"port", port},
-                                              {"tls", !s.tls_cert.empty()}, {"auth", state->tokens().enabled()}}));
+    spdlog::info("{}", sglc::server::logLine({{"event", "listening"},
+                                              {"address", s.listen},
+                                              {"port", port},
+                                              {"tls", !s.tls_cert.empty()},
+                                              {"auth", state->tokens().enabled()}}));
 
     const auto t0 = std::chrono::steady_clock::now();
     std::unique_ptr<sglc::storage::MapStore> store;
@@ -311,10 +321,16 @@ int main(int argc, char** argv) {
     auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, s.graph);
     state->attach(store.get(), graph.get());
     health->SetServingStatus(true);
-    spdlog::info("{}", sglc::server::logLine(
-                           {{"event", "serving"}, {"db", s.db}, {"maps", st.maps}, {"scans", st.scans},
-                            {"load_ms", std::round(std::chrono::duration<double, std::milli>(
-                                                       std::chrono::steady_clock::now() - t0).count() * 10) / 10}}));
+    spdlog::info(
+        "{}", sglc::server::logLine(
+                  {{"event", "serving"},
+                   {"db", s.db},
+                   {"maps", st.maps},
+                   {"scans", st.scans},
+                   {"load_ms",
+                    std::round(
+                        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() * 10) /
+                        10}}));
 
     int sig = 0;
     sigwait(&signals, &sig);

@@ -75,19 +75,6 @@ void MemoryBudget::grow(Lease& lease, std::size_t bytes, std::chrono::system_clo
   lease.bytes_ += bytes;
 }
 
-bool MemoryBudget::tryGrow(Lease& lease, std::size_t bytes) {
-  {
-    std::lock_guard lock(mutex_);
-    if (!queue_.empty() || !fits(bytes, lease.budget_ ? lease.bytes_ : 0)) return false;
-    used_ += bytes;
-    peak_ = std::max(peak_, used_);
-    high_water_ = std::max(high_water_, used_);
-  }
-  lease.budget_ = this;
-  lease.bytes_ += bytes;
-  return true;
-}
-
 void MemoryBudget::shrink(Lease& lease, std::size_t bytes) {
   if (lease.budget_ != this || lease.bytes_ <= bytes) return;
   give(lease.bytes_ - bytes);

@@ -43,13 +43,10 @@ class MemoryBudget {
   // Waits until `bytes` fit (or nothing else is in flight), while !cancelled() and before `deadline`; throws
   // RpcError: DEADLINE_EXCEEDED / CANCELLED, or RESOURCE_EXHAUSTED after `max_wait`.
   Lease acquire(std::size_t bytes, std::chrono::system_clock::time_point deadline,
-                const std::function<bool()>& cancelled,
-                std::chrono::milliseconds max_wait = std::chrono::seconds(30));
+                const std::function<bool()>& cancelled, std::chrono::milliseconds max_wait = std::chrono::seconds(30));
   // Adds `bytes` to a lease (chunked uploads grow as chunks arrive), waiting like acquire.
   void grow(Lease& lease, std::size_t bytes, std::chrono::system_clock::time_point deadline,
             const std::function<bool()>& cancelled, std::chrono::milliseconds max_wait = std::chrono::seconds(30));
-  // Adds `bytes` at once if they fit without waiting; false otherwise.
-  bool tryGrow(Lease& lease, std::size_t bytes);
   // Returns what a lease holds beyond `bytes` (a reservation made for the largest case, once the real size is
   // known).
   void shrink(Lease& lease, std::size_t bytes);

@@ -24,8 +24,8 @@ struct Asker {
   std::int64_t self_scan = 0;  // a stored query scan never matches itself
 };
 
-void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, const Fingerprint& query, const Asker& who,
-               const v1::QueryOptions& opt, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
+void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, const Fingerprint& query,
+               const Asker& who, const v1::QueryOptions& opt, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
                v1::Timing* timing) {
   const auto top_k = opt.top_k() ? opt.top_k() : 5u;
   if (top_k > 100) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "top_k must be at most 100");
@@ -154,9 +154,12 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
 
 v1::LabelSource toWire(ScanReport::LabelSource source) {
   switch (source) {
-    case ScanReport::LabelSource::kComputed: return v1::LABELS_COMPUTED;
-    case ScanReport::LabelSource::kCompleted: return v1::LABELS_COMPLETED;
-    default: return v1::LABELS_PROVIDED;
+    case ScanReport::LabelSource::kComputed:
+      return v1::LABELS_COMPUTED;
+    case ScanReport::LabelSource::kCompleted:
+      return v1::LABELS_COMPLETED;
+    default:
+      return v1::LABELS_PROVIDED;
   }
 }
 
@@ -168,8 +171,10 @@ void reportScan(const ScanReport& report, const std::string& map, const std::str
   resp->set_label_source(toWire(report.label_source));
   for (const auto& w : report.warnings) resp->add_warnings(w);
   if (!report.warnings.empty())
-    spdlog::warn("{}", logLine({{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq},
-                                {"warnings", report.warnings}}));
+    spdlog::warn(
+        "{}",
+        logLine(
+            {{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq}, {"warnings", report.warnings}}));
 }
 
 // Throws ALREADY_EXISTS unless the stored scan `id` is what this request would have stored (a retry).
@@ -180,13 +185,13 @@ void requireSameScan(const storage::MapStore& store, std::int64_t id, const Fing
   const auto stored = store.fingerprint(id);
   const bool same = info && stored && serialize(*stored) == serialize(fp) &&
                     info->stamp == (req.has_stamp() ? std::optional<double>(req.stamp()) : std::nullopt) &&
-                    info->odometry_pose.has_value() == pose.has_value() &&
-                    (!pose || *info->odometry_pose == *pose) && info->has_raw == req.store_raw();
+                    info->odometry_pose.has_value() == pose.has_value() && (!pose || *info->odometry_pose == *pose) &&
+                    info->has_raw == req.store_raw();
   if (!same)
-    throw RpcError(grpc::StatusCode::ALREADY_EXISTS,
-                   "robot '" + key.robot() + "' session '" + key.session() + "' seq " + std::to_string(key.seq()) +
-                       " already holds a different scan (scan " + std::to_string(id) +
-                       "); an identical retry would answer OK");
+    throw RpcError(grpc::StatusCode::ALREADY_EXISTS, "robot '" + key.robot() + "' session '" + key.session() +
+                                                         "' seq " + std::to_string(key.seq()) +
+                                                         " already holds a different scan (scan " + std::to_string(id) +
+                                                         "); an identical retry would answer OK");
 }
 
 }  // namespace
@@ -290,7 +295,6 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   resp->mutable_timing()->set_total_ms(msSince(t_start));
 }
 
-
 storage::MapStore& ServiceState::store() const {
   auto* s = store_.load();
   if (!s) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the map database is loading or the server is shutting down");
@@ -299,19 +303,16 @@ storage::MapStore& ServiceState::store() const {
 
 // ------------------------------------------------------------------------------------------------ LoopClosure
 
-grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req, v1::IngestResponse* resp) {
-  return run(ctx, {"Ingest", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->key().map();
-    log.robot = req->key().robot();
+grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::IngestRequest* req,
+                                        v1::IngestResponse* resp) {
+  return run(ctx, {"Ingest", req->key().map(), req->key().robot()}, [&](CallLog&) {
     const auto grant = state_.tokens().authenticate(*ctx);
     ingestScan(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), resp);
   });
 }
 
 grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::QueryRequest* req, v1::QueryResponse* resp) {
-  return run(ctx, {"Query", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
-    log.robot = req->robot();
+  return run(ctx, {"Query", req->map(), req->robot()}, [&](CallLog&) {
     const auto t_start = Clock::now();
     const auto grant = state_.tokens().authenticate(*ctx);
     checkName("map", req->map());
@@ -348,6 +349,12 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
 // ------------------------------------------------------------------------------------------------ MapAdmin
 
 namespace {
+// The scan descriptor's length under this server's engine configuration (what its maps are created with).
+int scanDescriptorDim(const Config& config) {
+  return descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph, config.descriptor)
+      .scanDim();
+}
+
 void fillMap(const storage::MapInfo& m, v1::MapInfo* out) {
   out->set_name(m.name);
   out->set_scans(m.scans);
@@ -358,20 +365,17 @@ void fillMap(const storage::MapInfo& m, v1::MapInfo* out) {
 }  // namespace
 
 grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::CreateMapRequest* req, v1::MapInfo* resp) {
-  return run(ctx, {"CreateMap", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->name();
+  return run(ctx, {"CreateMap", req->name(), ""}, [&](CallLog&) {
     const auto grant = state_.tokens().authenticate(*ctx);
     checkName("name", req->name());
     TokenTable::require(grant, req->name());
-    const auto& config = state_.pipeline().config();
-    const int dim =
-        descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph, config.descriptor).scanDim();
-    fillMap(state_.store().createMap(req->name(), dim), resp);
+    fillMap(state_.store().createMap(req->name(), scanDescriptorDim(state_.pipeline().config())), resp);
   });
 }
 
-grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest* req, v1::ListMapsResponse* resp) {
-  return run(ctx, {"ListMaps", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListMapsRequest*,
+                                       v1::ListMapsResponse* resp) {
+  return run(ctx, {"ListMaps", "", ""}, [&](CallLog&) {
     // UNAVAILABLE while loading comes before authentication: clients probe readiness with ListMaps.
     auto& store = state_.store();
     const auto grant = state_.tokens().authenticate(*ctx);
@@ -380,9 +384,9 @@ grpc::Status MapAdminService::ListMaps(grpc::ServerContext* ctx, const v1::ListM
   });
 }
 
-grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::ListRobotsRequest* req, v1::ListRobotsResponse* resp) {
-  return run(ctx, {"ListRobots", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
+grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::ListRobotsRequest* req,
+                                         v1::ListRobotsResponse* resp) {
+  return run(ctx, {"ListRobots", req->map(), ""}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     for (const auto& r : state_.store().listRobots(req->map())) {
       auto* o = resp->add_robots();
@@ -393,10 +397,9 @@ grpc::Status MapAdminService::ListRobots(grpc::ServerContext* ctx, const v1::Lis
   });
 }
 
-grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::ListSessionsRequest* req, v1::ListSessionsResponse* resp) {
-  return run(ctx, {"ListSessions", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
-    log.robot = req->robot();
+grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::ListSessionsRequest* req,
+                                           v1::ListSessionsResponse* resp) {
+  return run(ctx, {"ListSessions", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     for (const auto& s : state_.store().listSessions(req->map(), req->robot())) {
       auto* o = resp->add_sessions();
@@ -409,8 +412,9 @@ grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::L
   });
 }
 
-grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetScanRequest* req, v1::GetScanResponse* resp) {
-  return run(ctx, {"GetScan", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetScanRequest* req,
+                                      v1::GetScanResponse* resp) {
+  return run(ctx, {"GetScan", "", ""}, [&](CallLog& log) {
     const auto grant = state_.tokens().authenticate(*ctx);
     auto& store = state_.store();
     const auto info = store.scanInfo(req->scan_id());
@@ -449,10 +453,9 @@ grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetSca
   });
 }
 
-grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::DeleteSessionRequest* req, v1::DeleteResponse* resp) {
-  return run(ctx, {"DeleteSession", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
-    log.robot = req->robot();
+grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::DeleteSessionRequest* req,
+                                            v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteSession", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteSession(req->map(), req->robot(), req->session()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
@@ -460,10 +463,9 @@ grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::
   });
 }
 
-grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req, v1::DeleteResponse* resp) {
-  return run(ctx, {"DeleteRobot", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
-    log.robot = req->robot();
+grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req,
+                                          v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteRobot", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     resp->set_scans_removed(state_.store().deleteRobot(req->map(), req->robot()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
@@ -471,9 +473,9 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
   });
 }
 
-grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req, v1::GetStatsResponse* resp) {
-  return run(ctx, {"GetStats", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
+grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req,
+                                       v1::GetStatsResponse* resp) {
+  return run(ctx, {"GetStats", req->map(), ""}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
     const auto s = state_.store().stats(req->map());
     resp->set_maps(s.maps);
@@ -494,7 +496,7 @@ grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetSt
 
 grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::GetServerInfoRequest*,
                                             v1::GetServerInfoResponse* resp) {
-  return run(ctx, {"GetServerInfo", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+  return run(ctx, {"GetServerInfo", "", ""}, [&](CallLog&) {
     state_.tokens().authenticate(*ctx);  // any valid token may ask
     const auto& config = state_.pipeline().config();
     const auto& labels = config.labels;
@@ -512,8 +514,7 @@ grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::
     for (auto id : labels.moving) resp->add_moving(id);
     resp->set_labeller_mode(config.labeller.mode);
     resp->set_engine_config(dumpConfig(config));
-    resp->set_descriptor_dim(
-        descriptorLayout(static_cast<int>(labels.node_classes.size()), config.graph, config.descriptor).scanDim());
+    resp->set_descriptor_dim(scanDescriptorDim(config));
     const auto& limits = state_.limits();
     resp->set_max_points(static_cast<std::int64_t>(limits.max_points));
     resp->set_max_message_bytes(limits.max_message_bytes);
@@ -524,7 +525,7 @@ grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::
 }
 
 grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) {
-  return run(ctx, {"Backup", "", ""}, [&]([[maybe_unused]] CallLog& log) {
+  return run(ctx, {"Backup", "", ""}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), "");
     namespace fs = std::filesystem;
     const std::string& path = req->path();
@@ -553,9 +554,7 @@ grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupR
 // ------------------------------------------------------------------------------------------------ PoseGraph
 
 namespace sglc::server {
-namespace {
-
-}  // namespace
+namespace {}  // namespace
 
 void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
   checkName("map", map);
@@ -563,10 +562,9 @@ void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
 }
 
-grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req, v1::GetPosesResponse* resp) {
-  return run(ctx, {"GetPoses", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
-    log.robot = req->robot();
+grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
+                                        v1::GetPosesResponse* resp) {
+  return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
     requireMap(state_, ctx, req->map());
     if (!req->session().empty() && req->robot().empty())
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
@@ -624,9 +622,9 @@ grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetP
   });
 }
 
-grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req, v1::GetSessionFramesResponse* resp) {
-  return run(ctx, {"GetSessionFrames", "", ""}, [&]([[maybe_unused]] CallLog& log) {
-    log.map = req->map();
+grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
+                                                v1::GetSessionFramesResponse* resp) {
+  return run(ctx, {"GetSessionFrames", req->map(), ""}, [&](CallLog&) {
     requireMap(state_, ctx, req->map());
     auto& store = state_.store();
     resp->set_graph_version(store.graphVersion(req->map()));

@@ -11,10 +11,10 @@
 #include "executor.hpp"
 #include "graph_optimiser.hpp"
 #include "memory_budget.hpp"
-#include "stream_registry.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
+#include "stream_registry.hpp"
 
 namespace sglc::server {
 

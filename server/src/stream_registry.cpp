@@ -92,8 +92,8 @@ void StreamRegistry::housekeepingLoop() {
     const auto seconds = std::chrono::duration_cast<std::chrono::seconds>(limits_.idle_timeout).count();
     for (auto* s : idle) {
       s->close(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the stream was idle for more than " +
-                                                                std::to_string(seconds) +
-                                                                " s and was closed; open a new one to continue"));
+                                                               std::to_string(seconds) +
+                                                               " s and was closed; open a new one to continue"));
       s->unref();
     }
     if (housekeeping_) housekeeping_();

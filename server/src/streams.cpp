@@ -175,8 +175,10 @@ class IngestStreamReactor final : public StreamReactor<grpc::ServerBidiReactor<B
       }
       end = finishing_;
     }
-    if (end) finishNow();
-    else StartRead(&in_);
+    if (end)
+      finishNow();
+    else
+      StartRead(&in_);
   }
 
  private:
@@ -276,8 +278,8 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
   // Parses the chunk just read and appends it; returns whether it carried any bytes.
   bool append() {
     ++log_.messages;
-    auto chunk = parseMessage<v1::IngestChunk>(in_, "chunk " + std::to_string(log_.messages) +
-                                                        " of the stream (nothing of the scan was stored)");
+    auto chunk = parseMessage<v1::IngestChunk>(
+        in_, "chunk " + std::to_string(log_.messages) + " of the stream (nothing of the scan was stored)");
     in_.Clear();
     const std::size_t before = points_.size() + labels_.size();
     if (log_.messages == 1) {
@@ -366,8 +368,10 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
       end = finishing_;
       if (!end && pending_) next = take();
     }
-    if (end) finishNow();
-    else if (next) StartWrite(&out_);
+    if (end)
+      finishNow();
+    else if (next)
+      StartWrite(&out_);
   }
 
  private:

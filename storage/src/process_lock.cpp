@@ -21,9 +21,9 @@ ProcessLock::ProcessLock(const std::string& database) {
   fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd_ < 0) {
     const int e = errno;
-    throw StorageError(e == EACCES || e == EROFS || e == EPERM ? StorageError::Code::kReadOnly
-                                                               : StorageError::Code::kIo,
-                       path + ": cannot create the database's lock file: " + std::strerror(e));
+    throw StorageError(
+        e == EACCES || e == EROFS || e == EPERM ? StorageError::Code::kReadOnly : StorageError::Code::kIo,
+        path + ": cannot create the database's lock file: " + std::strerror(e));
   }
   if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
     const int e = errno;
@@ -34,9 +34,9 @@ ProcessLock::ProcessLock(const std::string& database) {
     if (e != EWOULDBLOCK) throw StorageError(StorageError::Code::kIo, path + ": cannot lock: " + std::strerror(e));
     std::string owner = n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : "";
     owner.erase(owner.find_last_not_of(" \n") + 1);
-    throw StorageError(StorageError::Code::kBusy,
-                       database + ": database in use by " + (owner.empty() ? "another process" : "process " + owner) +
-                           " (one server per map database)");
+    throw StorageError(StorageError::Code::kBusy, database + ": database in use by " +
+                                                      (owner.empty() ? "another process" : "process " + owner) +
+                                                      " (one server per map database)");
   }
   const std::string pid = std::to_string(::getpid()) + "\n";
   if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {

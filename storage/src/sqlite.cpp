@@ -35,13 +35,18 @@ StorageError::Code classify(sqlite3* db, int rc) {
 
 std::string meaning(StorageError::Code code) {
   switch (code) {
-    case StorageError::Code::kFull: return "the map database's disk is full (or the database reached its size limit)";
+    case StorageError::Code::kFull:
+      return "the map database's disk is full (or the database reached its size limit)";
     case StorageError::Code::kReadOnly:
       return "the map database cannot be written (read-only file or file system, or no permission)";
-    case StorageError::Code::kCorrupt: return "the map database is damaged";
-    case StorageError::Code::kBusy: return "the map database is locked by another process";
-    case StorageError::Code::kAlreadyExists: return "the record already exists";
-    default: return "the map database had an I/O error";
+    case StorageError::Code::kCorrupt:
+      return "the map database is damaged";
+    case StorageError::Code::kBusy:
+      return "the map database is locked by another process";
+    case StorageError::Code::kAlreadyExists:
+      return "the record already exists";
+    default:
+      return "the map database had an I/O error";
   }
 }
 

@@ -22,7 +22,8 @@ int main(int argc, char** argv) {
   bool dump = false, known_loop = false;
   app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
   app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)");
-  app.add_option("--labels-a", labels_a, ".label of scan A (1, 2 or 4 bytes per point; absent: the labeller labels it)");
+  app.add_option("--labels-a", labels_a,
+                 ".label of scan A (1, 2 or 4 bytes per point; absent: the labeller labels it)");
   app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)");
   app.add_option("--labels-b", labels_b, ".label of scan B (absent: the labeller labels it)");
   app.add_flag("--known-loop", known_loop,
@@ -77,7 +78,7 @@ int main(int argc, char** argv) {
     auto source = [](const sglc::ScanReport& r) {
       return r.label_source == sglc::ScanReport::LabelSource::kComputed    ? "computed"
              : r.label_source == sglc::ScanReport::LabelSource::kCompleted ? "completed"
-                                                                            : "provided";
+                                                                           : "provided";
     };
     out["labels_a"] = source(report_a);
     out["labels_b"] = source(report_b);

@@ -156,15 +156,15 @@ struct BevSearchConfig {
 // trunks for nuScenes-lidarseg), "always" (ignore given labels).
 struct LabellerConfig {
   std::string mode = "auto";
-  double max_range_m = 80.0;         // points farther (horizontally) are not labelled
-  double ground_cell_m = 2.0;        // ground columns
-  double ground_band_m = 0.3;        // points this close above a column's floor fit its ground plane
-  double ground_tolerance_m = 0.2;   // ground = within this of the plane (curbs included)
-  double cell_m = 0.25;              // object columns
-  double link_m = 0.25;              // columns this close belong to one object (raise for sparse clouds)
-  double low_band_m = 2.0;           // objects are found in the band below this height (under canopies)
-  double pole_max_width_m = 1.0;     // pole-like: footprint at most this long ...
-  double pole_min_height_m = 1.2;    // ... and at least this tall
+  double max_range_m = 80.0;        // points farther (horizontally) are not labelled
+  double ground_cell_m = 2.0;       // ground columns
+  double ground_band_m = 0.3;       // points this close above a column's floor fit its ground plane
+  double ground_tolerance_m = 0.2;  // ground = within this of the plane (curbs included)
+  double cell_m = 0.25;             // object columns
+  double link_m = 0.25;             // columns this close belong to one object (raise for sparse clouds)
+  double low_band_m = 2.0;          // objects are found in the band below this height (under canopies)
+  double pole_max_width_m = 1.0;    // pole-like: footprint at most this long ...
+  double pole_min_height_m = 1.2;   // ... and at least this tall
   double vehicle_min_length_m = 1.5, vehicle_max_length_m = 6.5, vehicle_max_width_m = 3.0;
   double vehicle_min_height_m = 0.8, vehicle_max_height_m = 2.6;
   double wall_min_length_m = 3.0, wall_max_width_m = 0.8, wall_min_height_m = 1.8;

@@ -31,13 +31,12 @@ class LabelMap {
   bool hasVehicleIds() const { return has_vehicle_ids_; }
   bool hasTrunkIds() const { return has_trunk_ids_; }
   bool hasPoleIds() const { return has_pole_ids_; }
-  bool hasBackgroundIds() const { return has_background_ids_; }
 
  private:
   // >= 0: node class index; -1: ignored; <= -2: background class (-role - 1).
   std::vector<std::int8_t> role_;
   int num_node_classes_ = 0;
-  bool has_vehicle_ids_ = false, has_trunk_ids_ = false, has_pole_ids_ = false, has_background_ids_ = false;
+  bool has_vehicle_ids_ = false, has_trunk_ids_ = false, has_pole_ids_ = false;
 };
 
 }  // namespace sglc
