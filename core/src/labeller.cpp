@@ -24,9 +24,12 @@ class Ground {
     const std::size_t n_cells = static_cast<std::size_t>(side_) * static_cast<std::size_t>(side_);
     std::vector<float> low1(n_cells, kInf), low2(n_cells, kInf);  // two lowest points per column
     const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
-    for (const auto& p : points) {
+    column_.assign(points.size(), -1);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const auto& p = points[i];
       if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
       const int k = index(p);
+      column_[i] = k;
       if (p.z() < low1[k]) {
         low2[k] = low1[k];
         low1[k] = p.z();
@@ -48,18 +51,20 @@ class Ground {
           }
         floor[cellAt(x, y)] = f;
       }
-    // Plane per column through the points within ground_band_m of the floor (only this column's points).
+    // Plane per column through the points within ground_band_m of the floor (only this column's points), in
+    // coordinates relative to the column's corner: small numbers, so float sums keep their precision.
     struct Sums {
-      double n = 0, x = 0, y = 0, z = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
+      float n = 0, x = 0, y = 0, z = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
     };
     std::vector<Sums> sums(n_cells);
     const float band = static_cast<float>(c.ground_band_m);
-    for (const auto& p : points) {
-      if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
-      const int k = index(p);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const int k = column_[i];
+      if (k < 0) continue;
+      const auto& p = points[i];
       if (!(p.z() <= floor[k] + band)) continue;
       auto& s = sums[k];
-      const double x = p.x(), y = p.y(), z = p.z();
+      const float x = p.x() - cornerX(k), y = p.y() - cornerY(k), z = p.z() - floor[k];
       s.n += 1;
       s.x += x, s.y += y, s.z += z;
       s.xx += x * x, s.xy += x * y, s.yy += y * y, s.xz += x * z, s.yz += y * z;
@@ -81,13 +86,18 @@ class Ground {
         const double spread = (s.xx - s.x * s.x / s.n) + (s.yy - s.y * s.y / s.n);
         if (fit.allFinite() && std::hypot(fit.x(), fit.y()) < 0.3 && spread / s.n > 0.1) sol = fit;
       }
+      // Back to scan coordinates: z = a (x - x0) + b (y - y0) + c + floor.
+      const auto k_int = static_cast<int>(k);
+      sol.z() += floor[k] - sol.x() * cornerX(k_int) - sol.y() * cornerY(k_int);
       plane_[k] = sol.cast<float>();
     }
   }
 
-  // Height of p above the ground of its column (+inf where the column has no ground estimate).
-  float height(const Vec3f& p) const {
-    const auto& g = plane_[index(p)];
+  // Height of point i above the ground of its column (+inf where it has none: out of range, non-finite).
+  float height(std::size_t i, const Vec3f& p) const {
+    const int k = column_[i];
+    if (k < 0) return kInf;
+    const auto& g = plane_[static_cast<std::size_t>(k)];
     if (!std::isfinite(g.z())) return kInf;
     return p.z() - (g.x() * p.x() + g.y() * p.y() + g.z());
   }
@@ -99,9 +109,12 @@ class Ground {
     return cellAt(x, y);
   }
   int cellAt(int x, int y) const { return y * side_ + x; }
+  float cornerX(int k) const { return static_cast<float>(k % side_ - half_) * cell_; }
+  float cornerY(int k) const { return static_cast<float>(k / side_ - half_) * cell_; }
 
   float cell_;
   int half_ = 0, side_ = 0;
+  std::vector<int> column_;             // per point: its column, or -1 (out of range, non-finite)
   std::vector<Eigen::Vector3f> plane_;  // a, b, c of z = a x + b y + c
 };
 
@@ -132,7 +145,6 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
   if (n == 0) return out;
   const Ground ground(points, c);
   const float tol = static_cast<float>(c.ground_tolerance_m), band = static_cast<float>(c.low_band_m);
-  const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
   const float inv_cell = static_cast<float>(1.0 / c.cell_m);
 
   // Heights, ground, and object columns.
@@ -141,22 +153,26 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
   VoxelMap map(n / 4 + 64);
   std::vector<Column> cols;
   std::vector<std::pair<int, int>> col_xy;
+  int last_x = std::numeric_limits<int>::min(), last_y = 0, last_k = -1;
   for (std::size_t i = 0; i < n; ++i) {
     const Vec3f& p = points[i];
-    if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
-    h[i] = ground.height(p);
+    h[i] = ground.height(i, p);
     if (!std::isfinite(h[i]) || h[i] < -0.5f) continue;  // no ground estimate, or far below it: ignored
     if (h[i] <= tol) {
       out[i] = id::kGround;
       continue;
     }
     const int cx = detail::floorInt(p.x() * inv_cell), cy = detail::floorInt(p.y() * inv_cell);
-    bool inserted = false;
-    const int k = map.findOrInsert(packCell(cx, cy, 0), static_cast<int>(cols.size()), &inserted);
-    if (inserted) {
-      cols.push_back({});
-      col_xy.emplace_back(cx, cy);
+    if (cx != last_x || cy != last_y) {  // neighbouring returns mostly share a column: look up only on a change
+      bool inserted = false;
+      last_k = map.findOrInsert(packCell(cx, cy, 0), static_cast<int>(cols.size()), &inserted);
+      if (inserted) {
+        cols.push_back({});
+        col_xy.emplace_back(cx, cy);
+      }
+      last_x = cx, last_y = cy;
     }
+    const int k = last_k;
     col_of[i] = k;
     auto& col = cols[static_cast<std::size_t>(k)];
     if (h[i] <= band)

@@ -9,6 +9,7 @@
 #include <map>
 
 #include "sglc/io.hpp"
+#include "sglc/labeller.hpp"
 #include "sglc/pipeline.hpp"
 
 namespace {
@@ -56,6 +57,23 @@ void BM_Fingerprint(benchmark::State& state) {
   const auto& scan = fixture().scans.at("000052");
   for (auto _ : state) benchmark::DoNotOptimize(fixture().pipeline.fingerprint(scan));
   state.counters["points"] = static_cast<double>(scan.points.size());
+}
+
+// The built-in labeller alone on a real HDL-64 scan (x, y, z only), with the engine's default parameters.
+void BM_Labeller(benchmark::State& state) {
+  if (!ready(state)) return;
+  const auto& scan = fixture().scans.at("000052");
+  const auto& config = fixture().pipeline.config().labeller;
+  for (auto _ : state) benchmark::DoNotOptimize(sglc::labelScene(scan.points, config));
+  state.counters["points"] = static_cast<double>(scan.points.size());
+}
+
+// Fingerprint of the same scan sent without labels: the labeller, then the usual pipeline.
+void BM_FingerprintWithoutLabels(benchmark::State& state) {
+  if (!ready(state)) return;
+  sglc::LabelledScan bare;
+  bare.points = fixture().scans.at("000052").points;
+  for (auto _ : state) benchmark::DoNotOptimize(fixture().pipeline.fingerprint(bare));
 }
 
 void BM_VerifyLoop(benchmark::State& state) {
@@ -116,6 +134,8 @@ void BM_Deserialize(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_Fingerprint)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_Labeller)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_FingerprintWithoutLabels)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VerifyLoop)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_VerifyNegative)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Refine)->Unit(benchmark::kMillisecond);
