@@ -76,6 +76,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"verify.confirm_below_inliers", &c.verify.confirm_below_inliers},
       {"verify.confirm_min_fitness", &c.verify.confirm_min_fitness},
       {"verify.confirm_max_rmse_m", &c.verify.confirm_max_rmse_m},
+      {"verify.confirm_min_constraint", &c.verify.confirm_min_constraint},
       {"verify.score_distance_m", &c.verify.score_distance_m},
       {"verify.bev_cell_m", &c.verify.bev_cell_m},
       {"verify.bev_radius_m", &c.verify.bev_radius_m},
@@ -165,6 +166,7 @@ void validateConfig(const Config& config) {
   require(c.verify.confirm_min_fitness >= 0 && c.verify.confirm_min_fitness <= 1, "verify.confirm_min_fitness",
           "in [0, 1]");
   require(c.verify.confirm_max_rmse_m > 0, "verify.confirm_max_rmse_m", "> 0");
+  require(c.verify.confirm_min_constraint >= 0, "verify.confirm_min_constraint", ">= 0");
   require(c.verify.bev_cell_m > 0 && c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000, "verify.bev_cell_m",
           "> 0 with bev_radius_m / bev_cell_m <= 2000");
   require(c.verify.bev_radius_m > 0, "verify.bev_radius_m", "> 0");

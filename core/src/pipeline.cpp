@@ -184,7 +184,8 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
     const auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
     const Mat4d d = r.T.inverse() * planes.T;  // confirming means staying near the coarse pose
     if (planes.iterations == 0 || planes.fitness < c.verify.confirm_min_fitness ||
-        planes.rmse > c.verify.confirm_max_rmse_m || d.topRightCorner<3, 1>().norm() > 1.0 ||
+        planes.rmse > c.verify.confirm_max_rmse_m || planes.horizontal_constraint < c.verify.confirm_min_constraint ||
+        d.topRightCorner<3, 1>().norm() > 1.0 ||
         rotationAngleDeg(d.topLeftCorner<3, 3>()) > 5.0) {
       r.is_loop = false;
       r.reason = "few node inliers and the background planes do not confirm the pose";

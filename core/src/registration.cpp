@@ -4,6 +4,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -377,8 +378,9 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   constexpr double kLever = 10.0;
   Vec6 scale;
   scale << 1.0 / kLever, 1.0 / kLever, 1.0 / kLever, 1.0, 1.0, 1.0;
-  // Gauss-Newton normal equations at T (left perturbation, rotation first) over the current association.
-  auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
+  // Gauss-Newton normal equations at T (left perturbation, rotation first) over the current association: the
+  // planes' part, then the anchor's.
+  auto planeEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
     const Mat3d R = T.topLeftCorner<3, 3>();
     const Vec3d t = T.topRightCorner<3, 1>();
     H.setZero();
@@ -395,6 +397,9 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       H += w * J * J.transpose();
       g += w * J * r;
     }
+  };
+  auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
+    planeEquations(T, H, g);
     const double wa = config.instance_weight;
     if (wa > 0 && !anchor_pairs.empty()) {
       // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
@@ -444,6 +449,13 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     normalEquations(result.T, H, g);  // at the final pose and association
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);
+    planeEquations(result.T, H, g);
+    const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
+    const std::array<int, 3> ground = {2, 3, 4};  // yaw, x, y
+    Mat3d Hg;
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) Hg(a, b) = Hs(ground[a], ground[b]);
+    result.horizontal_constraint = Eigen::SelfAdjointEigenSolver<Mat3d>(Hg, Eigen::EigenvaluesOnly).eigenvalues()[0];
   }
   return result;
 }

@@ -10,6 +10,7 @@
 #include "dense_registration.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/registration.hpp"
 #include "test_util.hpp"
 
 namespace sglc {
@@ -402,11 +403,21 @@ TEST(SyntheticPipeline, NearerRevisitScoresHigher) {
   EXPECT_NEAR(plain.score, far.graph_similarity * far.background_similarity * support, 1e-12);
 }
 
+// The street world with facades across it (a cross street's corners), so that its planes fix the position
+// along the street too.
+LabelledScan streetWithCrossFacades() {
+  LabelledScan world = test::makeStreetWorld();
+  test::addPoints(world, test::makeWall(30, -12, 30, -20, -1.7, 6, 0.4), test::kBuilding);
+  test::addPoints(world, test::makeWall(30, 9, 30, 20, -1.7, 6, 0.4), test::kBuilding);
+  test::addPoints(world, test::makeWall(-25, 9, -25, 20, -1.7, 6, 0.4), test::kBuilding);
+  return world;
+}
+
 // A loop with few node inliers must be confirmed by the background planes. The candidate below shows the same
 // street with both facades moved 0.8 m towards its middle: nodes and the bird's-eye view still agree, but no
 // rigid motion fits both facades' planes.
 TEST(SyntheticPipeline, FewInliersNeedThePlanesToConfirm) {
-  const LabelledScan world = test::makeStreetWorld();
+  const LabelledScan world = streetWithCrossFacades();
   LabelledScan squeezed = world;
   for (std::size_t i = 0; i < squeezed.points.size(); ++i)
     if (squeezed.labels[i] == test::kBuilding) squeezed.points[i].y() += squeezed.points[i].y() > 0 ? -0.8f : 0.8f;
@@ -427,6 +438,33 @@ TEST(SyntheticPipeline, FewInliersNeedThePlanesToConfirm) {
   EXPECT_EQ(static_cast<int>(unconfirmed.inlier_pairs.size()), unconfirmed.inliers);
   const LoopResult unchecked = p_never.verify(fq, fs);
   EXPECT_TRUE(unchecked.is_loop) << unchecked.reason;
+}
+
+// Planes of a straight street (facades along it only) fit at any shift along it, so they cannot confirm a
+// loop's position: horizontal_constraint is near 0 there, and well above verify.confirm_min_constraint once
+// cross facades pin the shift.
+TEST(SyntheticPipeline, AStraightStreetCannotConfirmAPosition) {
+  const Mat4d T = test::makeT(1.0, 2.0, 0.5, 0.0);
+  Config always;
+  always.verify.confirm_below_inliers = 1000;
+  Config unpinned = always;
+  unpinned.verify.confirm_min_constraint = 0;
+  const Pipeline p(always), p_unpinned(unpinned);
+  auto constraint = [&](const LabelledScan& world) {
+    const Fingerprint fq = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
+    const Fingerprint fc = p.fingerprint(test::viewFrom(world, T));
+    const LoopResult coarse = p_unpinned.verify(fq, fc);
+    EXPECT_TRUE(coarse.is_loop) << coarse.reason;
+    const auto planes = refinePlanes(fq.planes, fq.plane_index, fc.planes, {}, coarse.T, always.refine);
+    return std::make_pair(planes.horizontal_constraint, p.verify(fq, fc));
+  };
+  const auto [corridor, in_corridor] = constraint(test::makeStreetWorld());
+  EXPECT_LT(corridor, 0.5);
+  EXPECT_FALSE(in_corridor.is_loop);
+  EXPECT_STREQ(in_corridor.reason, "few node inliers and the background planes do not confirm the pose");
+  const auto [pinned, at_crossing] = constraint(streetWithCrossFacades());
+  EXPECT_GT(pinned, 2 * always.verify.confirm_min_constraint);
+  EXPECT_TRUE(at_crossing.is_loop) << at_crossing.reason;
 }
 
 LabelledScan emptyScan() { return {}; }

@@ -57,6 +57,11 @@ struct RefineResult {
   // 1 / max(rmse, 1 cm)^2, over a right perturbation T_true = T exp(xi), xi = (translation, rotation) in the
   // candidate's frame (metres, radians).
   Mat6d information = Mat6d::Zero();
+  // How firmly the planes alone fix the pose on the ground: the smallest eigenvalue of their Gauss-Newton
+  // Hessian over heading and horizontal shift (Cauchy-weighted plane pairs, heading scaled by a 10 m lever arm;
+  // 1/m^2, about the number of plane pairs whose normals pin the weakest direction). A straight corridor leaves
+  // the shift along it free: near 0.
+  double horizontal_constraint = 0.0;
 };
 
 // Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.
