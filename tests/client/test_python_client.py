@@ -204,6 +204,10 @@ try:
         finish()
 
     c = sglc_client.Client(address, stubs_path=args.stubs, timeout=60)
+    info = c.server_info()
+    check(info.label_preset == "semantickitti" and info.labeller_mode == "auto" and info.version != ""
+          and [n.name for n in info.node_classes] == ["vehicle", "trunk", "pole"] and info.max_points > 0,
+          f"server_info: preset, labeller mode, label map, limits ({info.label_preset}, {info.labeller_mode})")
     check(c.create_map("py").name == "py", "create_map")
     c.ensure_map("py")
     check([m.name for m in c.list_maps()] == ["py"], "list_maps")
@@ -277,6 +281,12 @@ try:
     p88, l88 = read_bytes("000088")
     e = raises(sglc_client.SglcError, c.ingest, "py", "a", "00", 52, p88, l88)
     check(e is not None and e.code_name == "ALREADY_EXISTS", "another scan under a stored key gives ALREADY_EXISTS")
+    # Points only (no labels): the server labels the scans, says so, and finds the loop from them.
+    c.create_map("raw")
+    u = c.ingest("raw", "u", "00", 52, p52)
+    check(u.label_source == c.pb2.LABELS_COMPUTED, "ingest without labels: labels computed by the server")
+    u2 = c.ingest("raw", "u", "00", 4501, p4501, query=True, exclude_recent=50)
+    check(any(x.scan_id == u.scan_id and x.verified for x in u2.loops), "the loop is found without labels")
     c.close()
 
     # The example runs and finds the loop.

@@ -350,6 +350,9 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
   std::vector<Candidate> top(frames.size());
   std::vector<RegistrationResult> poses;
   std::size_t in_band = 0;
+  // Every query's verified top-1 candidate, whatever its score: where false loops come from.
+  std::ofstream top1(run.out + "/top1.csv");
+  top1 << "frame,match_frame,score,distance_m,outcome\n" << std::setprecision(6);
   Prefetch pre(run.source, frames, run.threads);
   Progress bar("query", frames.size());
   for (std::size_t q = 0; q < frames.size(); ++q) {
@@ -363,7 +366,14 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
     for (const auto& c : cands) r.push_back(isTrue(f, c.frame));
     ranked.push_back(r);
     Decision d{0.0, false, has_true[q]};
-    if (!cands.empty() && cands[0].verified && inBand(f, cands[0].frame)) ++in_band;
+    if (!cands.empty() && cands[0].verified) {
+      const int m = cands[0].frame;
+      const bool band = inBand(f, m);
+      in_band += band;
+      top1 << f << "," << m << "," << cands[0].score << ","
+           << (run.source.hasPose(f) && run.source.hasPose(m) ? distance(f, m) : -1.0) << ","
+           << (band ? "between" : r[0] ? "true" : "false") << "\n";
+    }
     if (!cands.empty() && cands[0].verified && !inBand(f, cands[0].frame)) {
       top[q] = cands[0];
       d.score = cands[0].score;
@@ -546,7 +556,8 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
 int main(int argc, char** argv) {
   CLI::App app{"Loop-closure evaluation: F1max, EP, AUC, Recall@1, registration recall, pose errors, timing."};
   std::string protocol, data, poses, calib, frames, pairs, server, token, out, config_path, gt_list, title;
-  bool sim = false, no_plots = false, gt_from_file = false;
+  bool sim = false, no_plots = false, gt_from_file = false, no_labels = false;
+  int beams = 64;
   std::uint64_t seed = 7;
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
   int threads = 2;
@@ -560,6 +571,10 @@ int main(int argc, char** argv) {
   app.add_option("--calib", calib, "with --sim --poses: KITTI calib.txt (Tr)");
   app.add_option("--seed", seed, "with --sim: world and sensor seed");
   app.add_option("--label-noise", label_noise, "with --sim: label noise rate (0..1)")->check(CLI::Range(0.0, 1.0));
+  app.add_option("--beams", beams, "with --sim: sensor with 32 (HDL-32E-like), 64 (HDL-64E-like) or 128 beams")
+      ->check(CLI::IsMember({32, 64, 128}));
+  app.add_flag("--no-labels", no_labels,
+               "send points only (labels removed from any source): the engine's labeller labels them");
   app.add_option("--frames", frames, "frame selection 'a:b:s,...' (default: all)");
   app.add_option("--pairs", pairs, "pair file: 'i j label' (pairs), 'i j [T 3x4]' (pose)");
   std::string pose_pairs;
@@ -586,8 +601,9 @@ int main(int argc, char** argv) {
 
   try {
     if (sim == !data.empty()) throw InputError("give exactly one of --data DIR and --sim");
-    if (!sim && (!poses.empty() || !calib.empty() || label_noise > 0))
-      throw InputError("--poses, --calib and --label-noise belong to --sim");
+    if (!sim && (!poses.empty() || !calib.empty() || label_noise > 0 || beams != 64))
+      throw InputError("--poses, --calib, --label-noise and --beams belong to --sim");
+    if (no_labels && label_noise > 0) throw InputError("--label-noise has no effect with --no-labels");
     if (protocol == "slam" && server.empty())
       throw InputError("--protocol slam measures a server's pose graph: give --server ADDR");
     if (protocol != "sequence" && protocol != "slam" && pairs.empty()) throw InputError("--protocol " + protocol + " needs --pairs FILE");
@@ -599,8 +615,9 @@ int main(int argc, char** argv) {
     fs::create_directories(out);
 
     std::unique_ptr<FrameSource> source;
-    if (sim) source = simulatedSource({poses, calib, frames, seed, label_noise});
+    if (sim) source = simulatedSource({poses, calib, frames, seed, label_noise, beams});
     else source = directorySource(data, frames);
+    if (no_labels) source = withoutLabels(std::move(source));
     if (protocol == "sequence" || protocol == "all") {
       const auto n = static_cast<int>(std::ceil(0.01 * static_cast<double>(source->frames().size())));
       query.candidates = std::min(100, std::max(query.candidates, n));
@@ -625,6 +642,10 @@ int main(int argc, char** argv) {
       run.summary["title"] = (title.empty() ? name : title + " - " + name) + ": " + source->describe();
       run.summary["source"] = source->describe();
       run.summary["backend"] = backend->name();
+      run.summary["labels_sent"] = no_labels ? "none" : "given";
+      run.summary["label_preset"] = config.labels.preset;
+      run.summary["labeller_mode"] = config.labeller.mode;
+      if (sim) run.summary["beams"] = beams;
       if (!server.empty()) run.summary["server_map"] = map_name;
       run.summary["frames"] = source->frames().size();
       if (name == "sequence") {

@@ -18,7 +18,8 @@ class SimSource final : public FrameSource {
   explicit SimSource(const SimSourceOptions& o) : sim_(trajectory(o), config(o)) {
     frames_ = sim::parseFrameSelection(o.frames, sim_.numFrames());
     std::ostringstream d;
-    d << sim_.trajectory().source << ", seed " << o.seed << ", label noise " << o.label_noise * 100 << " %";
+    d << sim_.trajectory().source << ", " << o.beams << " beams, seed " << o.seed << ", label noise "
+      << o.label_noise * 100 << " %";
     describe_ = d.str();
   }
   const std::vector<int>& frames() const override { return frames_; }
@@ -37,6 +38,7 @@ class SimSource final : public FrameSource {
     sim::SimConfig c;
     c.seed = o.seed;
     c.label_noise = sim::LabelNoise::fromRate(o.label_noise);
+    c.sensor = sim::SensorConfig::preset(o.beams);
     c.threads = 1;  // frames are rendered in parallel instead
     return c;
   }
@@ -82,7 +84,29 @@ class DirSource final : public FrameSource {
   std::map<int, Mat4d> poses_;
 };
 
+class UnlabelledSource final : public FrameSource {
+ public:
+  explicit UnlabelledSource(std::unique_ptr<FrameSource> inner) : inner_(std::move(inner)) {}
+  const std::vector<int>& frames() const override { return inner_->frames(); }
+  bool hasPose(int f) const override { return inner_->hasPose(f); }
+  Mat4d pose(int f) const override { return inner_->pose(f); }
+  LabelledScan scan(int f) const override {
+    auto s = inner_->scan(f);
+    s.labels.clear();
+    s.labels.shrink_to_fit();
+    return s;
+  }
+  std::string describe() const override { return inner_->describe() + ", labels removed"; }
+
+ private:
+  std::unique_ptr<FrameSource> inner_;
+};
+
 }  // namespace
+
+std::unique_ptr<FrameSource> withoutLabels(std::unique_ptr<FrameSource> source) {
+  return std::make_unique<UnlabelledSource>(std::move(source));
+}
 
 std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
   return std::make_unique<SimSource>(options);

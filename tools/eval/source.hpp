@@ -31,11 +31,16 @@ struct SimSourceOptions {
   std::string frames;       // selection "a:b:s,..." (sglc-sim syntax); empty: all
   std::uint64_t seed = 7;
   double label_noise = 0;   // LabelNoise::fromRate
+  int beams = 64;           // SensorConfig::preset: 32 (HDL-32E-like), 64 (HDL-64E-like), 128
 };
 std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
 
 // dir: a sequence directory (velodyne/, labels/, optional poses.txt + calib.txt). poses.txt holds camera poses
 // (KITTI convention); with calib.txt they become LiDAR poses. `frames` selects by frame number.
 std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames);
+
+// The same frames with their labels removed (points only), to measure the label-free path: the engine's
+// built-in labeller labels them.
+std::unique_ptr<FrameSource> withoutLabels(std::unique_ptr<FrameSource> source);
 
 }  // namespace sglc::eval

@@ -214,6 +214,13 @@ class Client:
         """GetStatsResponse of one map, or of the whole database (map="")."""
         return self._call(self._admin.GetStats, "MapAdmin.GetStats", self.pb2.GetStatsRequest(map=map), timeout)
 
+    def server_info(self, timeout=None):
+        """GetServerInfoResponse: version, label preset and the full label map (node_classes, road, building,
+        fence, vegetation, moving), labeller mode, engine configuration (YAML), descriptor_dim and limits
+        (max_points, max_message_bytes, ...). Check it before sending: labels the map does not know give no
+        loops; unlabelled scans need labeller_mode "auto" or "always"."""
+        return self._call(self._admin.GetServerInfo, "MapAdmin.GetServerInfo", self.pb2.GetServerInfoRequest(), timeout)
+
     def backup(self, path, timeout=None):
         """Online backup to a new file on the server's machine. Returns BackupResponse (path, bytes)."""
         return self._call(self._admin.Backup, "MapAdmin.Backup", self.pb2.BackupRequest(path=path), timeout)
