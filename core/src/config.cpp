@@ -31,6 +31,7 @@ std::map<std::string, FieldRef> fields(Config& c) {
       {"labeller.ground_cell_m", &c.labeller.ground_cell_m},
       {"labeller.ground_band_m", &c.labeller.ground_band_m},
       {"labeller.ground_tolerance_m", &c.labeller.ground_tolerance_m},
+      {"labeller.ground_max_step_m", &c.labeller.ground_max_step_m},
       {"labeller.cell_m", &c.labeller.cell_m},
       {"labeller.link_m", &c.labeller.link_m},
       {"labeller.low_band_m", &c.labeller.low_band_m},

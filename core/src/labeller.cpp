@@ -14,8 +14,11 @@ namespace {
 namespace id = labeller_ids;
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
-// Ground: per column of ground_cell_m, the floor (second-lowest point, robust to one stray return below the
-// road), the floor of the 3 x 3 neighbourhood, and a plane z = a x + b y + c through the points just above it.
+// Ground: per column of ground_cell_m, a floor and a plane z = a x + b y + c through the column's points just
+// above it. Two floors: the column's own (its second-lowest point, robust to one stray return below the road)
+// and its 3 x 3 neighbourhood's (a column under a car sees the road beside it). The own floor's plane stands
+// unless it is more than ground_max_step_m above the own planes of two neighbours where the columns meet: so
+// slopes stay ground, and a raised column (a car, a bush, a wall's foot) takes the neighbourhood's floor.
 class Ground {
  public:
   Ground(const Points& points, const LabellerConfig& c) : cell_(static_cast<float>(c.ground_cell_m)) {
@@ -37,10 +40,8 @@ class Ground {
         low2[k] = p.z();
       }
     }
-    // A column's own floor: its second-lowest point (or its only one).
-    std::vector<float> own(n_cells, kInf);
+    std::vector<float> own(n_cells, kInf), near(n_cells, kInf);
     for (std::size_t k = 0; k < n_cells; ++k) own[k] = std::isfinite(low2[k]) ? low2[k] : low1[k];
-    std::vector<float> floor(n_cells, kInf);
     for (int y = 0; y < side_; ++y)
       for (int x = 0; x < side_; ++x) {
         float f = kInf;
@@ -49,48 +50,47 @@ class Ground {
             const int xx = x + dx, yy = y + dy;
             if (xx >= 0 && yy >= 0 && xx < side_ && yy < side_) f = std::min(f, own[cellAt(xx, yy)]);
           }
-        floor[cellAt(x, y)] = f;
+        near[cellAt(x, y)] = f;
       }
-    // Plane per column through the points within ground_band_m of the floor (only this column's points), in
-    // coordinates relative to the column's corner: small numbers, so float sums keep their precision.
-    struct Sums {
-      float n = 0, x = 0, y = 0, z = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
-    };
-    std::vector<Sums> sums(n_cells);
+    // Sums of the column's points within ground_band_m of each floor, relative to the column's corner and its
+    // floor: small numbers, so float sums keep their precision.
+    std::vector<PlaneSums> own_sums(n_cells), near_sums(n_cells);
     const float band = static_cast<float>(c.ground_band_m);
     for (std::size_t i = 0; i < points.size(); ++i) {
       const int k = column_[i];
       if (k < 0) continue;
       const auto& p = points[i];
-      if (!(p.z() <= floor[k] + band)) continue;
-      auto& s = sums[k];
-      const float x = p.x() - cornerX(k), y = p.y() - cornerY(k), z = p.z() - floor[k];
-      s.n += 1;
-      s.x += x, s.y += y, s.z += z;
-      s.xx += x * x, s.xy += x * y, s.yy += y * y, s.xz += x * z, s.yz += y * z;
+      const float x = p.x() - cornerX(k), y = p.y() - cornerY(k);
+      if (p.z() <= own[k] + band) own_sums[k].add(x, y, p.z() - own[k]);
+      if (p.z() <= near[k] + band) near_sums[k].add(x, y, p.z() - near[k]);
     }
+    std::vector<Eigen::Vector3f> own_plane(n_cells);
+    for (std::size_t k = 0; k < n_cells; ++k) own_plane[k] = plane(own_sums[k], own[k], static_cast<int>(k));
+    const float step = static_cast<float>(c.ground_max_step_m);
     plane_.assign(n_cells, Eigen::Vector3f(0, 0, kInf));
-    for (std::size_t k = 0; k < n_cells; ++k) {
-      const auto& s = sums[k];
-      if (s.n < 1) {
-        if (std::isfinite(floor[k])) plane_[k] = Eigen::Vector3f(0, 0, floor[k]);
-        continue;
+    for (int y = 0; y < side_; ++y)
+      for (int x = 0; x < side_; ++x) {
+        const int k = cellAt(x, y);
+        const auto ku = static_cast<std::size_t>(k);
+        if (!std::isfinite(own[ku])) continue;  // no points: never asked
+        // Compared where the two columns meet (half a column from each centre), so a tilt is extrapolated
+        // over little distance.
+        const float cx = cornerX(k) + 0.5f * cell_, cy = cornerY(k) + 0.5f * cell_;
+        auto at = [](const Eigen::Vector3f& g, float px, float py) { return g.x() * px + g.y() * py + g.z(); };
+        int below = 0;  // neighbours whose ground lies more than a step lower
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int xx = x + dx, yy = y + dy;
+            if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= side_ || yy >= side_) continue;
+            const auto n = static_cast<std::size_t>(cellAt(xx, yy));
+            // Only planes fitted to enough points: a level fallback is no reference on a slope.
+            if (own_sums[n].n < 6 || !std::isfinite(own_plane[n].z())) continue;
+            const float mx = cx + 0.5f * cell_ * static_cast<float>(dx), my = cy + 0.5f * cell_ * static_cast<float>(dy);
+            below += !(at(own_plane[ku], mx, my) <= at(own_plane[n], mx, my) + step);
+          }
+        // Two neighbours, so that one badly fitted neighbour (a sliver of points) does not lift a slope.
+        plane_[ku] = below >= 2 ? plane(near_sums[ku], near[ku], k) : own_plane[ku];
       }
-      Eigen::Vector3d sol(0, 0, s.z / s.n);
-      if (s.n >= 6) {
-        Eigen::Matrix3d A;
-        A << s.xx, s.xy, s.x, s.xy, s.yy, s.y, s.x, s.y, s.n;
-        const Eigen::Vector3d b(s.xz, s.yz, s.z);
-        const Eigen::Vector3d fit = A.ldlt().solve(b);
-        // Accept a tilted plane only when it is well conditioned and no steeper than 30 %.
-        const double spread = (s.xx - s.x * s.x / s.n) + (s.yy - s.y * s.y / s.n);
-        if (fit.allFinite() && std::hypot(fit.x(), fit.y()) < 0.3 && spread / s.n > 0.1) sol = fit;
-      }
-      // Back to scan coordinates: z = a (x - x0) + b (y - y0) + c + floor.
-      const auto k_int = static_cast<int>(k);
-      sol.z() += floor[k] - sol.x() * cornerX(k_int) - sol.y() * cornerY(k_int);
-      plane_[k] = sol.cast<float>();
-    }
   }
 
   // Height of point i above the ground of its column (+inf where it has none: out of range, non-finite).
@@ -109,6 +109,35 @@ class Ground {
     return cellAt(x, y);
   }
   int cellAt(int x, int y) const { return y * side_ + x; }
+
+  struct PlaneSums {
+    float n = 0, x = 0, y = 0, z = 0, xx = 0, xy = 0, yy = 0, xz = 0, yz = 0;
+    void add(float px, float py, float pz) {
+      n += 1;
+      x += px, y += py, z += pz;
+      xx += px * px, xy += px * py, yy += py * py, xz += px * pz, yz += py * pz;
+    }
+  };
+  // Plane z = a x + b y + c (scan coordinates) of column k from its sums relative to its corner and `floor`:
+  // tilted when the fit is well conditioned and no steeper than 30 %, else level at the points' mean height;
+  // the floor itself without points; +inf c without a floor.
+  Eigen::Vector3f plane(const PlaneSums& s, float floor, int k) const {
+    if (!std::isfinite(floor)) return {0, 0, kInf};
+    if (s.n < 1) return {0, 0, floor};
+    Eigen::Vector3d sol(0, 0, s.z / s.n);
+    if (s.n >= 6) {
+      Eigen::Matrix3d A;
+      A << s.xx, s.xy, s.x, s.xy, s.yy, s.y, s.x, s.y, s.n;
+      const Eigen::Vector3d b(s.xz, s.yz, s.z);
+      const Eigen::Vector3d fit = A.ldlt().solve(b);
+      const double spread = (s.xx - s.x * s.x / s.n) + (s.yy - s.y * s.y / s.n);
+      if (fit.allFinite() && std::hypot(fit.x(), fit.y()) < 0.3 && spread / s.n > 0.1) sol = fit;
+    }
+    // Back to scan coordinates: z = a (x - x0) + b (y - y0) + c + floor.
+    sol.z() += floor - sol.x() * cornerX(k) - sol.y() * cornerY(k);
+    return sol.cast<float>();
+  }
+
   float cornerX(int k) const { return static_cast<float>(k % side_ - half_) * cell_; }
   float cornerY(int k) const { return static_cast<float>(k / side_ - half_) * cell_; }
 

@@ -3,10 +3,11 @@
 // Loop closing needs labels that are repeatable more than correct: the same street must cluster into the same
 // objects on every visit. The labeller is geometric, deterministic and O(N), and assumes no beam model, ring
 // index or sensor height, so it serves 16 to 128 beams, non-repetitive patterns and downsampled clouds:
-//  1. Ground: the two lowest points of each 2 m column give a robust floor; the floor of a column is the lowest
-//     of its 3 x 3 neighbourhood (a column under a car sees the road beside it); the points within
-//     `ground_band_m` of that floor fit the column's ground plane. Points within `ground_tolerance_m` of it are
-//     ground (road role).
+//  1. Ground: per 2 m column, the second-lowest point is the column's floor (robust to one stray return) and the
+//     points within `ground_band_m` of it fit a plane (tilted up to 30 %, so slopes stay ground). A column whose
+//     plane stands more than `ground_max_step_m` above the planes of two neighbours (where the columns meet) has
+//     no ground of its own (a car, a bush, a wall's foot): its plane is fitted from the lowest floor of its 3 x 3
+//     neighbourhood instead. Points within `ground_tolerance_m` of the plane are ground (road role).
 //  2. Objects: points between `ground_tolerance_m` and `low_band_m` above the ground (the band where trunks,
 //     poles, cars, walls and hedges all appear, below canopies) are binned into `cell_m` columns; 8-connected
 //     columns are objects, classified by their footprint (principal extents), height and what stands above:
