@@ -2,7 +2,7 @@
 # Regenerates docs/RESULTS.md with build/bin/sglc-eval: simulated sequences along KITTI 00, 05 and 08 at 0, 5
 # and 15 % label noise (sequence, pair and pose protocols), the real pairs of ../shared/data, and ablations.
 # Summaries, CSV files and figures go to docs/results/ (generated, not committed).
-#   scripts/results.sh                    # everything (about two hours on 2 cores)
+#   scripts/results.sh                    # everything (about three hours on 2 cores)
 #   SEQS=00 NOISES=0.05 scripts/results.sh   # a subset
 #   PARTS="real ablation" scripts/results.sh # only some parts: real, ablation, sim, labels, nuscenes, slam
 #                                            # (default: all)
@@ -200,11 +200,13 @@ if want slam; then
 fi
 
 [ "${NO_REPORT:-0}" = 1 ] && exit 0
-if [ -z "${PARTS//[[:space:]]/}" ] || [[ " $PARTS " == *" sim "* ]]; then
+only_label_parts=1
+for p in $PARTS; do [ "$p" = labels ] || [ "$p" = nuscenes ] || only_label_parts=0; done
+if [ "$only_label_parts" = 0 ]; then
   /usr/bin/python3 tools/eval/results_md.py "$OUT" > docs/RESULTS.md
   echo "wrote docs/RESULTS.md" >&2
 else
-  # Only some parts ran: their sections replace the old ones; the rest of RESULTS.md stays as it was.
+  # Only the label-free parts ran: their sections replace the old ones; the rest of RESULTS.md stays.
   /usr/bin/python3 tools/eval/results_md.py --splice docs/RESULTS.md "$OUT" > docs/RESULTS.md.new
   mv docs/RESULTS.md.new docs/RESULTS.md
   echo "updated the sections of docs/RESULTS.md that these parts produce" >&2

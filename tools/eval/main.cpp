@@ -612,6 +612,8 @@ int main(int argc, char** argv) {
       throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
     Config config;
     if (!config_path.empty()) config = loadConfig(config_path);
+    if (no_labels && server.empty() && config.labeller.mode == "off")
+      throw InputError("--no-labels needs the labeller: labeller.mode is off in --config");
     fs::create_directories(out);
 
     std::unique_ptr<FrameSource> source;
@@ -643,8 +645,10 @@ int main(int argc, char** argv) {
       run.summary["source"] = source->describe();
       run.summary["backend"] = backend->name();
       run.summary["labels_sent"] = no_labels ? "none" : "given";
-      run.summary["label_preset"] = config.labels.preset;
-      run.summary["labeller_mode"] = config.labeller.mode;
+      if (server.empty()) {  // a server's own configuration decides there (GetServerInfo)
+        run.summary["label_preset"] = config.labels.preset;
+        run.summary["labeller_mode"] = config.labeller.mode;
+      }
       if (sim) run.summary["beams"] = beams;
       if (!server.empty()) run.summary["server_map"] = map_name;
       run.summary["frames"] = source->frames().size();

@@ -133,7 +133,11 @@ def splice(path, root):
     figures)."""
     text = open(path).read().split("\n")
     new = labels_section(root)
-    if BEGIN_LABELS in text and END_LABELS in text:
+    if not new:
+        return "\n".join(text)  # no label-free run here: the section stays as it was
+    if (BEGIN_LABELS in text) != (END_LABELS in text):
+        sys.exit(f"{path}: one of the label-free section's markers is missing; fix the file by hand")
+    if BEGIN_LABELS in text:
         a, b = text.index(BEGIN_LABELS), text.index(END_LABELS)
         end = b + 2 if b + 1 < len(text) and text[b + 1] == "" else b + 1
         text = text[:a] + new + text[end:]

@@ -165,7 +165,7 @@ struct LabellerConfig {
   double ground_cell_m = 2.0;       // ground columns
   double ground_band_m = 0.3;       // points this close above a column's floor fit its ground plane
   double ground_tolerance_m = 0.2;  // ground = within this of the plane (curbs included)
-  double ground_max_step_m = 0.25;  // a column this far above a neighbour's ground plane has none of its own
+  double ground_max_step_m = 0.25;  // a column this far above two neighbours' ground planes has none of its own
   double cell_m = 0.25;             // object columns
   double link_m = 0.25;             // columns this close belong to one object (raise for sparse clouds)
   double low_band_m = 2.0;          // objects are found in the band below this height (under canopies)

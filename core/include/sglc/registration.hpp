@@ -60,7 +60,9 @@ struct RefineResult {
   // How firmly the planes alone fix the pose on the ground: the smallest eigenvalue of their Gauss-Newton
   // Hessian over heading and horizontal shift (Cauchy-weighted plane pairs, heading scaled by a 10 m lever arm;
   // 1/m^2, about the number of plane pairs whose normals pin the weakest direction). A straight corridor leaves
-  // the shift along it free: near 0.
+  // the shift along it free: near 0. It is the Hessian's block with roll, pitch and height held (not their
+  // Schur complement), and it grows with the number of planes, so thresholds on it assume the default
+  // fingerprint.plane_voxel_m.
   double horizontal_constraint = 0.0;
 };
 
