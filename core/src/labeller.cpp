@@ -84,7 +84,7 @@ class Ground {
             if ((dx == 0 && dy == 0) || xx < 0 || yy < 0 || xx >= side_ || yy >= side_) continue;
             const auto n = static_cast<std::size_t>(cellAt(xx, yy));
             // Only planes fitted to enough points: a level fallback is no reference on a slope.
-            if (own_sums[n].n < 6 || !std::isfinite(own_plane[n].z())) continue;
+            if (own_sums[n].n < 6) continue;
             const float mx = cx + 0.5f * cell_ * static_cast<float>(dx), my = cy + 0.5f * cell_ * static_cast<float>(dy);
             below += !(at(own_plane[ku], mx, my) <= at(own_plane[n], mx, my) + step);
           }

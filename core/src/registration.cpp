@@ -4,7 +4,6 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <limits>
 
@@ -398,8 +397,7 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       g += w * J * r;
     }
   };
-  auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
-    planeEquations(T, H, g);
+  auto addAnchor = [&](const Mat4d& T, Mat6& H, Vec6& g) {
     const double wa = config.instance_weight;
     if (wa > 0 && !anchor_pairs.empty()) {
       // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
@@ -419,6 +417,10 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
       g += inv.asDiagonal() * (P * gas);
     }
+  };
+  auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
+    planeEquations(T, H, g);
+    addAnchor(T, H, g);
   };
   Mat6 H;
   Vec6 g;
@@ -446,16 +448,13 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   result.rmse = result.correspondences ? std::sqrt(sq / result.correspondences) : 0.0;
   result.fitness = candidate.empty() ? 0.0 : static_cast<double>(result.correspondences) / candidate.size();
   if (result.iterations > 0 && result.correspondences >= 6) {
-    normalEquations(result.T, H, g);  // at the final pose and association
+    // At the final pose and association: the planes alone (yaw, x, y are indices 2-4), then with the anchor.
+    planeEquations(result.T, H, g);
+    const Mat3d Hg = (scale.asDiagonal() * H * scale.asDiagonal()).block<3, 3>(2, 2);
+    result.horizontal_constraint = Eigen::SelfAdjointEigenSolver<Mat3d>(Hg, Eigen::EigenvaluesOnly).eigenvalues()[0];
+    addAnchor(result.T, H, g);
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);
-    planeEquations(result.T, H, g);
-    const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
-    const std::array<int, 3> ground = {2, 3, 4};  // yaw, x, y
-    Mat3d Hg;
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b) Hg(a, b) = Hs(ground[a], ground[b]);
-    result.horizontal_constraint = Eigen::SelfAdjointEigenSolver<Mat3d>(Hg, Eigen::EigenvaluesOnly).eigenvalues()[0];
   }
   return result;
 }
