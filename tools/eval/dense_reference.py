@@ -68,10 +68,21 @@ def main():
     ap.add_argument("--gaps", default="1,2", help="frame gaps of the pairs (default 1,2)")
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
-    rows = np.loadtxt(os.path.join(args.sequence, "poses.txt")).reshape(-1, 3, 4)
+    poses_path = os.path.join(args.sequence, "poses.txt")
+    if not os.path.isfile(poses_path):
+        sys.exit(f"{poses_path}: missing (12 numbers per line: LiDAR poses)")
+    rows = np.loadtxt(poses_path, ndmin=2)
+    if rows.shape[1] != 12 or not np.isfinite(rows).all():
+        sys.exit(f"{poses_path}: need 12 finite numbers per line, got {rows.shape[1]}")
+    rows = rows.reshape(-1, 3, 4)
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = rows
-    gaps = [int(g) for g in args.gaps.split(",")]
+    try:
+        gaps = [int(g) for g in args.gaps.split(",")]
+    except ValueError:
+        sys.exit(f"--gaps: comma-separated positive integers, got '{args.gaps}'")
+    if any(g < 1 for g in gaps):
+        sys.exit("--gaps: each gap must be at least 1")
     with open(args.out, "w") as out:
         for gap in gaps:
             errors = []
