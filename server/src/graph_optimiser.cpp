@@ -120,6 +120,7 @@ struct GraphOptimiser::MapGraph {
   std::int64_t last_scan = 0, last_loop = 0;
   std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
   bool converged = false;  // the last solve ended by convergence (not by its iteration or time bound)
+  int continuations = 0;   // unconverged solves in a row
 };
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
@@ -440,6 +441,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
     if (!problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) || !std::isfinite(cost))
       throw std::runtime_error("the graph's initial cost is not finite");
   }
+  g.converged = g.nodes.empty();  // nothing to solve is solved
   if (!g.nodes.empty()) {
     if (wide) {
       for (auto* loss : loop_losses)
@@ -485,6 +487,17 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   event.nodes = static_cast<std::int64_t>(g.nodes.size());
   event.rejected_loops = rejected;
   event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  event.converged = g.converged;
+  // Stopped at a bound: carry on from here soon (the worker; optimiseNow callers see converged = false), but
+  // not forever on a graph that never meets Ceres' tolerances.
+  g.continuations = g.converged ? 0 : g.continuations + 1;
+  if (!g.converged && g.continuations <= options_.max_continuations) {
+    {
+      std::lock_guard lock(mutex_);
+      if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+    }
+    wake_.notify_all();
+  }
   spdlog::info("{}", logLine({{"event", "optimised"},
                               {"map", map},
                               {"version", event.graph_version},
@@ -492,6 +505,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
                               {"loops", event.loops},
                               {"rejected", rejected},
                               {"iterations", summary.iterations.size()},
+                              {"converged", event.converged},
                               {"ms", std::round(event.optimise_ms * 10) / 10}}));
   publish(map, event);
   return event;

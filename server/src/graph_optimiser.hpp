@@ -34,6 +34,9 @@ struct GraphEvent {
   std::int64_t nodes = 0;
   int rejected_loops = 0;
   double optimise_ms = 0;
+  // The solve ended by convergence. False when it stopped at its iteration or time bound: the worker then
+  // goes on from these poses (up to GraphOptimiserOptions::max_continuations times) until it converges.
+  bool converged = false;
   // The solve failed (non-finite or diverged): the map keeps its last good poses (graph_version is theirs) and
   // `error` says what happened. The next successful solve clears it.
   bool failed = false;
@@ -44,6 +47,7 @@ struct GraphOptimiserOptions {
   std::chrono::milliseconds debounce{200};  // wait this long after a loop for more before optimising
   double max_seconds = 5.0;                 // per optimisation
   int max_iterations = 100;
+  int max_continuations = 10;               // solves in a row that may go on from an unconverged one
   double loss_scale = 1.0;                  // Cauchy loss scale on whitened loop residuals
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.

@@ -393,6 +393,7 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
     m.set_nodes(pending_->nodes);
     m.set_rejected_loops(pending_->rejected_loops);
     m.set_optimise_ms(pending_->optimise_ms);
+    m.set_converged(pending_->converged);
     m.set_failed(pending_->failed);
     m.set_error(pending_->error);
     if (!pending_->failed) after_ = pending_->graph_version;

@@ -181,6 +181,40 @@ TEST(GraphOptimiser, ARestartContinuesFromTheStoredPosesAndWakesWatchers) {
   EXPECT_TRUE(graph.stopping());
 }
 
+// A solve cut short by its iteration bound says so, and the worker goes on from its poses until the graph
+// converges; with no continuations allowed it stays where it stopped until something new arrives.
+TEST(GraphOptimiser, AnUnconvergedSolveIsContinued) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  const auto d = drive(*store);
+  GraphOptimiserOptions o;
+  o.debounce = std::chrono::milliseconds(10);
+  o.max_iterations = 2;
+  o.max_continuations = 0;
+  std::int64_t version = 0;
+  {
+    GraphOptimiser graph(*store, o);  // the start-up solve of the map is the only one
+    const auto e = graph.waitForVersion("m", 0, std::chrono::seconds(60));
+    ASSERT_TRUE(e.has_value());
+    EXPECT_FALSE(e->converged);
+    version = e->graph_version;
+    EXPECT_FALSE(graph.waitForVersion("m", version, std::chrono::milliseconds(300)).has_value());
+  }
+  o.max_continuations = 1000;
+  GraphOptimiser graph(*store, o);
+  std::optional<GraphEvent> e;
+  int solves = 0;
+  do {
+    e = graph.waitForVersion("m", version, std::chrono::seconds(60));
+    ASSERT_TRUE(e.has_value()) << "no further solve after version " << version;
+    version = e->graph_version;
+    ++solves;
+  } while (!e->converged && solves < 500);
+  EXPECT_TRUE(e->converged) << solves << " solves";
+  EXPECT_GT(solves, 1);
+  EXPECT_LT(ate(optimised(*store), d.gt), 0.5 * ate(d.odom, d.gt));
+}
+
 // Deleting a session takes its scans and loops out of the graph: the map is solved again without them, from
 // the poses it had, and a loop recorded twice for the same pair counts once (the second replaces the first).
 TEST(GraphOptimiser, DeletedScansAndReplacedLoopsLeaveTheGraph) {

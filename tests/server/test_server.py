@@ -486,21 +486,17 @@ def test_pose_graph(tmp):
         half = n // 2
         reqs += [pb.IngestRequest(key=key("b", i), scan=scan(i), odometry_pose=tf(offset @ odom[i]), query=True,
                                   query_options=opts) for i in range(half, n)]
-        loops = sum(len(r.loops) for r in s.loop.IngestStream(iter(reqs), timeout=600))
+        # Every verified loop becomes one edge of the pose graph.
+        loops = sum(l.verified for r in s.loop.IngestStream(iter(reqs), timeout=600) for l in r.loops)
         assert loops > 20, f"only {loops} loops"
-        # The optimiser runs off the request path: wait until the version stops moving.
-        last, stable = -1, 0
-        events = s.graph.WatchMap(pb.WatchMapRequest(map="m"), timeout=120)
-        first = next(events)
-        assert first.graph_version >= 1 and first.nodes > 0
-        events.cancel()
-        for _ in range(600):
-            v = s.graph.GetSessionFrames(pb.GetSessionFramesRequest(map="m")).graph_version
-            stable = stable + 1 if v == last else 0
-            last = v
-            if stable >= 10:
+        # The optimiser runs off the request path: wait for its converged solve of every scan and loop.
+        events = s.graph.WatchMap(pb.WatchMapRequest(map="m"), timeout=300)
+        for ev in events:
+            assert not ev.failed, ev.error
+            if ev.nodes == n + (n - half) and ev.loops == loops and ev.converged:
                 break
-            time.sleep(0.1)
+        events.cancel()
+        assert ev.graph_version >= 1 and ev.converged, ev
         poses, token = [], 0
         while True:  # paged
             r = s.graph.GetPoses(pb.GetPosesRequest(map="m", robot="a", page_token=token, page_size=50))

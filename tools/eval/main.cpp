@@ -419,6 +419,29 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
 // SLAM protocol: the frames go to a running server as one or two robots with drifting odometry and loop
 // queries; the server's pose graph corrects them. Two robots: the first drives the first 60 % of the frames,
 // the second the last 60 %, with its odometry in an unrelated frame.
+// The map's first converged pose-graph event covering at least `nodes` scans and `loops` loops, or the last event
+// seen when `timeout` passes first (converged() false then).
+v1::MapEvent waitForSettledGraph(const client::Client& cl, const std::string& map, std::int64_t nodes,
+                                 std::int64_t loops, std::chrono::seconds timeout) {
+  auto stub = v1::PoseGraph::NewStub(cl.channel());
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + timeout);
+  v1::WatchMapRequest req;
+  req.set_map(map);
+  auto reader = stub->WatchMap(&ctx, req);
+  v1::MapEvent last, e;
+  while (reader->Read(&e)) {
+    last = e;
+    if (e.converged() && !e.failed() && e.nodes() >= nodes && e.loops() >= loops) {
+      ctx.TryCancel();
+      break;
+    }
+  }
+  reader->Finish();  // cancelled or deadline: the event decides
+  if (!(last.converged() && last.nodes() >= nodes && last.loops() >= loops)) last.set_converged(false);
+  return last;
+}
+
 struct SlamOptions {
   double odom_noise = 0.01;
   int robots = 1;
@@ -485,19 +508,14 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
       bar.step(++done);
     }
   }
-  // The server optimises off the request path: wait until its graph version stops moving.
-  const auto t_wait = Clock::now();
-  std::int64_t version = -1;
-  for (auto stable_since = Clock::now(); seconds(t_wait) < 300;) {
-    const auto v = cl.getSessionFrames(map).graph_version();
-    if (v != version) {
-      version = v;
-      stable_since = Clock::now();
-    } else if (v > 0 && seconds(stable_since) > 3.0) {
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  }
+  // The server optimises off the request path: wait for its converged solve of every scan and loop.
+  const auto settled = waitForSettledGraph(cl, map, static_cast<std::int64_t>(total),
+                                           static_cast<std::int64_t>(loops), std::chrono::minutes(5));
+  if (!settled.converged())
+    std::cerr << "warning: the pose graph did not settle within 5 minutes (last version " << settled.graph_version()
+              << ", " << settled.nodes() << " nodes, " << settled.loops() << " loops)\n";
+  const std::int64_t version = settled.graph_version();
+  run.summary["graph_converged"] = settled.converged();
   run.summary["loops_reported"] = loops;
   run.summary["graph_version"] = version;
   run.summary["odom_noise"] = o.odom_noise;
