@@ -31,15 +31,6 @@ void writeAll(const std::string& path, const void* data, std::size_t bytes) {
 
 }  // namespace
 
-void validateScan(const LabelledScan& scan) {
-  if (scan.points.size() != scan.labels.size())
-    throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
-                     std::to_string(scan.labels.size()) + " labels");
-  for (std::size_t i = 0; i < scan.points.size(); ++i)
-    if (!scan.points[i].allFinite())
-      throw InputError("point " + std::to_string(i) + " has a non-finite coordinate");
-}
-
 Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
   const auto data = readAll(path);
   if (data.size() % 16 != 0)

@@ -3,7 +3,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 

@@ -7,6 +7,7 @@
 #include "log_line.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/types.hpp"
+#include "sglc/wire/error.hpp"
 
 namespace sglc::server {
 namespace {
@@ -34,47 +35,6 @@ grpc::StatusCode toGrpc(StorageError::Code code) {
   }
 }
 
-const char* codeName(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK:
-      return "OK";
-    case grpc::StatusCode::CANCELLED:
-      return "CANCELLED";
-    case grpc::StatusCode::UNKNOWN:
-      return "UNKNOWN";
-    case grpc::StatusCode::INVALID_ARGUMENT:
-      return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-      return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND:
-      return "NOT_FOUND";
-    case grpc::StatusCode::ALREADY_EXISTS:
-      return "ALREADY_EXISTS";
-    case grpc::StatusCode::PERMISSION_DENIED:
-      return "PERMISSION_DENIED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::FAILED_PRECONDITION:
-      return "FAILED_PRECONDITION";
-    case grpc::StatusCode::ABORTED:
-      return "ABORTED";
-    case grpc::StatusCode::OUT_OF_RANGE:
-      return "OUT_OF_RANGE";
-    case grpc::StatusCode::UNIMPLEMENTED:
-      return "UNIMPLEMENTED";
-    case grpc::StatusCode::UNAUTHENTICATED:
-      return "UNAUTHENTICATED";
-    case grpc::StatusCode::UNAVAILABLE:
-      return "UNAVAILABLE";
-    case grpc::StatusCode::DATA_LOSS:
-      return "DATA_LOSS";
-    case grpc::StatusCode::INTERNAL:
-      return "INTERNAL";
-    default:
-      return "OTHER";
-  }
-}
-
 }  // namespace
 
 grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
@@ -85,6 +45,8 @@ grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
   } catch (const StorageError& e) {
     *detail = e.detail();
     return grpc::Status(toGrpc(e.code()), e.what());
+  } catch (const wire::WireError& e) {
+    return grpc::Status(e.code(), e.what());
   } catch (const InputError& e) {
     return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, e.what());
   } catch (const std::bad_alloc&) {
@@ -102,7 +64,7 @@ grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, con
   nlohmann::ordered_json line = {{"method", log.method},
                                  {"map", log.map},
                                  {"robot", log.robot},
-                                 {"code", codeName(status.error_code())},
+                                 {"code", wire::statusCodeName(status.error_code())},
                                  {"ms", std::round(msSince(log.start) * 1000.0) / 1000.0},
                                  {"peer", ctx.peer()}};
   if (log.messages >= 0) line["messages"] = log.messages;

@@ -12,7 +12,7 @@
 #include <memory>
 #include <string>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 

@@ -2,7 +2,7 @@
 
 #include <chrono>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 

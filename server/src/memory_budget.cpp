@@ -4,7 +4,7 @@
 
 #include <algorithm>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 

@@ -10,8 +10,10 @@
 #include <nlohmann/json.hpp>
 
 #include "call.hpp"
-#include "codec.hpp"
 #include "log_line.hpp"
+#include "rpc_error.hpp"
+#include "sglc/wire/geometry_codec.hpp"
+#include "sglc/wire/scan_codec.hpp"
 
 namespace sglc::server {
 namespace {
@@ -146,9 +148,9 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
     c->set_fitness(v.result.fitness);
     c->set_rmse(v.result.rmse);
     c->set_refined(v.result.refined);
-    if (v.result.refined && !v.result.information.isZero()) encodeInformation(v.result.information, c);
+    if (v.result.refined && !v.result.information.isZero()) wire::encodeInformation(v.result.information, c);
     c->set_descriptor_distance(v.hit.distance);
-    encodeTransform(v.result.T, c->mutable_t_query_candidate());
+    wire::toTransform(v.result.T, c->mutable_t_query_candidate());
   }
 }
 
@@ -201,22 +203,22 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
                 v1::IngestResponse* resp, MemoryBudget::Lease* held) {
   const auto t_start = Clock::now();
   const auto& key = req.key();
-  checkName("key.map", key.map());
-  checkName("key.robot", key.robot());
-  checkName("key.session", key.session());
+  wire::checkName("key.map", key.map());
+  wire::checkName("key.robot", key.robot());
+  wire::checkName("key.session", key.session());
   TokenTable::require(grant, key.map());
   if (req.has_stamp() && !std::isfinite(req.stamp()))
     throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "stamp is not finite");
   std::optional<Mat4d> pose;
   if (req.has_odometry_pose() && req.odometry_pose().m_size() > 0)
-    pose = decodeTransform(req.odometry_pose(), "odometry_pose");
+    pose = wire::decodeRigidTransform(req.odometry_pose(), "odometry_pose");
   auto& store = state.store();
   if (!store.findMap(key.map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + key.map() + "'");
   MemoryBudget::Lease own;
   if (!held)
     own = state.memory().acquire((points.size() + labels.size()) * kScanCostFactor, ctx->deadline(),
                                  [ctx] { return ctx->IsCancelled(); });
-  const auto scan = decodeScan(points, labels, state.limits().max_points);
+  const auto scan = wire::decodeScan(points, labels, state.limits().max_points);
   checkAlive(ctx);
 
   // Engine work holds a compute slot; the database write below does not.
@@ -277,12 +279,12 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
         storage::LoopRecord r;
         r.query_scan = resp->scan_id();
         r.candidate_scan = loop.scan_id();
-        r.T = decodeTransform(loop.t_query_candidate(), "loop");
+        r.T = wire::decodeRigidTransform(loop.t_query_candidate(), "loop");
         r.score = loop.score();
         r.inliers = loop.inliers();
         r.fitness = loop.fitness();
         r.rmse = loop.rmse();
-        r.information = decodeInformation(loop);
+        r.information = wire::decodeInformation(loop);
         state.store().addLoop(key.map(), r);
         added = true;
       } catch (const std::exception& e) {
@@ -315,7 +317,7 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
   return run(ctx, {"Query", req->map(), req->robot()}, [&](CallLog&) {
     const auto t_start = Clock::now();
     const auto grant = state_.tokens().authenticate(*ctx);
-    checkName("map", req->map());
+    wire::checkName("map", req->map());
     TokenTable::require(grant, req->map());
     auto& store = state_.store();
     if (!store.findMap(req->map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");
@@ -324,7 +326,7 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     std::shared_ptr<const Fingerprint> fp;
     auto slot = state_.compute().acquire(ctx);
     if (req->has_scan()) {
-      const auto scan = decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
+      const auto scan = wire::decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
       const auto t0 = Clock::now();
       ScanReport report;
       fp = std::make_shared<const Fingerprint>(state_.pipeline().fingerprint(scan, &report));
@@ -367,7 +369,7 @@ void fillMap(const storage::MapInfo& m, v1::MapInfo* out) {
 grpc::Status MapAdminService::CreateMap(grpc::ServerContext* ctx, const v1::CreateMapRequest* req, v1::MapInfo* resp) {
   return run(ctx, {"CreateMap", req->name(), ""}, [&](CallLog&) {
     const auto grant = state_.tokens().authenticate(*ctx);
-    checkName("name", req->name());
+    wire::checkName("name", req->name());
     TokenTable::require(grant, req->name());
     fillMap(state_.store().createMap(req->name(), scanDescriptorDim(state_.pipeline().config())), resp);
   });
@@ -431,7 +433,7 @@ grpc::Status MapAdminService::GetScan(grpc::ServerContext* ctx, const v1::GetSca
     key->set_session(info->session);
     key->set_seq(info->seq);
     if (info->stamp) resp->set_stamp(*info->stamp);
-    if (info->odometry_pose) encodeTransform(*info->odometry_pose, resp->mutable_odometry_pose());
+    if (info->odometry_pose) wire::toTransform(*info->odometry_pose, resp->mutable_odometry_pose());
     resp->set_fingerprint_bytes(info->fingerprint_bytes);
     resp->set_has_raw(info->has_raw);
     if (req->include_graph()) {
@@ -557,7 +559,7 @@ namespace sglc::server {
 namespace {}  // namespace
 
 void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
-  checkName("map", map);
+  wire::checkName("map", map);
   TokenTable::require(state.tokens().authenticate(*ctx), map);
   if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
 }
@@ -611,10 +613,10 @@ grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetP
       o->set_connected(connected);
       if (const auto p = optimised.find(n.scan_id); p != optimised.end()) {
         o->set_optimised(true);
-        encodeTransform(p->second, o->mutable_t_map_scan());
+        wire::toTransform(p->second, o->mutable_t_map_scan());
       } else {
         // Not optimised yet: its odometry through the session's last known frame.
-        encodeTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
+        wire::toTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
                         o->mutable_t_map_scan());
       }
     }
@@ -636,7 +638,7 @@ grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const 
       o->set_session(s.name);
       const auto f = frames.find({s.robot, s.name});
       o->set_connected(f != frames.end() && f->second.connected);
-      encodeTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
+      wire::toTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
     }
   });
 }

@@ -3,7 +3,7 @@
 #include <functional>
 #include <vector>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 

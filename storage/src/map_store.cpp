@@ -18,6 +18,7 @@
 #include "fair_shared_mutex.hpp"
 #include "fingerprint_cache.hpp"
 #include "process_lock.hpp"
+#include "sglc/names.hpp"
 #include "sqlite.hpp"
 
 namespace sglc::storage {
@@ -123,11 +124,7 @@ std::vector<std::uint8_t> rawBlob(const LabelledScan& scan) {
 }
 
 void checkName(const std::string& what, const std::string& name) {
-  if (name.empty()) throw StorageError(Code::kInvalidArgument, what + " name is empty");
-  if (name.size() > 256) throw StorageError(Code::kInvalidArgument, what + " name is longer than 256 bytes");
-  for (unsigned char c : name)
-    if (c < 0x20 || c == 0x7f)
-      throw StorageError(Code::kInvalidArgument, what + " name contains a control character");
+  if (const auto error = nameError(name)) throw StorageError(Code::kInvalidArgument, what + " name " + *error);
 }
 
 struct MapState {

@@ -235,3 +235,49 @@ TEST(Errors, RpcErrorCarriesCodeAndMessageOnOneLine) {
   EXPECT_EQ(sc::statusCodeName(grpc::StatusCode::UNAUTHENTICATED), "UNAUTHENTICATED");
   EXPECT_EQ(sc::statusCodeName(grpc::StatusCode::RESOURCE_EXHAUSTED), "RESOURCE_EXHAUSTED");
 }
+
+// The wire codec's own rules, as the server applies them (sglc/wire).
+TEST(Wire, StatusCodeNamesAreGrpcsAndUnknownCodesSayTheirNumber) {
+  EXPECT_EQ(sglc::wire::statusCodeName(grpc::StatusCode::OK), "OK");
+  EXPECT_EQ(sglc::wire::statusCodeName(grpc::StatusCode::INVALID_ARGUMENT), "INVALID_ARGUMENT");
+  EXPECT_EQ(sglc::wire::statusCodeName(grpc::StatusCode::RESOURCE_EXHAUSTED), "RESOURCE_EXHAUSTED");
+  EXPECT_EQ(sglc::wire::statusCodeName(grpc::StatusCode::DATA_LOSS), "DATA_LOSS");
+  EXPECT_EQ(sglc::wire::statusCodeName(grpc::StatusCode::UNAUTHENTICATED), "UNAUTHENTICATED");
+  EXPECT_EQ(sglc::wire::statusCodeName(static_cast<grpc::StatusCode>(17)), "STATUS_17");
+  EXPECT_EQ(sglc::wire::statusCodeName(static_cast<grpc::StatusCode>(-1)), "STATUS_-1");
+}
+
+TEST(Wire, AnUnlabelledScanRoundTrips) {
+  auto scan = randomScan(50, 9);
+  scan.labels.clear();
+  const auto msg = sc::packScan(scan);
+  EXPECT_TRUE(msg.labels().empty());
+  const auto back = sc::unpackScan(msg);
+  EXPECT_EQ(back.points, scan.points);
+  EXPECT_TRUE(back.labels.empty());
+  EXPECT_EQ(sglc::wire::decodeScan(msg.points(), msg.labels()).points, scan.points);
+}
+
+TEST(Wire, DecodeScanSaysWhatIsWrongWithTheStatusToAnswer) {
+  auto scan = randomScan(10, 4);
+  auto msg = sc::packScan(scan);
+  auto code = [](const std::string& points, const std::string& labels, std::size_t max) {
+    try {
+      sglc::wire::decodeScan(points, labels, max);
+    } catch (const sglc::wire::WireError& e) {
+      return std::make_pair(e.code(), std::string(e.what()));
+    }
+    return std::make_pair(grpc::StatusCode::OK, std::string());
+  };
+  EXPECT_EQ(code(msg.points(), msg.labels(), 10).first, grpc::StatusCode::OK);
+  const auto [too_many, m1] = code(msg.points(), msg.labels(), 9);
+  EXPECT_EQ(too_many, grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(m1.find("at most 9"), std::string::npos) << m1;
+  EXPECT_EQ(code("", "", 10).first, grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(code(msg.points(), msg.labels().substr(4), 10).first, grpc::StatusCode::INVALID_ARGUMENT);
+  scan.points[7].y() = std::numeric_limits<float>::quiet_NaN();
+  msg = sc::packScan(scan);
+  const auto [nan, m2] = code(msg.points(), msg.labels(), 10);
+  EXPECT_EQ(nan, grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(m2.find("point 7"), std::string::npos) << m2;
+}

@@ -1,21 +1,22 @@
-// Fuzzing the server's wire decoding (server/src/codec.hpp): decodeScan, decodeTransform and checkName see
-// every request's bytes and throw RpcError, which becomes the call's status; decodeInformation reads a
-// candidate's 36 values. A rejection must be an RpcError with code INVALID_ARGUMENT or RESOURCE_EXHAUSTED and a
+// Fuzzing the server side of the wire codec (proto/include/sglc/wire): decodeScan, decodeRigidTransform and
+// checkName see every request's bytes and throw WireError, which becomes the call's status; decodeInformation
+// reads a candidate's 36 values. A rejection must be a WireError with code INVALID_ARGUMENT or RESOURCE_EXHAUSTED and a
 // message. An accepted scan has as many labels as points (at least one, at most max_points), finite coordinates
 // and the bytes it came from; an accepted transform is 16 finite values that decode again to (nearly) the same.
-#include "codec.hpp"
 #include "fuzz_util.hpp"
 #include "fuzz_wire.hpp"
+#include "sglc/wire/geometry_codec.hpp"
+#include "sglc/wire/scan_codec.hpp"
 
 namespace sglc {
 namespace {
 
 using fuzz::Outcome;
 using fuzz::Rng;
-using server::RpcError;
+using wire::WireError;
 
 enum Kind : std::uint8_t { kScan, kTransform, kName, kInformation, kKinds };
-const char* const kKindNames[] = {"decodeScan", "decodeTransform", "checkName", "decodeInformation"};
+const char* const kKindNames[] = {"decodeScan", "decodeRigidTransform", "checkName", "decodeInformation"};
 
 struct CodecCase {
   Kind kind = kScan;
@@ -56,10 +57,10 @@ std::string describe(const CodecCase& c) {
   }
 }
 
-void checkRejection(const RpcError& e, fuzz::Verdict& v) {
+void checkRejection(const WireError& e, fuzz::Verdict& v) {
   if (e.code() != grpc::StatusCode::INVALID_ARGUMENT && e.code() != grpc::StatusCode::RESOURCE_EXHAUSTED)
-    v.fail("RpcError with status code " + std::to_string(static_cast<int>(e.code())) + ": " + e.what());
-  if (!*e.what()) v.fail("RpcError with an empty message");
+    v.fail("WireError with status code " + std::to_string(static_cast<int>(e.code())) + ": " + e.what());
+  if (!*e.what()) v.fail("WireError with an empty message");
 }
 
 TEST(Fuzz, ServerCodec) {
@@ -121,7 +122,7 @@ TEST(Fuzz, ServerCodec) {
     try {
       switch (c.kind) {
         case kScan: {
-          const LabelledScan s = server::decodeScan(c.scan.points, c.scan.labels, c.max_points);
+          const LabelledScan s = wire::decodeScan(c.scan.points, c.scan.labels, c.max_points);
           // No labels at all is allowed (the server's labeller labels the scan); otherwise one per point.
           if ((!s.labels.empty() && s.points.size() != s.labels.size()) || s.points.empty() ||
               (s.labels.empty() && !c.scan.labels.empty()))
@@ -141,7 +142,7 @@ TEST(Fuzz, ServerCodec) {
           break;
         }
         case kTransform: {
-          const Mat4d T = server::decodeTransform(c.transform, c.text);
+          const Mat4d T = wire::decodeRigidTransform(c.transform, c.text);
           if (c.transform.m_size() != 16)
             v.fail("decodeTransform accepted " + std::to_string(c.transform.m_size()) + " values");
           if (!T.allFinite()) v.fail("decodeTransform returned non-finite values");
@@ -152,18 +153,18 @@ TEST(Fuzz, ServerCodec) {
             }
           // What the server decoded (and may store or send back) decodes again to (nearly) the same matrix.
           v1::Transform again;
-          server::encodeTransform(T, &again);
+          wire::toTransform(T, &again);
           try {
-            const Mat4d T2 = server::decodeTransform(again, c.text);
+            const Mat4d T2 = wire::decodeRigidTransform(again, c.text);
             if (!((T2 - T).array().abs() <= 1e-9 * (1.0 + T.array().abs())).all())
               v.fail("decoding the decoded transform again changes it");
-          } catch (const RpcError& e) {
+          } catch (const WireError& e) {
             v.fail(std::string("the decoded transform is rejected when decoded again: ") + e.what());
           }
           break;
         }
         case kName: {
-          server::checkName("robot", c.text);
+          wire::checkName("robot", c.text);
           if (c.text.empty() || c.text.size() > 256)
             v.fail("checkName accepted a name of " + std::to_string(c.text.size()) + " bytes");
           for (unsigned char ch : c.text)
@@ -174,7 +175,7 @@ TEST(Fuzz, ServerCodec) {
           break;
         }
         default: {
-          const auto I = server::decodeInformation(c.candidate);
+          const auto I = wire::decodeInformation(c.candidate);
           if (I.has_value() != (c.candidate.information_size() == 36))
             v.fail("decodeInformation: value present iff 36 values is violated");
           if (I) {
@@ -189,7 +190,7 @@ TEST(Fuzz, ServerCodec) {
           return Outcome::kRejected;
         }
       }
-    } catch (const RpcError& e) {
+    } catch (const WireError& e) {
       checkRejection(e, v);
       return Outcome::kRejected;
     }

@@ -11,7 +11,7 @@
 #include <thread>
 #include <vector>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 #include "compute_pool.hpp"
 
 namespace sglc::server {

@@ -4,7 +4,7 @@
 #include <atomic>
 #include <thread>
 
-#include "codec.hpp"
+#include "rpc_error.hpp"
 #include "memory_budget.hpp"
 #include "stream_registry.hpp"
 

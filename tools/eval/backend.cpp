@@ -223,7 +223,7 @@ class Remote final : public Backend {
       if (it == frames_.end()) continue;  // not one of ours (the map is new, so this does not happen)
       Candidate e{it->second, c.score(), c.verified(), c.refined(), c.inliers(), Mat4d::Identity(),
                   c.descriptor_distance()};
-      for (int i = 0; i < 16 && i < c.t_query_candidate().m_size(); ++i) e.T(i / 4, i % 4) = c.t_query_candidate().m(i);
+      if (client::isSet(c.t_query_candidate())) e.T = client::toMatrix(c.t_query_candidate());
       out.push_back(e);
     }
     return out;

@@ -529,9 +529,7 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
   for (const auto& r : robots) {
     std::map<std::int64_t, Mat4d> opt;
     for (const auto& p : cl.getPoses(map, r.name)) {
-      Mat4d T = Mat4d::Identity();
-      for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = p.t_map_scan().m(k);
-      opt[p.seq()] = T;
+      opt[p.seq()] = client::toMatrix(p.t_map_scan());
     }
     std::vector<Mat4d> est;
     for (int f : r.frames) {
@@ -560,8 +558,7 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
     const auto frames_resp = cl.getSessionFrames(map);
     for (const auto& s : frames_resp.sessions()) {
       if (s.robot() != "r1") continue;
-      Mat4d T = Mat4d::Identity();
-      for (int k = 0; k < 16; ++k) T(k / 4, k % 4) = s.t_map_session().m(k);
+      const Mat4d T = client::toMatrix(s.t_map_session());
       const Mat4d truth = robots[1].gt.front() * robots[1].odom.front().inverse();
       const auto e = poseError(T, truth);
       run.summary["frame_alignment_error"] = {{"m", e.rte_m}, {"deg", e.rre_deg}, {"connected", s.connected()}};

@@ -33,7 +33,7 @@
 namespace sglc::client {
 
 // "OK", "CANCELLED", ..., "UNAUTHENTICATED": the canonical name of a status code.
-std::string statusCodeName(grpc::StatusCode code);
+using wire::statusCodeName;
 
 // A failed call: the status the server (or the gRPC runtime) returned.
 // what() is "<method>: <CODE_NAME>: <message>" on one line.

@@ -1,12 +1,10 @@
-#include "sglc/client/packing.hpp"
+#include "sglc/wire/scan_codec.hpp"
 
 #include <algorithm>
 #include <bit>
-#include <cmath>
 #include <cstring>
 
-namespace sglc::client {
-
+namespace sglc::wire {
 namespace {
 
 static_assert(sizeof(float) == 4 && sizeof(double) == 8, "IEEE-754 single and double precision expected");
@@ -37,6 +35,21 @@ void copyWordsLittleEndian(void* dst, const void* src, std::size_t count) {
   }
 }
 
+// Point count of a scan's bytes: whole points, and labels absent or one per point.
+std::size_t checkedPointCount(std::string_view points, std::string_view labels) {
+  if (points.size() % kPointBytes != 0)
+    throw WireError("scan.points has " + std::to_string(points.size()) +
+                    " bytes, not a multiple of 12 (float32 x, y, z per point)");
+  if (labels.size() % kLabelBytes != 0)
+    throw WireError("scan.labels has " + std::to_string(labels.size()) +
+                    " bytes, not a multiple of 4 (uint32 per point)");
+  const std::size_t n = points.size() / kPointBytes;
+  if (!labels.empty() && labels.size() / kLabelBytes != n)
+    throw WireError("scan has " + std::to_string(n) + " points but " + std::to_string(labels.size() / kLabelBytes) +
+                    " labels");
+  return n;
+}
+
 }  // namespace
 
 std::string packPoints(const Points& points) {
@@ -51,28 +64,27 @@ std::string packLabels(const std::vector<std::uint32_t>& labels) {
   return out;
 }
 
-Points unpackPoints(const std::string& bytes) {
+Points unpackPoints(std::string_view bytes) {
   if (bytes.size() % kPointBytes != 0)
-    throw InputError("points: " + std::to_string(bytes.size()) +
-                     " bytes is not a multiple of 12 (float32 x, y, z per point)");
+    throw WireError("points: " + std::to_string(bytes.size()) +
+                    " bytes is not a multiple of 12 (float32 x, y, z per point)");
   Points points(bytes.size() / kPointBytes);
   copyWordsLittleEndian(points.data(), bytes.data(), points.size() * 3);
   return points;
 }
 
-std::vector<std::uint32_t> unpackLabels(const std::string& bytes) {
+std::vector<std::uint32_t> unpackLabels(std::string_view bytes) {
   if (bytes.size() % kLabelBytes != 0)
-    throw InputError("labels: " + std::to_string(bytes.size()) + " bytes is not a multiple of 4 (uint32 per point)");
+    throw WireError("labels: " + std::to_string(bytes.size()) + " bytes is not a multiple of 4 (uint32 per point)");
   std::vector<std::uint32_t> labels(bytes.size() / kLabelBytes);
   copyWordsLittleEndian(labels.data(), bytes.data(), labels.size());
   return labels;
 }
 
 void packScan(const LabelledScan& scan, v1::Scan* out) {
-  // No labels at all is an unlabelled scan (the server's labeller labels it).
   if (!scan.labels.empty() && scan.points.size() != scan.labels.size())
-    throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
-                     std::to_string(scan.labels.size()) + " labels");
+    throw WireError("scan has " + std::to_string(scan.points.size()) + " points but " +
+                    std::to_string(scan.labels.size()) + " labels");
   *out->mutable_points() = packPoints(scan.points);
   *out->mutable_labels() = packLabels(scan.labels);
 }
@@ -84,47 +96,33 @@ v1::Scan packScan(const LabelledScan& scan) {
 }
 
 LabelledScan unpackScan(const v1::Scan& scan) {
-  LabelledScan out;
-  out.points = unpackPoints(scan.points());
-  out.labels = unpackLabels(scan.labels());
-  if (out.points.size() != out.labels.size())
-    throw InputError("scan has " + std::to_string(out.points.size()) + " points but " +
-                     std::to_string(out.labels.size()) + " labels");
-  return out;
+  checkedPointCount(scan.points(), scan.labels());
+  return {unpackPoints(scan.points()), unpackLabels(scan.labels())};
 }
 
-void toTransform(const Mat4d& T, v1::Transform* out) {
-  out->clear_m();
-  out->mutable_m()->Reserve(16);
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) out->add_m(T(r, c));
-}
-
-v1::Transform toTransform(const Mat4d& T) {
-  v1::Transform out;
-  toTransform(T, &out);
-  return out;
-}
-
-Mat4d toMatrix(const v1::Transform& t) {
-  if (t.m_size() != 16)
-    throw InputError("transform has " + std::to_string(t.m_size()) + " values, expected 16 (row-major 4x4)");
-  Mat4d T;
-  for (int k = 0; k < 16; ++k) {
-    if (!std::isfinite(t.m(k))) throw InputError("transform value " + std::to_string(k) + " is not finite");
-    T(k / 4, k % 4) = t.m(k);
-  }
-  return T;
+LabelledScan decodeScan(std::string_view points, std::string_view labels, std::size_t max_points) {
+  const std::size_t n = checkedPointCount(points, labels);
+  if (n == 0) throw WireError("scan is empty");
+  if (n > max_points)
+    throw WireError("scan has " + std::to_string(n) + " points, the server accepts at most " +
+                        std::to_string(max_points),
+                    grpc::StatusCode::RESOURCE_EXHAUSTED);
+  LabelledScan scan{unpackPoints(points), unpackLabels(labels)};
+  for (std::size_t i = 0; i < n; ++i)
+    if (!scan.points[i].allFinite())
+      throw WireError("scan point " + std::to_string(i) + " has a non-finite coordinate (NaN or inf)");
+  return scan;
 }
 
 std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, std::size_t max_chunk_bytes) {
   const std::string& points = request.scan().points();
   const std::string& labels = request.scan().labels();
-  if (points.size() % kPointBytes != 0 || labels.size() % kLabelBytes != 0 ||
-      (!labels.empty() && points.size() / kPointBytes != labels.size() / kLabelBytes))
-    throw InputError("cannot chunk a malformed scan: " + std::to_string(points.size()) + " point bytes, " +
-                     std::to_string(labels.size()) + " label bytes");
-  const std::size_t n = points.size() / kPointBytes;
+  std::size_t n = 0;
+  try {
+    n = checkedPointCount(points, labels);
+  } catch (const WireError& e) {
+    throw WireError(std::string("cannot chunk a malformed scan: ") + e.what());
+  }
   const std::size_t per_chunk = std::max<std::size_t>(1, max_chunk_bytes / (kPointBytes + kLabelBytes));
 
   std::vector<v1::IngestChunk> chunks;
@@ -137,9 +135,9 @@ std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, s
     const std::size_t count = std::min(per_chunk, n - begin);
     v1::IngestChunk& chunk = chunks.emplace_back();
     chunk.set_points(points.substr(begin * kPointBytes, count * kPointBytes));
-    if (!labels.empty()) chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));  // none: unlabelled
+    if (!labels.empty()) chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));
   }
   return chunks;
 }
 
-}  // namespace sglc::client
+}  // namespace sglc::wire
