@@ -16,6 +16,8 @@ PACKAGES=(
   # tests, benchmarks, Python clients and plots
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib
+  # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)
+  python3-scipy
 )
 
 missing=()

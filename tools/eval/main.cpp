@@ -1,4 +1,4 @@
-// sglc-eval: loop-closure metrics computed the way the paper's protocols define them (../shared/docs/METHOD.md),
+// sglc-eval: loop-closure metrics computed the way the paper's protocols define them (docs/METHOD.md),
 // on a SemanticKITTI-layout sequence or on a simulated one, with the engine in-process or through a server.
 //
 //   sglc-eval --protocol pairs|sequence|pose|all [--data DIR | --sim [--poses P --calib C] [--seed N]

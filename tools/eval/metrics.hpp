@@ -1,4 +1,4 @@
-// Loop-closure metrics, defined as in ../shared/docs/METHOD.md so that numbers compare with published ones.
+// Loop-closure metrics, defined as in docs/METHOD.md so that numbers compare with published ones.
 // Pure functions over plain values; no I/O.
 #pragma once
 

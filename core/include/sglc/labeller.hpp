@@ -14,8 +14,9 @@
 //     thin and tall -> pole-like (trunk when a canopy spreads above it, else pole); car-sized, touching the
 //     ground, nothing above 2.6 m -> vehicle; long and thin and tall -> building (wall); long, thin and low ->
 //     fence; anything else -> vegetation.
-//  3. Points above the band take their column's role (walls rise into buildings, poles into poles, car roofs
-//     stay vehicle); elsewhere building next to a wall, else vegetation (canopy, overhangs).
+//  3. Points above the band take their column's role (walls and fences rise into buildings, poles into poles,
+//     car roofs up to vehicle_max_height_m stay vehicle); everything else above it is vegetation (canopy,
+//     overhangs).
 // Labels are written as the reserved ids below, which every LabelMap knows, so nothing downstream changes.
 #pragma once
 

@@ -8,8 +8,9 @@
 
 namespace sglc {
 
-// Background classes, numbered by priority in the background agreement grid: a cell holding several
-// classes keeps the highest (fence > building > vegetation > road).
+// Background classes, numbered by priority in the background agreement grid: a cell holding several classes
+// takes the structure class with most votes, ties going to the higher number (class_votes.hpp), and road only
+// where no structure is seen.
 enum class Background : std::uint8_t { kNone = 0, kRoad = 1, kVegetation = 2, kBuilding = 3, kFence = 4 };
 
 class LabelMap {
