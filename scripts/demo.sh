@@ -20,7 +20,7 @@ for _ in $(seq 100); do build/bin/sglc maps --server "127.0.0.1:$PORT" >/dev/nul
 N=$(ls "$WORK/seq/velodyne" | wc -l)
 HALF=$((N / 2))
 echo "== ingesting $N scans: alpha = 0..$((HALF - 1)), bravo = $HALF..$((N - 1))"
-build/bin/sglc ingest --server "127.0.0.1:$PORT" --map demo --robot alpha --frames "0:$((HALF - 1))" --query \
+build/bin/sglc ingest --server "127.0.0.1:$PORT" --map demo --robot alpha --frames "0:$HALF" --query \
   --exclude-recent 30 --json --no-progress "$WORK/seq" > "$WORK/alpha.jsonl"
 build/bin/sglc ingest --server "127.0.0.1:$PORT" --map demo --robot bravo --frames "$HALF:" --query \
   --exclude-recent 30 --json --no-progress "$WORK/seq" > "$WORK/bravo.jsonl"

@@ -21,8 +21,8 @@
 
 #include "sglc/client/client.hpp"
 #include "sglc/client/packing.hpp"
-#include "sglc/client/sequence.hpp"
 #include "sglc/io.hpp"
+#include "sglc/sequence.hpp"
 
 namespace {
 
@@ -264,10 +264,8 @@ int runIngest(const Common& common, const IngestArgs& a) {
   if (a.robot.empty()) throw UsageError("--robot is empty");
   if (a.window < 1) throw UsageError("--window must be at least 1");
   if (!(a.chunk_mb >= 0.001 && a.chunk_mb <= 2000)) throw UsageError("--chunk-mb must be between 0.001 and 2000");
-  sc::FrameRange range;
-  if (!a.frames.empty()) range = sc::parseFrameRange(a.frames);
   const v1::QueryOptions query_options = toQueryOptions(a.q);
-  const sc::Sequence seq = sc::openSequence(a.dir, range, a.every);
+  const sglc::Sequence seq = sglc::openSequence(a.dir, sglc::FrameSelection::parse(a.frames), a.every);
   const std::string session = a.session.empty() ? seq.name : a.session;
   if (session.empty()) throw UsageError("cannot name the session after " + a.dir + ": give --session");
 
@@ -609,7 +607,7 @@ int main(int argc, char** argv) {
   c_ingest->add_option("--map", ingest.map, "Map name (created if missing)")->required();
   c_ingest->add_option("--robot", ingest.robot, "Robot name")->required();
   c_ingest->add_option("--session", ingest.session, "Session name (default: the directory's base name)");
-  c_ingest->add_option("--frames", ingest.frames, "Frame numbers a:b (inclusive; a: and :b open-ended)");
+  c_ingest->add_option("--frames", ingest.frames, "Frame numbers: a, a:b (b exclusive; a: and :b open-ended), a:b:s, or a comma-separated list");
   c_ingest->add_option("--every", ingest.every, "Ingest every N-th frame (default 1)");
   c_ingest->add_flag("--query", ingest.query, "Look for loops before each scan is stored and report them");
   c_ingest->add_flag("--store-raw", ingest.store_raw, "Also keep the raw clouds on the server");

@@ -59,9 +59,9 @@ TEST(CliErrors, BadIngestInput) {
   const auto dir = tinySequence(tmp);
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", tmp / "missing"}, "not a directory");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", tmp.path().string()}, "velodyne");
-  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "9:3", dir}, "frame range");
-  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "x", dir}, "frame range");
-  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "5:9", dir}, "no scans in frame range");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "9:3", dir}, "frame selection");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "x", dir}, "frame selection");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--frames", "5:9", dir}, "no scans in frame selection");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--every", "0", dir}, "--every");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--scope", "galaxy", dir}, "galaxy");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--scope", "sessions", dir}, "--sessions");

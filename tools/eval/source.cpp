@@ -4,8 +4,9 @@
 #include <map>
 #include <sstream>
 
-#include "sglc/client/sequence.hpp"
+#include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
+#include "sglc/sequence.hpp"
 #include "sim/simulator.hpp"
 
 namespace sglc::eval {
@@ -16,7 +17,7 @@ namespace fs = std::filesystem;
 class SimSource final : public FrameSource {
  public:
   explicit SimSource(const SimSourceOptions& o) : sim_(trajectory(o), config(o)) {
-    frames_ = sim::parseFrameSelection(o.frames, sim_.numFrames());
+    frames_ = FrameSelection::parse(o.frames).frames(sim_.numFrames());
     std::ostringstream d;
     d << sim_.trajectory().source << ", " << o.beams << " beams, seed " << o.seed << ", label noise "
       << o.label_noise * 100 << " %";
@@ -50,10 +51,10 @@ class SimSource final : public FrameSource {
 class DirSource final : public FrameSource {
  public:
   DirSource(const std::string& dir, const std::string& spec) : dir_(dir) {
-    const auto seq = client::openSequence(dir);
+    const auto seq = openSequence(dir);
     const int max_frame = static_cast<int>(seq.frames.back().number);
-    const auto wanted = sim::parseFrameSelection(spec, max_frame + 1);
-    std::map<int, const client::SequenceFrame*> by_number;
+    const auto wanted = FrameSelection::parse(spec).frames(max_frame + 1);
+    std::map<int, const SequenceFrame*> by_number;
     for (const auto& f : seq.frames) by_number[static_cast<int>(f.number)] = &f;
     Mat4d Tr = Mat4d::Identity();
     const auto calib = fs::path(dir) / "calib.txt";

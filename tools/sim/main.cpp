@@ -7,6 +7,7 @@
 #include <iostream>
 #include <thread>
 
+#include "sglc/frame_selection.hpp"
 #include "sim/sequence.hpp"
 
 int main(int argc, char** argv) {
@@ -79,7 +80,7 @@ int main(int argc, char** argv) {
     sglc::sim::Trajectory traj =
         route.empty() ? sglc::sim::loadKittiTrajectory(poses_path, calib_path) : sglc::sim::loopRoute();
     sglc::sim::SequenceOptions opt;
-    opt.frames = sglc::sim::parseFrameSelection(frames_spec, static_cast<int>(traj.poses.size()));
+    opt.frames = sglc::FrameSelection::parse(frames_spec).frames(static_cast<int>(traj.poses.size()));
     opt.selection_spec = frames_spec;
     opt.out_dir = out_dir;
     opt.threads = threads;

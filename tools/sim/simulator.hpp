@@ -36,11 +36,6 @@ Trajectory loadKittiTrajectory(const std::string& poses_path, const std::string&
 // other way (reverse revisits), with intersections and gentle slopes. About 1900 frames at 10 Hz.
 Trajectory loopRoute();
 
-// Frame selection: comma-separated items "a:b" (b exclusive), "a:b:s" (stride s), or "a" (one frame);
-// a or b may be left out ("4300:", ":300"). Items must be ascending and not overlap. Empty = all frames.
-// Throws InputError naming the offending item.
-std::vector<int> parseFrameSelection(std::string_view spec, int num_frames);
-
 // ---- Sensor -------------------------------------------------------------------------------------------
 
 struct SensorConfig {

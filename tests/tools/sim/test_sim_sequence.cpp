@@ -2,6 +2,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
 #include "sim/sequence.hpp"
 #include "sim_test_util.hpp"
@@ -20,7 +21,7 @@ SequenceOptions options(const fs::path& dir, const std::string& spec, int thread
   SequenceOptions o;
   o.out_dir = dir.string();
   o.selection_spec = spec;
-  o.frames = parseFrameSelection(spec, smallLoop().numFrames());
+  o.frames = FrameSelection::parse(spec).frames(smallLoop().numFrames());
   o.threads = threads;
   o.pairs.seed = 7;
   return o;
@@ -45,7 +46,7 @@ TEST(Sequence, ProjectReadersReadTheOutput) {
   const int n = smallLoop().numFrames();  // the route ends where it started, driven the other way
   const std::string spec = "0:4," + std::to_string(n - 13) + ":" + std::to_string(n) + ":3";
   const auto summary = writeSequence(smallLoop(), options(dir.path(), spec));
-  const auto frames = parseFrameSelection(spec, smallLoop().numFrames());
+  const auto frames = FrameSelection::parse(spec).frames(smallLoop().numFrames());
   ASSERT_EQ(summary.frames, static_cast<int>(frames.size()));
   const auto poses = readPoses((dir.path() / "poses.txt").string());
   ASSERT_EQ(poses.size(), frames.size());

@@ -1,4 +1,4 @@
-// Trajectories, frame selection and ground truth lists.
+// Trajectories and ground truth lists.
 #include "sim/ground_truth.hpp"
 #include "sim_test_util.hpp"
 
@@ -10,34 +10,6 @@ Mat4d poseAt(double x, double y, double yaw_deg) {
   T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(yaw_deg * std::numbers::pi / 180.0, Vec3d::UnitZ()).toRotationMatrix();
   T.topRightCorner<3, 1>() = Vec3d(x, y, 0.0);
   return T;
-}
-
-TEST(FrameSelection, RangesStridesAndSingles) {
-  auto f = parseFrameSelection("0:300,4300:4541", 4541);
-  ASSERT_EQ(f.size(), 541u);
-  EXPECT_EQ(f.front(), 0);
-  EXPECT_EQ(f[299], 299);
-  EXPECT_EQ(f[300], 4300);
-  EXPECT_EQ(f.back(), 4540);
-  f = parseFrameSelection("0:4541:5", 4541);
-  ASSERT_EQ(f.size(), 909u);
-  EXPECT_EQ(f[1], 5);
-  EXPECT_EQ(f.back(), 4540);
-  EXPECT_EQ(parseFrameSelection("52, 4501", 4541), (std::vector<int>{52, 4501}));
-  EXPECT_EQ(parseFrameSelection("8:", 10), (std::vector<int>{8, 9}));
-  EXPECT_EQ(parseFrameSelection(":2", 10), (std::vector<int>{0, 1}));
-  EXPECT_EQ(parseFrameSelection("", 3), (std::vector<int>{0, 1, 2}));
-}
-
-TEST(FrameSelection, RejectsBadItemsWithTheirText) {
-  for (const char* bad : {"5:3", "0:99999", "a:b", "0:10:0", "3:6,4:8", "1:2:3:4", "7,7", "-1:4", "0:10,", "3:3"}) {
-    try {
-      parseFrameSelection(bad, 100);
-      ADD_FAILURE() << "accepted '" << bad << "'";
-    } catch (const InputError& e) {
-      EXPECT_NE(std::string(e.what()).find("frame selection"), std::string::npos) << e.what();
-    }
-  }
 }
 
 TEST(Trajectory, KittiPosesBecomeLidarPoses) {

@@ -1,7 +1,7 @@
 // A SemanticKITTI-layout sequence directory, as `sglc ingest` reads it:
 //
 //   DIR/velodyne/NNNNNN.bin    KITTI scans (float32 x, y, z, reflectance)
-//   DIR/labels/NNNNNN.label    SemanticKITTI labels (uint32 per point); required for every selected scan
+//   DIR/labels/NNNNNN.label    labels (uint32, or 1-2 bytes, per point); all present or all absent (unlabelled)
 //   DIR/poses.txt              optional: odometry poses (KITTI format, 3x4 row-major per line), in frame order
 //   DIR/times.txt              optional: one timestamp in seconds per line, in frame order
 //
@@ -18,21 +18,10 @@
 #include <string>
 #include <vector>
 
+#include "sglc/frame_selection.hpp"
 #include "sglc/types.hpp"
 
-namespace sglc::client {
-
-// An inclusive range of frame numbers; an unset end is open.
-struct FrameRange {
-  std::optional<std::int64_t> first;
-  std::optional<std::int64_t> last;
-  bool contains(std::int64_t frame) const {
-    return (!first || frame >= *first) && (!last || frame <= *last);
-  }
-};
-
-// "a:b" (both inclusive), "a:" (from a), ":b" (up to b), "a" (only a). Throws InputError otherwise.
-FrameRange parseFrameRange(const std::string& text);
+namespace sglc {
 
 struct SequenceFrame {
   std::string name;          // file stem, e.g. "000720"
@@ -52,10 +41,10 @@ struct Sequence {
   bool has_stamps = false;
 };
 
-// Lists the selected frames: those in `range`, then every `every`-th of them (the first, the
+// Lists the selected frames: those whose numbers `selection` contains, then every `every`-th of them (the first, the
 // every+1-th, ...). Throws InputError when the directory is not a sequence, `every` < 1, nothing is
 // selected, a selected scan has no label file, or poses.txt / times.txt cannot be read or do not match.
 // Scans themselves are not read.
-Sequence openSequence(const std::string& dir, const FrameRange& range = {}, int every = 1);
+Sequence openSequence(const std::string& dir, const FrameSelection& selection = {}, int every = 1);
 
-}  // namespace sglc::client
+}  // namespace sglc

@@ -1,4 +1,4 @@
-#include "sglc/client/sequence.hpp"
+#include "sglc/sequence.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -12,7 +12,7 @@
 
 #include "sglc/io.hpp"
 
-namespace sglc::client {
+namespace sglc {
 
 namespace fs = std::filesystem;
 
@@ -20,12 +20,6 @@ namespace {
 
 bool allDigits(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
-}
-
-std::int64_t parseFrameNumber(const std::string& text, const std::string& whole) {
-  if (!allDigits(text) || text.size() > 12)
-    throw InputError("bad frame range '" + whole + "': '" + text + "' is not a frame number (expected a:b, a:, :b or a)");
-  return std::stoll(text);
 }
 
 std::vector<double> readStamps(const std::string& path) {
@@ -59,23 +53,7 @@ Indexing chooseIndexing(const std::string& path, std::size_t lines, std::int64_t
 
 }  // namespace
 
-FrameRange parseFrameRange(const std::string& text) {
-  FrameRange range;
-  const auto colon = text.find(':');
-  if (colon == std::string::npos) {
-    range.first = range.last = parseFrameNumber(text, text);
-    return range;
-  }
-  const std::string a = text.substr(0, colon), b = text.substr(colon + 1);
-  if (a.empty() && b.empty()) throw InputError("bad frame range ':' (expected a:b, a:, :b or a)");
-  if (!a.empty()) range.first = parseFrameNumber(a, text);
-  if (!b.empty()) range.last = parseFrameNumber(b, text);
-  if (range.first && range.last && *range.first > *range.last)
-    throw InputError("bad frame range '" + text + "': first frame after last");
-  return range;
-}
-
-Sequence openSequence(const std::string& dir, const FrameRange& range, int every) {
+Sequence openSequence(const std::string& dir, const FrameSelection& selection, int every) {
   if (every < 1) throw InputError("--every must be at least 1 (got " + std::to_string(every) + ")");
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw InputError(dir + ": not a directory");
@@ -131,12 +109,11 @@ Sequence openSequence(const std::string& dir, const FrameRange& range, int every
 
   std::size_t in_range = 0;
   for (auto& f : all) {
-    if (!range.contains(f.number)) continue;
+    if (!selection.contains(f.number)) continue;
     if (in_range++ % static_cast<std::size_t>(every) == 0) seq.frames.push_back(std::move(f));
   }
   if (seq.frames.empty()) {
-    std::string sel = (range.first ? std::to_string(*range.first) : "") + ":" + (range.last ? std::to_string(*range.last) : "");
-    throw InputError(velodyne.string() + ": no scans in frame range " + sel + " (scans there go from " +
+    throw InputError(velodyne.string() + ": no scans in frame selection '" + selection.text() + "' (scans there go from " +
                      std::to_string(all.front().number) + " to " + std::to_string(max_frame) + ")");
   }
   // Labels are all there or all absent (a directory with velodyne/ only is sent unlabelled: the server's
@@ -153,4 +130,4 @@ Sequence openSequence(const std::string& dir, const FrameRange& range, int every
   return seq;
 }
 
-}  // namespace sglc::client
+}  // namespace sglc
