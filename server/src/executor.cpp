@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "log_line.hpp"
+
 namespace sglc::server {
 
 Executor::Executor(int threads) {
@@ -36,7 +38,8 @@ void Executor::loop() {
     try {
       task();
     } catch (const std::exception& e) {
-      spdlog::error("executor task threw: {}", e.what());  // tasks handle their own errors; this is a bug
+      // Tasks handle their own errors: one that escapes is a bug, logged like every other line (JSON).
+      spdlog::error("{}", logLine({{"event", "executor_task_threw"}, {"error", e.what()}}));
     }
     lock.lock();
   }
