@@ -73,7 +73,8 @@ sc::Client connectClient(const Common& c, std::size_t chunk_bytes = sc::kDefault
     if (options.tls_root_certs.find("-----BEGIN") == std::string::npos)
       throw sglc::InputError("--tls-ca " + c.tls_ca + ": not a PEM certificate file");
   }
-  if (!(c.timeout_s >= 0) || !std::isfinite(c.timeout_s)) throw UsageError("--timeout must be a number of seconds >= 0");
+  if (!(c.timeout_s >= 0) || !std::isfinite(c.timeout_s))
+    throw UsageError("--timeout must be a number of seconds >= 0");
   options.default_deadline = std::chrono::milliseconds(static_cast<std::int64_t>(c.timeout_s * 1000.0));
   if (c.server.empty()) throw UsageError("--server is empty");
   return sc::Client::connect(c.server, options);
@@ -83,7 +84,7 @@ sc::Client connectClient(const Common& c, std::size_t chunk_bytes = sc::kDefault
 // Query options (ingest --query and query)
 
 struct QueryFlags {
-  unsigned top_k = 0;              // 0: the server's default (5)
+  unsigned top_k = 0;  // 0: the server's default (5)
   std::int64_t exclude_recent = 50;
   double exclude_seconds = 0;
   std::string scope = "all";
@@ -101,8 +102,10 @@ void addQueryFlags(CLI::App* app, QueryFlags& q, bool with_rejected) {
   app->add_option("--top-k", q.top_k, "Loops to return (server default 5, at most 100)");
   app->add_option("--exclude-recent", q.exclude_recent,
                   "Skip the querying robot's scans within N sequence numbers in the same session (default 50)");
-  app->add_option("--exclude-seconds", q.exclude_seconds, "Skip the querying robot's scans within S seconds (needs stamps)");
-  app->add_option("--scope", q.scope, "same (this robot), other (other robots), all (default), sessions (see --sessions)");
+  app->add_option("--exclude-seconds", q.exclude_seconds,
+                  "Skip the querying robot's scans within S seconds (needs stamps)");
+  app->add_option("--scope", q.scope,
+                  "same (this robot), other (other robots), all (default), sessions (see --sessions)");
   app->add_option("--sessions", q.sessions, "robot/session names searched with --scope sessions (comma separated)");
   app->add_option("--candidates", q.candidates, "Descriptor neighbours to verify (server default max(top-k, 10))");
   app->add_flag("--no-refine", q.no_refine, "Skip the fine/refine pose stages");
@@ -110,8 +113,9 @@ void addQueryFlags(CLI::App* app, QueryFlags& q, bool with_rejected) {
     app->add_flag("--include-rejected", q.include_rejected, "Also list candidates that failed verification");
     app->add_option("--verify", q.verify_scan_ids, "Check exactly these stored scan ids instead of searching")
         ->delimiter(',');
-    app->add_flag("--known-loops", q.known_loops,
-                  "The candidates are known loops (with --verify: a chosen place): estimate a pose for rejected ones too");
+    app->add_flag(
+        "--known-loops", q.known_loops,
+        "The candidates are known loops (with --verify: a chosen place): estimate a pose for rejected ones too");
   }
   q.min_score_opt = app->add_option("--min-score", q.min_score, "Drop verified candidates scoring below this");
 }
@@ -123,7 +127,8 @@ v1::QueryOptions toQueryOptions(const QueryFlags& q) {
   } catch (const sglc::InputError& e) {
     throw UsageError(std::string("--scope: ") + e.what());
   }
-  if (q.scope == "sessions" && q.sessions.empty()) throw UsageError("--scope sessions needs --sessions robot/session,...");
+  if (q.scope == "sessions" && q.sessions.empty())
+    throw UsageError("--scope sessions needs --sessions robot/session,...");
   if (q.scope != "sessions" && !q.sessions.empty()) throw UsageError("--sessions needs --scope sessions");
   std::istringstream list(q.sessions);
   for (std::string s; std::getline(list, s, ',');) {
@@ -404,7 +409,8 @@ int runMaps(const Common& common) {
     return 0;
   }
   std::cout << std::left << std::setw(24) << "MAP" << std::right << std::setw(10) << "SCANS" << std::setw(8) << "ROBOTS"
-            << std::setw(10) << "SESSIONS" << "\n";
+            << std::setw(10) << "SESSIONS"
+            << "\n";
   for (const auto& m : maps)
     std::cout << std::left << std::setw(24) << m.name() << std::right << std::setw(10) << m.scans() << std::setw(8)
               << m.robots() << std::setw(10) << m.sessions() << "\n";
@@ -417,7 +423,8 @@ int runRobots(const Common& common, const std::string& map) {
     json j;
     j["map"] = map;
     j["robots"] = json::array();
-    for (const auto& r : robots) j["robots"].push_back({{"name", r.name()}, {"scans", r.scans()}, {"sessions", r.sessions()}});
+    for (const auto& r : robots)
+      j["robots"].push_back({{"name", r.name()}, {"scans", r.scans()}, {"sessions", r.sessions()}});
     std::cout << j.dump() << std::endl;
     return 0;
   }
@@ -426,7 +433,8 @@ int runRobots(const Common& common, const std::string& map) {
     return 0;
   }
   std::cout << std::left << std::setw(24) << "ROBOT" << std::right << std::setw(10) << "SCANS" << std::setw(10)
-            << "SESSIONS" << "\n";
+            << "SESSIONS"
+            << "\n";
   for (const auto& r : robots)
     std::cout << std::left << std::setw(24) << r.name() << std::right << std::setw(10) << r.scans() << std::setw(10)
               << r.sessions() << "\n";
@@ -440,8 +448,11 @@ int runSessions(const Common& common, const std::string& map, const std::string&
     j["map"] = map;
     j["sessions"] = json::array();
     for (const auto& s : sessions)
-      j["sessions"].push_back({{"robot", s.robot()}, {"name", s.name()}, {"scans", s.scans()},
-                               {"first_seq", s.first_seq()}, {"last_seq", s.last_seq()}});
+      j["sessions"].push_back({{"robot", s.robot()},
+                               {"name", s.name()},
+                               {"scans", s.scans()},
+                               {"first_seq", s.first_seq()},
+                               {"last_seq", s.last_seq()}});
     std::cout << j.dump() << std::endl;
     return 0;
   }
@@ -450,7 +461,8 @@ int runSessions(const Common& common, const std::string& map, const std::string&
     return 0;
   }
   std::cout << std::left << std::setw(20) << "ROBOT" << std::setw(20) << "SESSION" << std::right << std::setw(10)
-            << "SCANS" << std::setw(12) << "SEQ" << "\n";
+            << "SCANS" << std::setw(12) << "SEQ"
+            << "\n";
   for (const auto& s : sessions)
     std::cout << std::left << std::setw(20) << s.robot() << std::setw(20) << s.name() << std::right << std::setw(10)
               << s.scans() << std::setw(12) << (std::to_string(s.first_seq()) + ".." + std::to_string(s.last_seq()))
@@ -474,8 +486,13 @@ int runScan(const Common& common, std::int64_t id, bool graph) {
     if (graph) {
       j["nodes"] = json::array();
       for (const auto& n : r.nodes())
-        j["nodes"].push_back({{"cls", n.cls()}, {"x", n.x()}, {"y", n.y()}, {"z", n.z()}, {"length", n.length()},
-                              {"width", n.width()}, {"height", n.height()}});
+        j["nodes"].push_back({{"cls", n.cls()},
+                              {"x", n.x()},
+                              {"y", n.y()},
+                              {"z", n.z()},
+                              {"length", n.length()},
+                              {"width", n.width()},
+                              {"height", n.height()}});
       j["scan_descriptor"] = std::vector<float>(r.scan_descriptor().begin(), r.scan_descriptor().end());
     }
     std::cout << j.dump() << std::endl;
@@ -485,7 +502,8 @@ int runScan(const Common& common, std::int64_t id, bool graph) {
             << r.key().session() << ", seq " << r.key().seq() << "\n";
   if (r.has_stamp()) std::cout << "  stamp " << std::fixed << std::setprecision(6) << r.stamp() << " s\n";
   if (sc::isSet(r.odometry_pose())) std::cout << "  odometry pose " << poseText(r.odometry_pose()) << "\n";
-  std::cout << "  fingerprint " << r.fingerprint_bytes() << " bytes" << (r.has_raw() ? ", raw cloud stored" : "") << "\n";
+  std::cout << "  fingerprint " << r.fingerprint_bytes() << " bytes" << (r.has_raw() ? ", raw cloud stored" : "")
+            << "\n";
   if (graph) {
     std::cout << "  " << r.nodes_size() << " graph nodes\n";
     for (const auto& n : r.nodes())
@@ -500,7 +518,8 @@ int runScan(const Common& common, std::int64_t id, bool graph) {
 int runTrajectory(const Common& common, const std::string& map, const std::string& robot, const std::string& session,
                   const std::string& out_path) {
   const auto poses = connectClient(common).getPoses(map, robot, session);
-  if (poses.empty()) throw sglc::InputError("robot '" + robot + "' of map '" + map + "' has no scan with an odometry pose");
+  if (poses.empty())
+    throw sglc::InputError("robot '" + robot + "' of map '" + map + "' has no scan with an odometry pose");
   std::ofstream out(out_path);
   if (!out) throw sglc::InputError(out_path + ": cannot write");
   out << std::setprecision(9);
@@ -513,8 +532,13 @@ int runTrajectory(const Common& common, const std::string& map, const std::strin
   }
   if (!out.flush()) throw sglc::InputError(out_path + ": write failed");
   if (common.json) {
-    std::cout << json{{"map", map}, {"robot", robot}, {"poses", poses.size()}, {"optimised", optimised},
-                      {"connected", connected}, {"out", out_path}}.dump()
+    std::cout << json{{"map", map},
+                      {"robot", robot},
+                      {"poses", poses.size()},
+                      {"optimised", optimised},
+                      {"connected", connected},
+                      {"out", out_path}}
+                     .dump()
               << std::endl;
   } else {
     std::cout << poses.size() << " poses of " << robot << " (" << optimised << " optimised, " << connected
@@ -553,7 +577,8 @@ int runStats(const Common& common, const std::string& map) {
 
 int runDelete(const Common& common, const std::string& map, const std::string& robot, const std::string& session) {
   const sc::Client client = connectClient(common);
-  const std::int64_t removed = session.empty() ? client.deleteRobot(map, robot) : client.deleteSession(map, robot, session);
+  const std::int64_t removed =
+      session.empty() ? client.deleteRobot(map, robot) : client.deleteSession(map, robot, session);
   if (common.json) {
     json j;
     j["map"] = map;
@@ -607,7 +632,8 @@ int main(int argc, char** argv) {
   c_ingest->add_option("--map", ingest.map, "Map name (created if missing)")->required();
   c_ingest->add_option("--robot", ingest.robot, "Robot name")->required();
   c_ingest->add_option("--session", ingest.session, "Session name (default: the directory's base name)");
-  c_ingest->add_option("--frames", ingest.frames, "Frame numbers: a, a:b (b exclusive; a: and :b open-ended), a:b:s, or a comma-separated list");
+  c_ingest->add_option("--frames", ingest.frames,
+                       "Frame numbers: a, a:b (b exclusive; a: and :b open-ended), a:b:s, or a comma-separated list");
   c_ingest->add_option("--every", ingest.every, "Ingest every N-th frame (default 1)");
   c_ingest->add_flag("--query", ingest.query, "Look for loops before each scan is stored and report them");
   c_ingest->add_flag("--store-raw", ingest.store_raw, "Also keep the raw clouds on the server");
@@ -621,7 +647,8 @@ int main(int argc, char** argv) {
       ->required();
 
   QueryArgs query;
-  auto* c_query = app.add_subcommand("query", "Find loops for a stored scan (--scan-id) or a scan file (relocalization)");
+  auto* c_query =
+      app.add_subcommand("query", "Find loops for a stored scan (--scan-id) or a scan file (relocalization)");
   addCommon(c_query, common);
   c_query->add_option("--map", query.map, "Map name")->required();
   query.scan_id_opt = c_query->add_option("--scan-id", query.scan_id, "A stored scan's id");

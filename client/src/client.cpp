@@ -205,15 +205,16 @@ void Client::ensureMap(const std::string& name, const CallOptions& call) const {
 }
 
 std::vector<v1::MapInfo> Client::listMaps(const CallOptions& call) const {
-  const auto r = core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::ListMaps, "MapAdmin.ListMaps",
-                              v1::ListMapsRequest{}, call);
+  const auto r =
+      core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::ListMaps, "MapAdmin.ListMaps", v1::ListMapsRequest{}, call);
   return {r.maps().begin(), r.maps().end()};
 }
 
 std::vector<v1::RobotInfo> Client::listRobots(const std::string& map, const CallOptions& call) const {
   v1::ListRobotsRequest request;
   request.set_map(map);
-  const auto r = core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::ListRobots, "MapAdmin.ListRobots", request, call);
+  const auto r =
+      core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::ListRobots, "MapAdmin.ListRobots", request, call);
   return {r.robots().begin(), r.robots().end()};
 }
 
@@ -277,8 +278,8 @@ std::vector<v1::ScanPose> Client::getPoses(const std::string& map, const std::st
 v1::GetSessionFramesResponse Client::getSessionFrames(const std::string& map, const CallOptions& call) const {
   v1::GetSessionFramesRequest request;
   request.set_map(map);
-  return core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetSessionFrames, "PoseGraph.GetSessionFrames",
-                      request, call);
+  return core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetSessionFrames, "PoseGraph.GetSessionFrames", request,
+                      call);
 }
 
 v1::BackupResponse Client::backup(const std::string& path, const CallOptions& call) const {
@@ -347,7 +348,8 @@ void IngestSession::failStream(const char* what) {
   }
   grpc::Status status = state_->stream->Finish();
   finished_ = true;
-  if (status.ok()) status = grpc::Status(grpc::StatusCode::INTERNAL, std::string("the server closed the stream ") + what);
+  if (status.ok())
+    status = grpc::Status(grpc::StatusCode::INTERNAL, std::string("the server closed the stream ") + what);
   outstanding_ = std::move(kept);
   error_.emplace(kStreamMethod, status);
   throw *error_;

@@ -3,9 +3,9 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
-#include <tuple>
 #include <cmath>
 #include <numbers>
+#include <tuple>
 
 #include "class_votes.hpp"
 #include "fast_math.hpp"
@@ -29,9 +29,8 @@ std::vector<float> ringKey(const Points& points, const std::vector<Background>& 
     const float rho = std::sqrt(p.x() * p.x() + p.y() * p.y());
     if (rho < rmin || rho >= rmax) continue;
     const int ring = std::min(static_cast<int>((rho - rmin) * inv_ring), rings - 1);
-    const int sector =
-        std::min(static_cast<int>((detail::fastAtan2(p.y(), p.x()) + std::numbers::pi_v<float>) * inv_sector),
-                 sectors - 1);
+    const int sector = std::min(
+        static_cast<int>((detail::fastAtan2(p.y(), p.x()) + std::numbers::pi_v<float>)*inv_sector), sectors - 1);
     const int part = b == Background::kBuilding ? 0 : 1;
     occupied[(static_cast<std::size_t>(part) * rings + ring) * sectors + sector] = 1;
   }
@@ -168,8 +167,7 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
     if (gx < 0 || gy < 0 || gx >= g || gy >= g || cls == 0 || cls > 4) return;
     grid[static_cast<std::size_t>(gy) * g + gx].add(static_cast<Background>(cls));
   };
-  for (const auto& cell : query)
-    put(q, (cell.ix + 0.5) * stored_cell, (cell.iy + 0.5) * stored_cell, cell.cls);
+  for (const auto& cell : query) put(q, (cell.ix + 0.5) * stored_cell, (cell.iy + 0.5) * stored_cell, cell.cls);
   const double r00 = T_q_c(0, 0), r01 = T_q_c(0, 1), r10 = T_q_c(1, 0), r11 = T_q_c(1, 1);
   const double tx = T_q_c(0, 3), ty = T_q_c(1, 3);
   for (const auto& cell : candidate) {

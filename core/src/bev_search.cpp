@@ -14,7 +14,8 @@ namespace {
 constexpr int kClasses = 3;  // vegetation, building, fence (Background values 2..4)
 
 int structureIndex(std::uint8_t cls) {
-  return cls >= static_cast<std::uint8_t>(Background::kVegetation) && cls <= static_cast<std::uint8_t>(Background::kFence)
+  return cls >= static_cast<std::uint8_t>(Background::kVegetation) &&
+                 cls <= static_cast<std::uint8_t>(Background::kFence)
              ? cls - static_cast<int>(Background::kVegetation)
              : -1;
 }
@@ -36,7 +37,9 @@ struct ScoreGrid {
   std::vector<std::uint8_t> score;  // kClasses grids of n * n, row-major (iy, ix)
 
   ScoreGrid(const std::vector<Point2>& points, double cell_m, double half_m)
-      : cell(cell_m), half(half_m), n(static_cast<int>(std::ceil(2.0 * half_m / cell_m))),
+      : cell(cell_m),
+        half(half_m),
+        n(static_cast<int>(std::ceil(2.0 * half_m / cell_m))),
         score(static_cast<std::size_t>(kClasses) * n * n, 0) {
     // Each cell's class by the stored BEV's own rule (majority, ties to the higher priority).
     std::vector<detail::ClassVotes> votes(static_cast<std::size_t>(n) * n);

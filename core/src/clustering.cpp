@@ -22,8 +22,10 @@ void unite(std::vector<int>& parent, int a, int b) {
   a = findRoot(parent, a);
   b = findRoot(parent, b);
   if (a == b) return;
-  if (a < b) parent[b] = a;  // smaller index wins: the result does not depend on visiting order
-  else parent[a] = b;
+  if (a < b)
+    parent[b] = a;  // smaller index wins: the result does not depend on visiting order
+  else
+    parent[a] = b;
 }
 
 }  // namespace

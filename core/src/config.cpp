@@ -3,11 +3,11 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <fstream>
 #include <functional>
 #include <map>
-#include <variant>
-#include <fstream>
 #include <sstream>
+#include <variant>
 
 #include "sglc/types.hpp"
 
@@ -157,8 +157,7 @@ void validateConfig(const Config& config) {
   require(c.match.prune_min_matches >= 0, "match.prune_min_matches", ">= 0");
   require(c.match.prune_min_kept >= 0, "match.prune_min_kept", ">= 0");
   require(c.ransac.inlier_threshold > 0, "ransac.inlier_threshold", "> 0");
-  require(c.ransac.max_iterations >= 1 && c.ransac.max_iterations <= 1000000, "ransac.max_iterations",
-          "in [1, 1e6]");
+  require(c.ransac.max_iterations >= 1 && c.ransac.max_iterations <= 1000000, "ransac.max_iterations", "in [1, 1e6]");
   require(c.ransac.min_triangle_height >= 0, "ransac.min_triangle_height", ">= 0");
   require(c.ransac.min_inliers >= 3, "ransac.min_inliers", ">= 3");
   require(c.verify.t_g >= 0 && c.verify.t_g <= 1, "verify.t_g", "in [0, 1]");
@@ -183,14 +182,12 @@ void validateConfig(const Config& config) {
   require(f.plane_max_range_m > 0 && f.plane_max_range_m <= 320, "fingerprint.plane_max_range_m", "in (0, 320]");
   require(c.cluster.max_range_m <= 320, "cluster.max_range_m", "<= 320 (fingerprints store centimetres in 16 bits)");
   require(c.fine.max_iterations >= 0, "fine.max_iterations", ">= 0");
-  require(c.fine.max_corr_start_m > 0 && c.fine.max_corr_end_m > 0 &&
-              c.fine.max_corr_end_m <= c.fine.max_corr_start_m,
+  require(c.fine.max_corr_start_m > 0 && c.fine.max_corr_end_m > 0 && c.fine.max_corr_end_m <= c.fine.max_corr_start_m,
           "fine.max_corr_start_m/max_corr_end_m", "> 0 with end <= start");
   require(c.fine.huber_m > 0, "fine.huber_m", "> 0");
   require(c.refine.max_iterations >= 0, "refine.max_iterations", ">= 0");
   require(c.refine.max_corr_m > 0, "refine.max_corr_m", "> 0");
-  require(c.refine.min_normal_cosine >= 0 && c.refine.min_normal_cosine <= 1, "refine.min_normal_cosine",
-          "in [0, 1]");
+  require(c.refine.min_normal_cosine >= 0 && c.refine.min_normal_cosine <= 1, "refine.min_normal_cosine", "in [0, 1]");
   require(c.refine.cauchy_m > 0, "refine.cauchy_m", "> 0");
   require(c.refine.instance_weight >= 0, "refine.instance_weight", ">= 0");
   require(c.refine.min_information >= 0, "refine.min_information", ">= 0");
@@ -290,8 +287,7 @@ Config parseConfig(const std::string& yaml_text) {
         }
         auto it = table.find(key);
         if (it == table.end()) throw InputError("config: unknown parameter '" + key + "'");
-        std::visit(
-            [&](auto* field) { *field = item.second.as<std::remove_pointer_t<decltype(field)>>(); }, it->second);
+        std::visit([&](auto* field) { *field = item.second.as<std::remove_pointer_t<decltype(field)>>(); }, it->second);
       } catch (const YAML::Exception& e) {
         throw InputError("config: bad value for '" + key + "': " + e.what());
       }
@@ -333,8 +329,10 @@ std::string dumpConfig(const Config& config) {
     out << YAML::Key << name.substr(dot + 1) << YAML::Value;
     std::visit(
         [&](auto* field) {
-          if constexpr (std::is_same_v<decltype(field), std::vector<std::uint32_t>*>) out << YAML::Flow << *field;
-          else out << *field;
+          if constexpr (std::is_same_v<decltype(field), std::vector<std::uint32_t>*>)
+            out << YAML::Flow << *field;
+          else
+            out << *field;
         },
         ref);
   }

@@ -14,8 +14,9 @@ inline float fastAtan2(float y, float x) {
   if (mx == 0.0f) return 0.0f;
   const float z = (ax > ay ? ay : ax) / mx;
   const float z2 = z * z;
-  float r = z * (0.99997726f +
-                 z2 * (-0.33262347f + z2 * (0.19354346f + z2 * (-0.11643287f + z2 * (0.05265332f + z2 * -0.01172120f)))));
+  float r =
+      z * (0.99997726f +
+           z2 * (-0.33262347f + z2 * (0.19354346f + z2 * (-0.11643287f + z2 * (0.05265332f + z2 * -0.01172120f)))));
   if (ay > ax) r = std::numbers::pi_v<float> / 2 - r;
   if (x < 0) r = std::numbers::pi_v<float> - r;
   return y < 0 ? -r : r;

@@ -119,8 +119,8 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   std::memcpy(header, bytes.data(), sizeof(header));
   if (header[0] != kMagic) throw InputError("fingerprint: not a fingerprint (bad magic)");
   if (header[1] > kFingerprintVersion || header[1] == 0)
-    throw InputError("fingerprint: format version " + std::to_string(header[1]) + " is not supported (this build reads " +
-                     std::to_string(kFingerprintVersion) + ")");
+    throw InputError("fingerprint: format version " + std::to_string(header[1]) +
+                     " is not supported (this build reads " + std::to_string(kFingerprintVersion) + ")");
   if (header[2] != bytes.size() - kHeaderBytes)
     throw InputError("fingerprint: payload is " + std::to_string(bytes.size() - kHeaderBytes) + " bytes, header says " +
                      std::to_string(header[2]));

@@ -39,8 +39,8 @@ Node makeNode(const Points& points, const Cluster& cluster) {
   }
   const double uc = 0.5 * (umin + umax), vc = 0.5 * (vmin + vmax);
   Node node;
-  node.center = Vec3f(static_cast<float>(mx + c * uc - s * vc), static_cast<float>(my + s * uc + c * vc),
-                      0.5f * (zmin + zmax));
+  node.center =
+      Vec3f(static_cast<float>(mx + c * uc - s * vc), static_cast<float>(my + s * uc + c * vc), 0.5f * (zmin + zmax));
   const float l = static_cast<float>(umax - umin), w = static_cast<float>(vmax - vmin);
   node.size = Vec3f(std::max(l, w), std::min(l, w), zmax - zmin);
   node.cls = static_cast<std::uint8_t>(cluster.cls);

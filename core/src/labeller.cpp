@@ -85,7 +85,8 @@ class Ground {
             const auto n = static_cast<std::size_t>(cellAt(xx, yy));
             // Only planes fitted to enough points: a level fallback is no reference on a slope.
             if (own_sums[n].n < 6) continue;
-            const float mx = cx + 0.5f * cell_ * static_cast<float>(dx), my = cy + 0.5f * cell_ * static_cast<float>(dy);
+            const float mx = cx + 0.5f * cell_ * static_cast<float>(dx),
+                        my = cy + 0.5f * cell_ * static_cast<float>(dy);
             below += !(at(own_plane[ku], mx, my) <= at(own_plane[n], mx, my) + step);
           }
         // Two neighbours, so that one badly fitted neighbour (a sliver of points) does not lift a slope.

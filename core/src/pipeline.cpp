@@ -20,10 +20,9 @@ void downsampleInstance(const Points& points, const Cluster& cluster, double vox
   for (auto i : cluster.points) {
     const Vec3f& p = points[i];
     bool inserted = false;
-    const int idx = map.findOrInsert(packCell(detail::floorInt(p.x() * inv),
-                                              detail::floorInt(p.y() * inv),
-                                              detail::floorInt(p.z() * inv)),
-                                     static_cast<int>(sums.size()), &inserted);
+    const int idx = map.findOrInsert(
+        packCell(detail::floorInt(p.x() * inv), detail::floorInt(p.y() * inv), detail::floorInt(p.z() * inv)),
+        static_cast<int>(sums.size()), &inserted);
     if (inserted) {
       sums.push_back(Vec3d::Zero());
       counts.push_back(0);
@@ -125,11 +124,10 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
     downsampleInstance(node_points, clusters[k], c.fingerprint.instance_voxel_m, fp.instance_points);
     fp.instance_offsets.push_back(static_cast<std::uint32_t>(fp.instance_points.size()));
   }
-  fp.background = bevCells(bg_points, background, c.fingerprint.background_cell_m,
-                           c.fingerprint.background_max_range_m);
+  fp.background =
+      bevCells(bg_points, background, c.fingerprint.background_cell_m, c.fingerprint.background_max_range_m);
   fp.planes = extractPlanes(bg_points, background, c.fingerprint);
-  fp.descriptor = scanDescriptor(fp.nodes, ringKey(bg_points, background, c.descriptor), fp.layout, fp.d_max,
-                                 fp.d_i);
+  fp.descriptor = scanDescriptor(fp.nodes, ringKey(bg_points, background, c.descriptor), fp.layout, fp.d_max, fp.d_i);
   fp.finalize();
   if (n > 0 && node_points.empty() && bg_points.empty())
     rep.warnings.push_back("no point carries a label the active label map (labels.preset: " + c.labels.preset +
@@ -173,11 +171,14 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   r.score = r.graph_similarity * r.background_similarity * (1.0 - std::exp(-r.inliers / 3.0));
   // Nearer revisits rank first: they share more of the scene, so their pose is the more reliable.
   if (c.verify.score_distance_m > 0) r.score *= std::exp(-translation / c.verify.score_distance_m);
-  if (r.graph_similarity < c.verify.t_g) r.reason = "graph similarity below t_g";
-  else if (r.background_similarity < c.verify.t_b) r.reason = "background similarity below t_b";
+  if (r.graph_similarity < c.verify.t_g)
+    r.reason = "graph similarity below t_g";
+  else if (r.background_similarity < c.verify.t_b)
+    r.reason = "background similarity below t_b";
   else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)
     r.reason = "translation exceeds verify.max_translation";
-  else r.is_loop = true;
+  else
+    r.is_loop = true;
   // Few node inliers are weak evidence (three or four landmarks align by chance between look-alike streets):
   // such a loop stands only if the background planes, aligned from the coarse pose, agree with it.
   if (r.is_loop && r.inliers < c.verify.confirm_below_inliers) {
@@ -185,8 +186,7 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
     const Mat4d d = r.T.inverse() * planes.T;  // confirming means staying near the coarse pose
     if (planes.iterations == 0 || planes.fitness < c.verify.confirm_min_fitness ||
         planes.rmse > c.verify.confirm_max_rmse_m || planes.horizontal_constraint < c.verify.confirm_min_constraint ||
-        d.topRightCorner<3, 1>().norm() > 1.0 ||
-        rotationAngleDeg(d.topLeftCorner<3, 3>()) > 5.0) {
+        d.topRightCorner<3, 1>().norm() > 1.0 || rotationAngleDeg(d.topLeftCorner<3, 3>()) > 5.0) {
       r.is_loop = false;
       r.reason = "few node inliers and the background planes do not confirm the pose";
     }
@@ -240,7 +240,8 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     const Mat4d d = T.inverse() * ref.T;
-    kept = ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0;
+    kept =
+        ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0;
     if (kept) {
       T = ref.T;
       r.information = ref.information;

@@ -255,7 +255,8 @@ IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>&
         float best = gate2;
         const Vec3f* arg = nullptr;
         // Scan outwards from x.x() in both directions, stopping once |dx| alone exceeds the best distance.
-        const auto mid = std::lower_bound(qs.begin(), qs.end(), x.x(), [](const Vec3f& u, float v) { return u.x() < v; });
+        const auto mid =
+            std::lower_bound(qs.begin(), qs.end(), x.x(), [](const Vec3f& u, float v) { return u.x() < v; });
         for (auto it = mid; it != qs.end(); ++it) {
           const float dx = it->x() - x.x();
           if (dx * dx >= best) break;
@@ -318,10 +319,10 @@ PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double voxel) : map_(pl
   for (int i = static_cast<int>(planes.size()) - 1; i >= 0; --i) {
     const Vec3f& c = planes[i].centroid;
     bool inserted = false;
-    int& head = map_.findOrInsert(packCell(static_cast<int>(std::floor(c.x() * inv)),
-                                           static_cast<int>(std::floor(c.y() * inv)),
-                                           static_cast<int>(std::floor(c.z() * inv))),
-                                  i, &inserted);
+    int& head =
+        map_.findOrInsert(packCell(static_cast<int>(std::floor(c.x() * inv)), static_cast<int>(std::floor(c.y() * inv)),
+                                   static_cast<int>(std::floor(c.z() * inv))),
+                          i, &inserted);
     if (!inserted) {
       next_[i] = head;
       head = i;
@@ -352,9 +353,8 @@ int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const 
 }
 
 RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
-                          const std::vector<Plane>& candidate,
-                          const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,
-                          const RefineConfig& config) {
+                          const std::vector<Plane>& candidate, const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs,
+                          const Mat4d& T0, const RefineConfig& config) {
   RefineResult result;
   result.T = T0;
   using Vec6 = Eigen::Matrix<double, 6, 1>;
@@ -365,8 +365,8 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     const Vec3f t = T.topRightCorner<3, 1>().cast<float>();
     int count = 0;
     for (std::size_t k = 0; k < candidate.size(); ++k) {
-      assoc[k] = query_index.nearest(query, R * candidate[k].centroid + t, R * candidate[k].normal,
-                                     config.max_corr_m, config.min_normal_cosine);
+      assoc[k] = query_index.nearest(query, R * candidate[k].centroid + t, R * candidate[k].normal, config.max_corr_m,
+                                     config.min_normal_cosine);
       count += assoc[k] >= 0;
     }
     return count;
@@ -405,7 +405,8 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       const Eigen::SelfAdjointEigenSolver<Mat6> eig(Hs);
       Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
       for (int k = 0; k < 6; ++k)
-        if (eig.eigenvalues()[k] < config.min_information) P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
+        if (eig.eigenvalues()[k] < config.min_information)
+          P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
       if (P.isZero()) return;  // fully constrained: the pairs are not needed
       Mat6 Ha = Mat6::Zero();
       Vec6 ga = Vec6::Zero();
@@ -441,8 +442,8 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   for (std::size_t k = 0; k < candidate.size(); ++k) {
     if (assoc[k] < 0) continue;
     const Plane& q = query[assoc[k]];
-    const double r = q.normal.cast<double>().dot(R * candidate[k].centroid.cast<double>() + t -
-                                                  q.centroid.cast<double>());
+    const double r =
+        q.normal.cast<double>().dot(R * candidate[k].centroid.cast<double>() + t - q.centroid.cast<double>());
     sq += r * r;
   }
   result.rmse = result.correspondences ? std::sqrt(sq / result.correspondences) : 0.0;

@@ -48,7 +48,8 @@ Indexing chooseIndexing(const std::string& path, std::size_t lines, std::int64_t
   if (lines > static_cast<std::size_t>(max_frame)) return Indexing::kByNumber;
   if (lines == frames) return Indexing::kByPosition;
   throw InputError(path + ": " + std::to_string(lines) + " lines, but frames go up to " + std::to_string(max_frame) +
-                   " (" + std::to_string(frames) + " scans in the directory); expected one line per frame number or per scan");
+                   " (" + std::to_string(frames) +
+                   " scans in the directory); expected one line per frame number or per scan");
 }
 
 }  // namespace
@@ -60,7 +61,8 @@ Sequence openSequence(const std::string& dir, const FrameSelection& selection, i
   const fs::path root(dir);
   const fs::path velodyne = root / "velodyne";
   if (!fs::is_directory(velodyne, ec))
-    throw InputError(dir + ": no velodyne/ directory (expected SemanticKITTI layout: velodyne/NNNNNN.bin, labels/NNNNNN.label)");
+    throw InputError(
+        dir + ": no velodyne/ directory (expected SemanticKITTI layout: velodyne/NNNNNN.bin, labels/NNNNNN.label)");
 
   Sequence seq;
   seq.dir = dir;
@@ -113,8 +115,9 @@ Sequence openSequence(const std::string& dir, const FrameSelection& selection, i
     if (in_range++ % static_cast<std::size_t>(every) == 0) seq.frames.push_back(std::move(f));
   }
   if (seq.frames.empty()) {
-    throw InputError(velodyne.string() + ": no scans in frame selection '" + selection.text() + "' (scans there go from " +
-                     std::to_string(all.front().number) + " to " + std::to_string(max_frame) + ")");
+    throw InputError(velodyne.string() + ": no scans in frame selection '" + selection.text() +
+                     "' (scans there go from " + std::to_string(all.front().number) + " to " +
+                     std::to_string(max_frame) + ")");
   }
   // Labels are all there or all absent (a directory with velodyne/ only is sent unlabelled: the server's
   // labeller labels it); a sequence with some label files missing is an error.

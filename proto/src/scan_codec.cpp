@@ -104,9 +104,9 @@ LabelledScan decodeScan(std::string_view points, std::string_view labels, std::s
   const std::size_t n = checkedPointCount(points, labels);
   if (n == 0) throw WireError("scan is empty");
   if (n > max_points)
-    throw WireError("scan has " + std::to_string(n) + " points, the server accepts at most " +
-                        std::to_string(max_points),
-                    grpc::StatusCode::RESOURCE_EXHAUSTED);
+    throw WireError(
+        "scan has " + std::to_string(n) + " points, the server accepts at most " + std::to_string(max_points),
+        grpc::StatusCode::RESOURCE_EXHAUSTED);
   LabelledScan scan{unpackPoints(points), unpackLabels(labels)};
   for (std::size_t i = 0; i < n; ++i)
     if (!scan.points[i].allFinite())

@@ -23,7 +23,8 @@ TokenTable TokenTable::load(const std::string& path) {
     if (!(ss >> token)) continue;
     if (!(ss >> maps) || (ss >> extra))
       throw std::runtime_error(path + ":" + std::to_string(no) + ": expected 'TOKEN map1,map2' or 'TOKEN *'");
-    if (token.size() < 8) throw std::runtime_error(path + ":" + std::to_string(no) + ": token shorter than 8 characters");
+    if (token.size() < 8)
+      throw std::runtime_error(path + ":" + std::to_string(no) + ": token shorter than 8 characters");
     auto& set = table.tokens_[token];
     std::istringstream ms(maps);
     std::string map;
@@ -42,7 +43,8 @@ TokenTable::Grant TokenTable::authenticate(const grpc::ServerContextBase& ctx) c
   }
   const auto& md = ctx.client_metadata();
   auto it = md.find("authorization");
-  if (it == md.end()) throw RpcError(grpc::StatusCode::UNAUTHENTICATED, "missing 'authorization: Bearer TOKEN' metadata");
+  if (it == md.end())
+    throw RpcError(grpc::StatusCode::UNAUTHENTICATED, "missing 'authorization: Bearer TOKEN' metadata");
   const std::string value(it->second.data(), it->second.size());
   const std::string prefix = "Bearer ";
   if (value.rfind(prefix, 0) != 0)

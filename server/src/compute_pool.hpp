@@ -81,7 +81,7 @@ class ComputePool {
   const int threads_;
   mutable std::mutex mutex_;
   std::condition_variable changed_;
-  int busy_ = 0;  // slots in use (calls + helpers at work)
+  int busy_ = 0;                               // slots in use (calls + helpers at work)
   std::deque<std::shared_ptr<bool>> waiters_;  // calls waiting for a slot, oldest first; set true when granted
   std::deque<std::shared_ptr<Job>> jobs_;
   bool stop_ = false;

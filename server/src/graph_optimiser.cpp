@@ -119,8 +119,8 @@ struct GraphOptimiser::MapGraph {
   std::set<std::pair<std::int64_t, std::int64_t>> pairs;  // (a, b) of the loops above
   std::int64_t last_scan = 0, last_loop = 0;
   std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
-  bool converged = false;  // the last solve ended by convergence (not by its iteration or time bound)
-  int continuations = 0;   // unconverged solves in a row
+  bool converged = false;         // the last solve ended by convergence (not by its iteration or time bound)
+  int continuations = 0;          // unconverged solves in a row
 };
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
@@ -187,7 +187,8 @@ void GraphOptimiser::run() {
       wake_.wait(lock);
       continue;
     }
-    auto next = std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+    auto next =
+        std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
     if (next->second > Clock::now()) {
       wake_.wait_until(lock, next->second);
       continue;
@@ -297,7 +298,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   std::map<std::int64_t, std::vector<std::size_t>> sessions;
   for (std::size_t i = 0; i < g.nodes.size(); ++i) sessions[g.nodes[i].session_id].push_back(i);
   for (auto& [sid, idx] : sessions)
-    std::stable_sort(idx.begin(), idx.end(), [&](std::size_t a, std::size_t b) { return g.nodes[a].seq < g.nodes[b].seq; });
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](std::size_t a, std::size_t b) { return g.nodes[a].seq < g.nodes[b].seq; });
 
   // Components: sessions linked by loops (union-find); the map frame's component is "connected".
   std::map<std::int64_t, std::int64_t> parent;
@@ -368,7 +370,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
     x[i] = {p.q.x(), p.q.y(), p.q.z(), p.q.w(), p.t.x(), p.t.y(), p.t.z()};
   }
   auto edge = [](const Mat4d& T_ab, const Mat6& sqrt_info) {
-    return RelativePoseError{Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), sqrt_info};
+    return RelativePoseError{Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3),
+                             sqrt_info};
   };
   auto addEdge = [&](std::size_t a, std::size_t b, const RelativePoseError& e, ceres::LossFunction* loss) {
     auto* cost = new ceres::AutoDiffCostFunction<RelativePoseError, 6, 7, 7>(new RelativePoseError(e));
@@ -382,9 +385,9 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
       const double d = step.block<3, 1>(0, 3).norm();
       // Odometry: trusted (no robust loss), sigmas growing with the distance driven.
       addEdge(idx[k - 1], idx[k],
-              edge(step, diagonalSqrtInformation(options_.odometry_sigma_m + options_.odometry_sigma_per_m * d,
-                                                 (options_.odometry_sigma_deg + options_.odometry_sigma_deg_per_m * d) *
-                                                     kRadPerDeg)),
+              edge(step, diagonalSqrtInformation(
+                             options_.odometry_sigma_m + options_.odometry_sigma_per_m * d,
+                             (options_.odometry_sigma_deg + options_.odometry_sigma_deg_per_m * d) * kRadPerDeg)),
               nullptr);
     }
   std::vector<RelativePoseError> loop_edges;
@@ -399,7 +402,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
       const double st = std::max(options_.loop_sigma_m, l.rmse);
       loop_edges.push_back(edge(l.T, diagonalSqrtInformation(st, floor_r * st / options_.loop_sigma_m)));
     }
-    loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP));
+    loop_losses.push_back(
+        new ceres::LossFunctionWrapper(new ceres::CauchyLoss(options_.loss_scale), ceres::TAKE_OWNERSHIP));
     addEdge(g.index[l.a], g.index[l.b], loop_edges.back(), loop_losses.back());
   }
   // Graduated: when a new loop is far off the current poses (a first optimisation from odometry, a long drift
@@ -415,8 +419,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   for (std::size_t k = 0; k < g.loops.size() && !wide; ++k)
     wide = g.loops[k].id > solved_through && loopError2(k) > std::pow(kWideLoss * options_.loss_scale, 2);
   for (std::size_t i = 0; i < g.nodes.size(); ++i) {
-    problem.AddParameterBlock(x[i].data(), 7,
-                              new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
+    problem.AddParameterBlock(
+        x[i].data(), 7, new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
   }
   std::set<std::int64_t> fixed_roots;
   for (const auto& [sid, idx] : sessions)

@@ -47,8 +47,8 @@ struct GraphOptimiserOptions {
   std::chrono::milliseconds debounce{200};  // wait this long after a loop for more before optimising
   double max_seconds = 5.0;                 // per optimisation
   int max_iterations = 100;
-  int max_continuations = 10;               // solves in a row that may go on from an unconverged one
-  double loss_scale = 1.0;                  // Cauchy loss scale on whitened loop residuals
+  int max_continuations = 10;  // solves in a row that may go on from an unconverged one
+  double loss_scale = 1.0;     // Cauchy loss scale on whitened loop residuals
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.
   double odometry_sigma_m = 0.01, odometry_sigma_per_m = 0.015;
@@ -97,13 +97,13 @@ class GraphOptimiser {
   storage::MapStore& store_;
   GraphOptimiserOptions options_;
   mutable std::mutex mutex_;
-  std::condition_variable wake_;     // the worker
-  std::condition_variable changed_;  // watchers
+  std::condition_variable wake_;                                      // the worker
+  std::condition_variable changed_;                                   // watchers
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
-  std::set<std::string> stale_;  // maps whose in-memory graph must be rebuilt
+  std::set<std::string> stale_;                              // maps whose in-memory graph must be rebuilt
   std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
-  std::mutex optimise_mutex_;  // one optimisation at a time
+  std::mutex optimise_mutex_;                                // one optimisation at a time
   bool stop_ = false;
   std::mutex listeners_mutex_;  // held while listeners run
   std::map<std::uint64_t, Listener> listeners_;

@@ -10,10 +10,10 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
-#include <map>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <sstream>
 #include <thread>
 
@@ -38,8 +38,8 @@ struct Settings {
   std::string db = "var/sglc.db";
   std::string listen = "127.0.0.1:50051";
   std::string config;
-  int threads = 0;       // compute threads; 0 = the machine's cores
-  int max_calls = 256;   // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
+  int threads = 0;      // compute threads; 0 = the machine's cores
+  int max_calls = 256;  // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
   double max_message_mb = 64;
   std::size_t max_points = 2'000'000;
   std::string tls_cert, tls_key, tokens, backup_dir;
@@ -79,8 +79,10 @@ void validateGraphOptions(const sglc::server::GraphOptimiserOptions& g) {
     throw std::runtime_error("pose_graph.odometry_sigma_m and odometry_sigma_per_m must not both be zero");
   if (g.odometry_sigma_deg + g.odometry_sigma_deg_per_m <= 0)
     throw std::runtime_error("pose_graph.odometry_sigma_deg and odometry_sigma_deg_per_m must not both be zero");
-  for (const auto& [name, v] : {std::pair{"loop_sigma_m", g.loop_sigma_m}, {"loop_sigma_deg", g.loop_sigma_deg},
-                                {"loss_scale", g.loss_scale}, {"max_seconds", g.max_seconds}})
+  for (const auto& [name, v] : {std::pair{"loop_sigma_m", g.loop_sigma_m},
+                                {"loop_sigma_deg", g.loop_sigma_deg},
+                                {"loss_scale", g.loss_scale},
+                                {"max_seconds", g.max_seconds}})
     if (v <= 0) throw std::runtime_error(std::string("pose_graph.") + name + " must be > 0");
 }
 
@@ -110,33 +112,58 @@ void applyConfigFile(Settings& s, const std::string& path) {
       try {
         if (key == "storage.sync") {
           const auto m = v.as<std::string>();
-          if (m == "full") s.store.sync = sglc::storage::StoreOptions::Sync::kFull;
-          else if (m == "normal") s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
-          else if (m == "off") s.store.sync = sglc::storage::StoreOptions::Sync::kOff;
-          else throw std::runtime_error("storage.sync must be full, normal or off");
-        } else if (key == "storage.cache_mb") s.store.cache_mb = v.as<double>();
-        else if (key == "storage.busy_timeout_ms") s.store.busy_timeout_ms = v.as<int>();
-        else if (key == "storage.snapshot_index") s.store.snapshot_index = v.as<bool>();
-        else if (key == "storage.max_db_mb") s.store.max_db_mb = v.as<double>();
+          if (m == "full")
+            s.store.sync = sglc::storage::StoreOptions::Sync::kFull;
+          else if (m == "normal")
+            s.store.sync = sglc::storage::StoreOptions::Sync::kNormal;
+          else if (m == "off")
+            s.store.sync = sglc::storage::StoreOptions::Sync::kOff;
+          else
+            throw std::runtime_error("storage.sync must be full, normal or off");
+        } else if (key == "storage.cache_mb")
+          s.store.cache_mb = v.as<double>();
+        else if (key == "storage.busy_timeout_ms")
+          s.store.busy_timeout_ms = v.as<int>();
+        else if (key == "storage.snapshot_index")
+          s.store.snapshot_index = v.as<bool>();
+        else if (key == "storage.max_db_mb")
+          s.store.max_db_mb = v.as<double>();
         else if (key == "storage.index") {
           const auto t = v.as<std::string>();
-          if (t == "exact") s.store.index.type = sglc::storage::IndexOptions::Type::kExact;
-          else if (t == "ivf") s.store.index.type = sglc::storage::IndexOptions::Type::kIvf;
-          else throw std::runtime_error("storage.index must be exact or ivf");
-        } else if (key == "storage.ivf_nlist") s.store.index.ivf_nlist = v.as<int>();
-        else if (key == "storage.ivf_nprobe") s.store.index.ivf_nprobe = v.as<int>();
-        else if (key == "storage.ivf_min_scans") s.store.index.ivf_min_scans = v.as<int>();
-        else if (key == "server.db") s.db = v.as<std::string>();
-        else if (key == "server.listen") s.listen = v.as<std::string>();
-        else if (key == "server.threads") s.threads = v.as<int>();
-        else if (key == "server.max_calls") s.max_calls = v.as<int>();
-        else if (key == "server.max_message_mb") s.max_message_mb = v.as<double>();
-        else if (key == "server.max_points") s.max_points = v.as<std::size_t>();
-        else if (key == "server.tls_cert") s.tls_cert = v.as<std::string>();
-        else if (key == "server.tls_key") s.tls_key = v.as<std::string>();
-        else if (key == "server.tokens") s.tokens = v.as<std::string>();
-        else if (key == "server.backup_dir") s.backup_dir = v.as<std::string>();
-        else if (key == "server.shutdown_grace_s") s.shutdown_grace_s = v.as<double>();
+          if (t == "exact")
+            s.store.index.type = sglc::storage::IndexOptions::Type::kExact;
+          else if (t == "ivf")
+            s.store.index.type = sglc::storage::IndexOptions::Type::kIvf;
+          else
+            throw std::runtime_error("storage.index must be exact or ivf");
+        } else if (key == "storage.ivf_nlist")
+          s.store.index.ivf_nlist = v.as<int>();
+        else if (key == "storage.ivf_nprobe")
+          s.store.index.ivf_nprobe = v.as<int>();
+        else if (key == "storage.ivf_min_scans")
+          s.store.index.ivf_min_scans = v.as<int>();
+        else if (key == "server.db")
+          s.db = v.as<std::string>();
+        else if (key == "server.listen")
+          s.listen = v.as<std::string>();
+        else if (key == "server.threads")
+          s.threads = v.as<int>();
+        else if (key == "server.max_calls")
+          s.max_calls = v.as<int>();
+        else if (key == "server.max_message_mb")
+          s.max_message_mb = v.as<double>();
+        else if (key == "server.max_points")
+          s.max_points = v.as<std::size_t>();
+        else if (key == "server.tls_cert")
+          s.tls_cert = v.as<std::string>();
+        else if (key == "server.tls_key")
+          s.tls_key = v.as<std::string>();
+        else if (key == "server.tokens")
+          s.tokens = v.as<std::string>();
+        else if (key == "server.backup_dir")
+          s.backup_dir = v.as<std::string>();
+        else if (key == "server.shutdown_grace_s")
+          s.shutdown_grace_s = v.as<double>();
         else if (key == "server.max_inflight_mb")
           s.max_inflight_mb = v.as<double>();
         else if (key == "server.max_streams_per_client")
@@ -145,8 +172,10 @@ void applyConfigFile(Settings& s, const std::string& path) {
           s.streams.max_total = v.as<int>();
         else if (key == "server.stream_idle_timeout_s")
           s.streams.idle_timeout = std::chrono::milliseconds(static_cast<long>(v.as<double>() * 1000));
-        else if (key.rfind("pose_graph.", 0) == 0) setGraphOption(s.graph, key, v.as<double>());
-        else throw std::runtime_error("unknown parameter '" + key + "'");
+        else if (key.rfind("pose_graph.", 0) == 0)
+          setGraphOption(s.graph, key, v.as<double>());
+        else
+          throw std::runtime_error("unknown parameter '" + key + "'");
       } catch (const YAML::Exception& e) {
         throw std::runtime_error(path + ": bad value for '" + key + "': " + e.what());
       } catch (const std::runtime_error& e) {
@@ -184,7 +213,8 @@ int main(int argc, char** argv) {
   auto* threads_opt = app.add_option("--threads", s.threads, "compute threads (0: the machine's cores)");
   auto* calls_opt =
       app.add_option("--max-calls", s.max_calls, "unary calls served at once (open streams hold no thread)");
-  auto* tokens_opt = app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
+  auto* tokens_opt =
+      app.add_option("--tokens", s.tokens, "bearer token file ('TOKEN map1,map2' or 'TOKEN *' per line)");
   auto* cert_opt = app.add_option("--tls-cert", s.tls_cert, "PEM certificate chain (enables TLS with --tls-key)");
   auto* key_opt = app.add_option("--tls-key", s.tls_key, "PEM private key");
   auto* msg_opt = app.add_option("--max-message-mb", s.max_message_mb, "largest accepted message (MB)");
@@ -238,7 +268,8 @@ int main(int argc, char** argv) {
     if (s.threads < 0 || s.threads > 256) throw std::runtime_error("--threads must be 0..256");
     if (s.threads == 0) s.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     if (s.max_calls < 1 || s.max_calls > 4096) throw std::runtime_error("--max-calls must be 1..4096");
-    if (!(s.max_message_mb > 0 && s.max_message_mb <= 2047)) throw std::runtime_error("--max-message-mb must be in (0, 2047]");
+    if (!(s.max_message_mb > 0 && s.max_message_mb <= 2047))
+      throw std::runtime_error("--max-message-mb must be in (0, 2047]");
     if (s.tls_cert.empty() != s.tls_key.empty()) throw std::runtime_error("--tls-cert and --tls-key go together");
     s.store.path = s.db;
     if (s.backup_dir.empty()) s.backup_dir = (fs::path(s.db).parent_path() / "backups").string();

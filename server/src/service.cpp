@@ -5,9 +5,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <unordered_set>
-#include <nlohmann/json.hpp>
 
 #include "call.hpp"
 #include "log_line.hpp"
@@ -55,7 +55,8 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
   if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
   switch (opt.scope()) {
     case v1::SCOPE_UNSPECIFIED:
-    case v1::SCOPE_WHOLE_MAP: break;
+    case v1::SCOPE_WHOLE_MAP:
+      break;
     case v1::SCOPE_SAME_ROBOT:
     case v1::SCOPE_OTHER_ROBOTS:
       if (who.robot.empty())
@@ -74,13 +75,15 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
       }
       for (const auto& r : opt.session_refs()) req.session_refs.emplace_back(r.robot(), r.session());
       break;
-    default: throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "unknown scope");
+    default:
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "unknown scope");
   }
   auto& store = state.store();
   auto t0 = Clock::now();
   std::vector<storage::SearchHit> hits;
   if (opt.verify_scan_ids_size() > 0) {
-    if (opt.verify_scan_ids_size() > 200) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids: at most 200");
+    if (opt.verify_scan_ids_size() > 200)
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids: at most 200");
     std::unordered_set<std::int64_t> seen;
     for (const auto id : opt.verify_scan_ids()) {
       if (!seen.insert(id).second)
@@ -89,7 +92,8 @@ void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, co
       const auto fp = info && info->map == who.map ? store.fingerprint(id) : nullptr;
       if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + who.map + "' has no scan " + std::to_string(id));
       if (fp->descriptor.size() != query.descriptor.size())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scan " + std::to_string(id) + " has another descriptor layout");
+        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
+                       "scan " + std::to_string(id) + " has another descriptor layout");
       double d2 = 0;
       for (std::size_t i = 0; i < query.descriptor.size(); ++i)
         d2 += std::pow(double(query.descriptor[i]) - double(fp->descriptor[i]), 2);
@@ -579,8 +583,9 @@ grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetP
       for (const auto& s : store.listSessions(req->map(), req->robot()))
         found = found || req->session().empty() || s.name == req->session();
       if (!found)
-        throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + req->robot() + "'" +
-                                                        (req->session().empty() ? "" : " with session '" + req->session() + "'"));
+        throw RpcError(grpc::StatusCode::NOT_FOUND,
+                       "map '" + req->map() + "' has no robot '" + req->robot() + "'" +
+                           (req->session().empty() ? "" : " with session '" + req->session() + "'"));
     }
     const auto version = store.graphVersion(req->map());
     std::map<std::int64_t, storage::SessionFrame> frames;
@@ -617,7 +622,7 @@ grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetP
       } else {
         // Not optimised yet: its odometry through the session's last known frame.
         wire::toTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
-                        o->mutable_t_map_scan());
+                          o->mutable_t_map_scan());
       }
     }
     resp->set_graph_version(version);

@@ -19,9 +19,9 @@
 namespace sglc::server {
 
 struct ServiceLimits {
-  std::size_t max_points = 2'000'000;      // per scan
-  std::string backup_dir;                  // Backup paths are resolved inside it
-  int compute_threads = 1;                 // engine work runs on at most this many threads at once
+  std::size_t max_points = 2'000'000;                     // per scan
+  std::string backup_dir;                                 // Backup paths are resolved inside it
+  int compute_threads = 1;                                // engine work runs on at most this many threads at once
   std::size_t max_inflight_bytes = std::size_t{1} << 30;  // scan memory in flight (MemoryBudget)
   std::int64_t max_message_bytes = 64 << 20;
   StreamLimits streams;

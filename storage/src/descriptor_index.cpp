@@ -6,14 +6,14 @@
 #include <faiss/impl/io.h>
 #include <faiss/index_io.h>
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
-#include <unistd.h>
-#include <fcntl.h>
 
 // Fortran BLAS (OpenBLAS when installed, see scripts/install-deps.sh): y = alpha * op(A) * x + beta * y.
 extern "C" void sgemv_(const char* trans, const int* m, const int* n, const float* alpha, const float* a,
@@ -88,9 +88,8 @@ void DescriptorIndex::build(std::vector<IndexEntry> entries, const std::vector<f
     computeNorms();
     return;
   }
-  const int nlist = options_.ivf_nlist > 0
-                        ? options_.ivf_nlist
-                        : std::clamp(static_cast<int>(std::sqrt(static_cast<double>(n))), 16, 65536);
+  const int nlist = options_.ivf_nlist > 0 ? options_.ivf_nlist
+                                           : std::clamp(static_cast<int>(std::sqrt(static_cast<double>(n))), 16, 65536);
   // k-means wants about 39 training points per cell.
   const int cells = std::max(1, std::min<int>(nlist, static_cast<int>(n / 39)));
   quantizer_ = std::make_unique<faiss::IndexFlatL2>(dim_);
@@ -155,7 +154,8 @@ std::vector<SearchHit> DescriptorIndex::search(const float* query, int k, const 
   std::vector<SearchHit> hits;
   if (k <= 0 || live_ == 0) return hits;
   if (!ivf_) return searchExact(query, k, filter);
-  const auto kk = static_cast<faiss::Index::idx_t>(std::min<std::int64_t>(k, static_cast<std::int64_t>(entries_.size())));
+  const auto kk =
+      static_cast<faiss::Index::idx_t>(std::min<std::int64_t>(k, static_cast<std::int64_t>(entries_.size())));
   std::vector<float> dist(static_cast<std::size_t>(kk));
   std::vector<faiss::Index::idx_t> labels(static_cast<std::size_t>(kk), -1);
   FilterSelector selector(entries_, filter);
@@ -166,7 +166,8 @@ std::vector<SearchHit> DescriptorIndex::search(const float* query, int k, const 
   for (faiss::Index::idx_t i = 0; i < kk; ++i) {
     const auto l = labels[static_cast<std::size_t>(i)];
     if (l < 0) continue;
-    hits.push_back({entries_[static_cast<std::size_t>(l)].scan_id, std::sqrt(std::max(0.0f, dist[static_cast<std::size_t>(i)]))});
+    hits.push_back(
+        {entries_[static_cast<std::size_t>(l)].scan_id, std::sqrt(std::max(0.0f, dist[static_cast<std::size_t>(i)]))});
   }
   std::stable_sort(hits.begin(), hits.end(), [](const SearchHit& a, const SearchHit& b) {
     return a.distance != b.distance ? a.distance < b.distance : a.scan_id < b.scan_id;
@@ -263,7 +264,8 @@ bool DescriptorIndex::load(const std::string& path, std::int64_t generation) {
   if (static_cast<bool>(ivf) != (options_.type == IndexOptions::Type::kIvf)) {
     // Configured index type changed: only an exact snapshot of a small IVF map is still right.
     if (ivf) return false;
-    if (options_.type == IndexOptions::Type::kIvf && n >= static_cast<std::uint64_t>(options_.ivf_min_scans)) return false;
+    if (options_.type == IndexOptions::Type::kIvf && n >= static_cast<std::uint64_t>(options_.ivf_min_scans))
+      return false;
   }
   if (n > (1ull << 34)) return false;
   std::vector<IndexEntry> entries(n);

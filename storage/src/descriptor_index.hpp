@@ -27,9 +27,9 @@ struct IndexEntry {
 
 // What a search may return, resolved to database ids.
 struct SearchFilter {
-  std::unordered_set<std::int64_t> robots;          // empty: any
+  std::unordered_set<std::int64_t> robots;  // empty: any
   std::unordered_set<std::int64_t> exclude_robots;
-  std::unordered_set<std::int64_t> sessions;        // empty: any
+  std::unordered_set<std::int64_t> sessions;  // empty: any
   std::unordered_set<std::int64_t> exclude_scans;
   std::int64_t self_robot = -1;
   std::int64_t self_session = -1;

@@ -161,8 +161,8 @@ class SqliteMapStore final : public MapStore {
       std::shared_lock lock(state_mutex_);
       if (auto it = maps_.find(name); it != maps_.end()) {
         if (it->second.dim != dim)
-          throw StorageError(Code::kAlreadyExists, "map '" + name + "' exists with descriptor dimension " +
-                                                       std::to_string(it->second.dim));
+          throw StorageError(Code::kAlreadyExists,
+                             "map '" + name + "' exists with descriptor dimension " + std::to_string(it->second.dim));
         return infoLocked(it->second);
       }
     }
@@ -277,8 +277,10 @@ class SqliteMapStore final : public MapStore {
                    "INSERT INTO scans(map_id, robot_id, session_id, seq, stamp, pose, descriptor, fingerprint_bytes,"
                    " has_raw, created_at) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
       st.bind(1, m->id).bind(2, robot_id).bind(3, session_id).bind(4, scan.seq);
-      if (scan.stamp) st.bind(5, *scan.stamp);
-      else st.bindNull(5);
+      if (scan.stamp)
+        st.bind(5, *scan.stamp);
+      else
+        st.bindNull(5);
       std::vector<std::uint8_t> pose;
       if (scan.odometry_pose) {
         pose = poseBlob(*scan.odometry_pose);
@@ -303,8 +305,10 @@ class SqliteMapStore final : public MapStore {
     {
       sql::Stmt st(writer_, "INSERT INTO scan_blobs(scan_id, fingerprint, raw) VALUES(?, ?, ?)");
       st.bind(1, scan_id).bindBlob(2, blob);
-      if (scan.raw) st.bindBlob(3, raw);
-      else st.bindNull(3);
+      if (scan.raw)
+        st.bindBlob(3, raw);
+      else
+        st.bindNull(3);
       st.run();
     }
     sql::Stmt(writer_, "UPDATE maps SET generation = generation + 1 WHERE id = ?").bind(1, m->id).run();
@@ -450,10 +454,13 @@ class SqliteMapStore final : public MapStore {
         throw StorageError(Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
       session_id = s->second;
     }
-    return deleteWhere(*m, "session_id = ?", session_id, [&] {
-      for (auto it = m->sessions.begin(); it != m->sessions.end();)
-        it = it->second == session_id ? m->sessions.erase(it) : std::next(it);
-    }, "DELETE FROM sessions WHERE id = ?");
+    return deleteWhere(
+        *m, "session_id = ?", session_id,
+        [&] {
+          for (auto it = m->sessions.begin(); it != m->sessions.end();)
+            it = it->second == session_id ? m->sessions.erase(it) : std::next(it);
+        },
+        "DELETE FROM sessions WHERE id = ?");
   }
 
   std::int64_t deleteRobot(const std::string& map, const std::string& robot) override {
@@ -467,11 +474,14 @@ class SqliteMapStore final : public MapStore {
       if (r == m->robots.end()) throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
       robot_id = r->second;
     }
-    return deleteWhere(*m, "robot_id = ?", robot_id, [&] {
-      m->robots.erase(robot);
-      for (auto it = m->sessions.begin(); it != m->sessions.end();)
-        it = it->first.first == robot_id ? m->sessions.erase(it) : std::next(it);
-    }, "DELETE FROM sessions WHERE robot_id = ?; DELETE FROM robots WHERE id = ?");
+    return deleteWhere(
+        *m, "robot_id = ?", robot_id,
+        [&] {
+          m->robots.erase(robot);
+          for (auto it = m->sessions.begin(); it != m->sessions.end();)
+            it = it->first.first == robot_id ? m->sessions.erase(it) : std::next(it);
+        },
+        "DELETE FROM sessions WHERE robot_id = ?; DELETE FROM robots WHERE id = ?");
   }
 
   void backup(const std::string& dest) const override {
@@ -502,8 +512,8 @@ class SqliteMapStore final : public MapStore {
 
   // ---- Pose graph
   std::int64_t addLoop(const std::string& map, const LoopRecord& loop) override {
-    if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse) ||
-        (loop.information && !loop.information->allFinite()))
+    if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) ||
+        !std::isfinite(loop.rmse) || (loop.information && !loop.information->allFinite()))
       throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
     if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
     std::lock_guard write(write_mutex_);
@@ -529,8 +539,10 @@ class SqliteMapStore final : public MapStore {
     st.bind(1, map_id).bind(2, loop.query_scan).bind(3, loop.candidate_scan).bindBlob(4, t).bind(5, loop.score);
     st.bind(6, static_cast<std::int64_t>(loop.inliers)).bind(7, loop.fitness).bind(8, loop.rmse).bind(9, nowSeconds());
     const auto info = loop.information ? informationBlob(*loop.information) : std::vector<std::uint8_t>{};
-    if (loop.information) st.bindBlob(10, info);
-    else st.bindNull(10);
+    if (loop.information)
+      st.bindBlob(10, info);
+    else
+      st.bindNull(10);
     st.run();
     const auto id = sqlite3_last_insert_rowid(writer_.get());
     tx.commit();
@@ -639,8 +651,9 @@ class SqliteMapStore final : public MapStore {
     return version;
   }
 
-  std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot, const std::string& session,
-                                            std::int64_t after_scan, std::int64_t limit) const override {
+  std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot,
+                                            const std::string& session, std::int64_t after_scan,
+                                            std::int64_t limit) const override {
     const auto map_id = mapId(map);
     auto reader = acquireReader();
     sql::Stmt st(*reader,
@@ -786,14 +799,15 @@ class SqliteMapStore final : public MapStore {
     if (!existed && path.has_parent_path()) {
       fs::create_directories(path.parent_path(), ec);
       if (ec)
-        throw StorageError(ec == std::errc::permission_denied || ec == std::errc::read_only_file_system ? Code::kReadOnly
-                                                                                                        : Code::kIo,
-                           path.parent_path().string() + ": cannot create directory: " + ec.message());
+        throw StorageError(
+            ec == std::errc::permission_denied || ec == std::errc::read_only_file_system ? Code::kReadOnly : Code::kIo,
+            path.parent_path().string() + ": cannot create directory: " + ec.message());
     }
     if (!existed) {
       const auto dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
       if (::access(dir.c_str(), W_OK) != 0)
-        throw StorageError(Code::kReadOnly, dir.string() + ": directory is not writable, cannot create " + options_.path);
+        throw StorageError(Code::kReadOnly,
+                           dir.string() + ": directory is not writable, cannot create " + options_.path);
     } else if (::access(options_.path.c_str(), W_OK) != 0) {
       throw StorageError(Code::kReadOnly, options_.path + ": database file is not writable");
     }
@@ -871,8 +885,9 @@ class SqliteMapStore final : public MapStore {
       sql::Stmt r(writer_, "SELECT id, name FROM robots WHERE map_id = ?");
       r.bind(1, m.id);
       while (r.step()) m.robots[r.text(1)] = r.i64(0);
-      sql::Stmt s(writer_, "SELECT x.id, x.robot_id, x.name FROM sessions x JOIN robots r ON r.id = x.robot_id"
-                           " WHERE r.map_id = ?");
+      sql::Stmt s(writer_,
+                  "SELECT x.id, x.robot_id, x.name FROM sessions x JOIN robots r ON r.id = x.robot_id"
+                  " WHERE r.map_id = ?");
       s.bind(1, m.id);
       while (s.step()) m.sessions[{s.i64(1), s.text(2)}] = s.i64(0);
       if (options_.snapshot_index && m.index->load(snapshotPath(m.id), m.generation)) continue;
@@ -883,7 +898,8 @@ class SqliteMapStore final : public MapStore {
   void rebuildIndex(MapState& m) {
     std::vector<IndexEntry> entries;
     std::vector<float> vectors;
-    sql::Stmt st(writer_, "SELECT id, robot_id, session_id, seq, stamp, descriptor FROM scans WHERE map_id = ? ORDER BY id");
+    sql::Stmt st(writer_,
+                 "SELECT id, robot_id, session_id, seq, stamp, descriptor FROM scans WHERE map_id = ? ORDER BY id");
     st.bind(1, m.id);
     while (st.step()) {
       const auto blob = st.blob(5);
@@ -907,9 +923,10 @@ class SqliteMapStore final : public MapStore {
       st.bind(1, m.id).bind(2, id);
       while (st.step()) ids.insert(st.i64(0));
     }
-    sql::Stmt(writer_, (std::string("DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ? AND ") +
-                        where + ")")
-                           .c_str())
+    sql::Stmt(writer_,
+              (std::string("DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ? AND ") +
+               where + ")")
+                  .c_str())
         .bind(1, m.id)
         .bind(2, id)
         .run();
@@ -925,7 +942,10 @@ class SqliteMapStore final : public MapStore {
       for (auto at = text.find('%'); at != std::string::npos; at = text.find('%')) text.replace(at, 1, where2);
       sql::Stmt(writer_, text.c_str()).bind(1, m.id).bind(2, id).run();
     }
-    sql::Stmt(writer_, (std::string("DELETE FROM scans WHERE map_id = ? AND ") + where).c_str()).bind(1, m.id).bind(2, id).run();
+    sql::Stmt(writer_, (std::string("DELETE FROM scans WHERE map_id = ? AND ") + where).c_str())
+        .bind(1, m.id)
+        .bind(2, id)
+        .run();
     // Parent rows (session, or sessions and robot): one statement each, all bound to the same id.
     std::size_t start = 0;
     while (start < delete_parents.size()) {

@@ -6,16 +6,22 @@ namespace sglc::storage::sql {
 
 StorageError::Code classify(int rc) {
   switch (rc & 0xFF) {
-    case SQLITE_FULL: return StorageError::Code::kFull;
+    case SQLITE_FULL:
+      return StorageError::Code::kFull;
     case SQLITE_READONLY:
     case SQLITE_PERM:
-    case SQLITE_CANTOPEN: return StorageError::Code::kReadOnly;
+    case SQLITE_CANTOPEN:
+      return StorageError::Code::kReadOnly;
     case SQLITE_NOTADB:
-    case SQLITE_CORRUPT: return StorageError::Code::kCorrupt;
+    case SQLITE_CORRUPT:
+      return StorageError::Code::kCorrupt;
     case SQLITE_BUSY:
-    case SQLITE_LOCKED: return StorageError::Code::kBusy;
-    case SQLITE_CONSTRAINT: return StorageError::Code::kAlreadyExists;
-    default: return StorageError::Code::kIo;
+    case SQLITE_LOCKED:
+      return StorageError::Code::kBusy;
+    case SQLITE_CONSTRAINT:
+      return StorageError::Code::kAlreadyExists;
+    default:
+      return StorageError::Code::kIo;
   }
 }
 

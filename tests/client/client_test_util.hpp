@@ -159,7 +159,8 @@ inline std::optional<std::string> serverBinary(std::string* looked_at = nullptr)
 class ServerProcess {
  public:
   // Returns an empty optional (and why) when the binary is absent; throws when it is there but does not come up.
-  static std::optional<ServerProcess> start(const std::vector<std::string>& extra_args = {}, std::string* why = nullptr) {
+  static std::optional<ServerProcess> start(const std::vector<std::string>& extra_args = {},
+                                            std::string* why = nullptr) {
     std::string looked_at;
     const auto binary = serverBinary(&looked_at);
     if (!binary) {
@@ -171,7 +172,8 @@ class ServerProcess {
     return server;
   }
 
-  ServerProcess(const std::string& binary, const std::vector<std::string>& extra_args) : dir_(std::make_unique<TempDir>()) {
+  ServerProcess(const std::string& binary, const std::vector<std::string>& extra_args)
+      : dir_(std::make_unique<TempDir>()) {
     std::string last_log;
     for (int attempt = 0; attempt < 3; ++attempt) {  // the free port may be taken in between: retry
       port_ = freePort();

@@ -22,8 +22,8 @@ std::string expectOneLineError(const std::vector<std::string>& args, const std::
   EXPECT_EQ(r.out, "") << "sglc" << joined;
   const std::string line = err.empty() ? "" : err[0];
   EXPECT_EQ(line.rfind("sglc: error: ", 0), 0u) << line;
-  EXPECT_NE(line.find(must_mention), std::string::npos) << "sglc" << joined << ": '" << line << "' lacks '"
-                                                         << must_mention << "'";
+  EXPECT_NE(line.find(must_mention), std::string::npos)
+      << "sglc" << joined << ": '" << line << "' lacks '" << must_mention << "'";
   return line;
 }
 

@@ -1,9 +1,9 @@
 // The client library against an in-process fake of both services: which RPC carries a scan (single
 // message or chunks), what the chunks add up to, the bearer token, deadlines, status codes, and the
 // ordering and failure behaviour of an IngestSession. The real server is exercised in test_e2e.cpp.
-#include <algorithm>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+#include <algorithm>
 
 #include <mutex>
 #include <thread>
@@ -30,7 +30,8 @@ class FakeLoopClosure final : public v1::LoopClosure::Service {
     std::size_t chunks = 0;
   };
 
-  grpc::Status Ingest(grpc::ServerContext* context, const v1::IngestRequest* request, v1::IngestResponse* response) override {
+  grpc::Status Ingest(grpc::ServerContext* context, const v1::IngestRequest* request,
+                      v1::IngestResponse* response) override {
     return store("Ingest", context, *request, 0, response);
   }
 
@@ -64,7 +65,8 @@ class FakeLoopClosure final : public v1::LoopClosure::Service {
     return grpc::Status::OK;
   }
 
-  grpc::Status Query(grpc::ServerContext* context, const v1::QueryRequest* request, v1::QueryResponse* response) override {
+  grpc::Status Query(grpc::ServerContext* context, const v1::QueryRequest* request,
+                     v1::QueryResponse* response) override {
     std::lock_guard lock(mutex_);
     last_token_ = authorization(context);
     last_query_ = *request;
@@ -87,8 +89,8 @@ class FakeLoopClosure final : public v1::LoopClosure::Service {
   }
 
  private:
-  grpc::Status store(const char* rpc, grpc::ServerContext* context, const v1::IngestRequest& request, std::size_t chunks,
-                     v1::IngestResponse* response) {
+  grpc::Status store(const char* rpc, grpc::ServerContext* context, const v1::IngestRequest& request,
+                     std::size_t chunks, v1::IngestResponse* response) {
     std::lock_guard lock(mutex_);
     last_token_ = authorization(context);
     if (request.key().robot() == "reject") return {grpc::StatusCode::INVALID_ARGUMENT, "robot 'reject' is refused"};
@@ -118,14 +120,16 @@ class FakeMapAdmin final : public v1::MapAdmin::Service {
     for (const auto& m : maps_) response->add_maps()->set_name(m);
     return grpc::Status::OK;
   }
-  grpc::Status ListRobots(grpc::ServerContext*, const v1::ListRobotsRequest* request, v1::ListRobotsResponse*) override {
+  grpc::Status ListRobots(grpc::ServerContext*, const v1::ListRobotsRequest* request,
+                          v1::ListRobotsResponse*) override {
     return {grpc::StatusCode::NOT_FOUND, "unknown map '" + request->map() + "'"};
   }
   // Map "slow" answers only when the call is cancelled (deadline tests).
   grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
                         v1::GetStatsResponse* response) override {
     if (request->map() == "slow") {
-      for (int i = 0; i < 3000 && !context->IsCancelled(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      for (int i = 0; i < 3000 && !context->IsCancelled(); ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
     }
     response->set_scans(11);
     response->set_maps(2);
@@ -368,6 +372,6 @@ TEST_F(FakeServer, AbandonedSessionIsCancelledCleanly) {
   {
     auto session = c.openSession();
     session.send(sc::makeKey("m", "r", "s", 1), scanOf(3));
-  }  // destroyed without finish()
+  }                                     // destroyed without finish()
   EXPECT_EQ(c.getStats().scans(), 11);  // the channel still works
 }

@@ -24,7 +24,8 @@ class EndToEnd : public ::testing::Test {
   void SetUp() override { startServer({}); }
 
   void startServer(const std::vector<std::string>& args) {
-    if (!t::haveRealData()) GTEST_SKIP() << "real scans not found under " << t::sharedData() << "; end-to-end test skipped";
+    if (!t::haveRealData())
+      GTEST_SKIP() << "real scans not found under " << t::sharedData() << "; end-to-end test skipped";
     const auto ref = t::referenceT52from4501();
     ASSERT_TRUE(ref) << "pairs.txt has no 00 000052 004501 row";
     T_a_b_ = *ref;
@@ -172,7 +173,8 @@ TEST_F(EndToEnd, AdminCallsAndErrors) {
             grpc::StatusCode::INVALID_ARGUMENT);
   sglc::LabelledScan nan_scan = t::realScan("000052");
   nan_scan.points[10].x() = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_EQ(code([&] { client.ingest(sc::makeKey("m1", "a", "run1", 54), nan_scan); }), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(code([&] { client.ingest(sc::makeKey("m1", "a", "run1", 54), nan_scan); }),
+            grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(client.getStats().scans(), 3) << "a failed call stored something";
 
   // Deletes.
@@ -280,11 +282,11 @@ TEST_F(EndToEnd, CommandLine) {
   for (const auto& [k, v] : second.items()) EXPECT_TRUE(keys.count(k)) << "unexpected key " << k;
 
   // Text mode of the same (another session name, every frame of the directory): loops are reported.
-  r = cli({"ingest", "--map", "cli", "--robot", "c", "--session", "again", "--every", "2", "--query", "--scope", "other",
-           "--chunk-mb", "0.5", dir});  // and through IngestChunked (scans are ~1.9 MB packed)
+  r = cli({"ingest", "--map", "cli", "--robot", "c", "--session", "again", "--every", "2", "--query", "--scope",
+           "other", "--chunk-mb", "0.5", dir});  // and through IngestChunked (scans are ~1.9 MB packed)
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_NE(r.out.find("ingested 2 scans"), std::string::npos) << r.out;  // frames 52 and 850 of 52, 88, 850, 4501
-  EXPECT_NE(r.out.find("frame 000052 (scan "), std::string::npos) << r.out;   // its loops with a's 52 and b's 4501
+  EXPECT_NE(r.out.find("ingested 2 scans"), std::string::npos) << r.out;     // frames 52 and 850 of 52, 88, 850, 4501
+  EXPECT_NE(r.out.find("frame 000052 (scan "), std::string::npos) << r.out;  // its loops with a's 52 and b's 4501
   EXPECT_NE(r.out.find("robot b, session 00, seq 4501"), std::string::npos) << r.out;
 
   // Query by id: 52 asks, 4501 answers with T_a_b.
@@ -368,10 +370,9 @@ TEST_F(EndToEnd, CommandLine) {
   }
 
   // Server-side errors: non-zero exit, one line naming the status.
-  for (const auto& args : std::vector<std::vector<std::string>>{
-           {"robots", "--map", "nosuchmap"},
-           {"query", "--map", "cli", "--scan-id", "987654"},
-           {"query", "--map", "nosuchmap", "--scan-id", "1"}}) {
+  for (const auto& args : std::vector<std::vector<std::string>>{{"robots", "--map", "nosuchmap"},
+                                                                {"query", "--map", "cli", "--scan-id", "987654"},
+                                                                {"query", "--map", "nosuchmap", "--scan-id", "1"}}) {
     r = cli(args);
     EXPECT_NE(r.exit_code, 0) << args[0];
     const auto err = t::lines(r.err);
@@ -412,7 +413,8 @@ TEST_F(EndToEndAuth, BearerTokens) {
   EXPECT_EQ(code([&] { limited.listRobots("m2"); }), grpc::StatusCode::PERMISSION_DENIED);
   EXPECT_EQ(code([&] { limited.ingest(sc::makeKey("m2", "a", "s", 52), t::realScan("000052")); }),
             grpc::StatusCode::PERMISSION_DENIED);
-  EXPECT_EQ(code([&] { limited.ingest(sc::makeKey("m1", "a", "s", 52), t::realScan("000052")); }), grpc::StatusCode::OK);
+  EXPECT_EQ(code([&] { limited.ingest(sc::makeKey("m1", "a", "s", 52), t::realScan("000052")); }),
+            grpc::StatusCode::OK);
 
   // The command line passes --token.
   std::vector<std::string> base = {t::cliBinary(), "robots", "--map", "m1", "--json", "--server", server_->address()};

@@ -66,8 +66,8 @@ TEST(Packing, ByteLayoutIsLittleEndianFloat32AndUint32) {
   scan.labels = {0x00010028u, 0x00000046u};  // instance 1 / class 40 (road); class 70 (vegetation)
   const v1::Scan packed = sc::packScan(scan);
   const std::vector<unsigned char> expected_points = {
-      0x00, 0x00, 0x80, 0x3F,  0x00, 0x00, 0x00, 0xC0,  0x00, 0x00, 0x00, 0x3F,   // 1, -2, 0.5
-      0x00, 0x00, 0x00, 0x00,  0x00, 0x00, 0x40, 0x40,  0x00, 0x00, 0x80, 0xBE};  // 0, 3, -0.25
+      0x00, 0x00, 0x80, 0x3F, 0x00, 0x00, 0x00, 0xC0, 0x00, 0x00, 0x00, 0x3F,   // 1, -2, 0.5
+      0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x40, 0x40, 0x00, 0x00, 0x80, 0xBE};  // 0, 3, -0.25
   const std::vector<unsigned char> expected_labels = {0x28, 0x00, 0x01, 0x00, 0x46, 0x00, 0x00, 0x00};
   EXPECT_EQ(bytesOf(packed.points()), expected_points);
   EXPECT_EQ(bytesOf(packed.labels()), expected_labels);
@@ -226,7 +226,8 @@ TEST(Builders, ScopeNames) {
 }
 
 TEST(Errors, RpcErrorCarriesCodeAndMessageOnOneLine) {
-  const sc::RpcError e("MapAdmin.ListRobots", grpc::Status(grpc::StatusCode::NOT_FOUND, "unknown map 'x'\nsecond line"));
+  const sc::RpcError e("MapAdmin.ListRobots",
+                       grpc::Status(grpc::StatusCode::NOT_FOUND, "unknown map 'x'\nsecond line"));
   EXPECT_EQ(e.code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(e.codeName(), "NOT_FOUND");
   EXPECT_EQ(e.statusMessage(), "unknown map 'x'\nsecond line");

@@ -99,17 +99,21 @@ class DenseRegistration {
  private:
   static constexpr double kCell = 0.5;
   static std::uint64_t key(const Vec3d& p, double cell) {
-    const auto c = [&](double v) { return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v / cell)) + (1 << 20)) & 0x1FFFFFu; };
+    const auto c = [&](double v) {
+      return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v / cell)) + (1 << 20)) & 0x1FFFFFu;
+    };
     return (c(p.x()) << 42) | (c(p.y()) << 21) | c(p.z());
   }
   template <typename F>
   void around(const Vec3d& p, F f) const {
-    const auto cx = static_cast<std::int64_t>(std::floor(p.x() / kCell)), cy = static_cast<std::int64_t>(std::floor(p.y() / kCell)),
+    const auto cx = static_cast<std::int64_t>(std::floor(p.x() / kCell)),
+               cy = static_cast<std::int64_t>(std::floor(p.y() / kCell)),
                cz = static_cast<std::int64_t>(std::floor(p.z() / kCell));
     for (std::int64_t dx = -1; dx <= 1; ++dx)
       for (std::int64_t dy = -1; dy <= 1; ++dy)
         for (std::int64_t dz = -1; dz <= 1; ++dz) {
-          const auto it = grid_.find(key(Vec3d((cx + dx + 0.5) * kCell, (cy + dy + 0.5) * kCell, (cz + dz + 0.5) * kCell), kCell));
+          const auto it =
+              grid_.find(key(Vec3d((cx + dx + 0.5) * kCell, (cy + dy + 0.5) * kCell, (cz + dz + 0.5) * kCell), kCell));
           if (it == grid_.end()) continue;
           for (int j : it->second) f(j);
         }

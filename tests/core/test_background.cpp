@@ -151,7 +151,8 @@ TEST(BevCells, MajorityOfStructureClassesWins) {
 TEST(BevAgreement, GridCellsTakeTheMajorityOfTheirStoredCells) {
   // One 2 m grid cell holds four stored 0.5 m cells: building x3 + fence x1 in one cloud, building x4 in the
   // other -> the same class (building), full agreement. With road x3 + vegetation x1 the cell is vegetation.
-  const std::vector<BevCell> a{{0, 0, 3}, {1, 0, 3}, {0, 1, 3}, {1, 1, 4}}, b{{0, 0, 3}, {1, 0, 3}, {2, 1, 3}, {3, 3, 3}};
+  const std::vector<BevCell> a{{0, 0, 3}, {1, 0, 3}, {0, 1, 3}, {1, 1, 4}},
+      b{{0, 0, 3}, {1, 0, 3}, {2, 1, 3}, {3, 3, 3}};
   EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 2.0, 10.0), 1.0);
   const std::vector<BevCell> road{{0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 2}}, veg{{2, 2, 2}};
   EXPECT_DOUBLE_EQ(bevAgreement(road, veg, 0.5, Mat4d::Identity(), 2.0, 10.0), 1.0);
@@ -180,8 +181,10 @@ TEST(BevAgreement, RobustToScatteredLabelNoise) {
   std::uniform_real_distribution<double> u(0.0, 1.0);
   for (auto& b : noisy.bg) {
     const double x = u(rng);
-    if (b == Background::kBuilding && x < 0.1) b = x < 0.05 ? Background::kFence : Background::kVegetation;
-    else if (b == Background::kVegetation && x < 0.1) b = Background::kBuilding;
+    if (b == Background::kBuilding && x < 0.1)
+      b = x < 0.05 ? Background::kFence : Background::kVegetation;
+    else if (b == Background::kVegetation && x < 0.1)
+      b = Background::kBuilding;
   }
   const auto q = bevCells(clean.points, clean.bg, 0.5, 50.0);
   const auto c = bevCells(noisy.points, noisy.bg, 0.5, 50.0);
@@ -250,8 +253,8 @@ TEST(ExtractPlanes, FlatFloorFacesSensor) {
 
 TEST(ExtractPlanes, WallsFaceSensor) {
   BgCloud c;
-  c.add(test::makeWall(8.05, -4.03, 8.05, 4.03, -1.55, 2.45, 0.1), Background::kBuilding);    // in front
-  c.add(test::makeWall(-6.05, -3.03, -6.05, 3.03, -1.55, 2.45, 0.1), Background::kFence);     // behind
+  c.add(test::makeWall(8.05, -4.03, 8.05, 4.03, -1.55, 2.45, 0.1), Background::kBuilding);  // in front
+  c.add(test::makeWall(-6.05, -3.03, -6.05, 3.03, -1.55, 2.45, 0.1), Background::kFence);   // behind
   const auto planes = extractPlanes(c.points, c.bg, FingerprintConfig{});
   ASSERT_GE(planes.size(), 20u);
   int front = 0, back = 0;
@@ -275,7 +278,8 @@ TEST(ExtractPlanes, NoisyBlobVegetationAndSparseGiveNothing) {
   BgCloud c;
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  for (int i = 0; i < 2000; ++i) c.add(Vec3f(5.0f + 3 * u(rng), 2.0f + 3 * u(rng), -1.0f + 3 * u(rng)), Background::kBuilding);
+  for (int i = 0; i < 2000; ++i)
+    c.add(Vec3f(5.0f + 3 * u(rng), 2.0f + 3 * u(rng), -1.0f + 3 * u(rng)), Background::kBuilding);
   // A flat floor, but vegetation (no planes from vegetation).
   c.add(test::makeFloor(-9.987, -3.013, -2.987, 2.987, -1.7, 0.1), Background::kVegetation);
   // A flat floor with too few points per voxel (spacing 0.5 m -> 4 points per 1 m voxel < 8).

@@ -189,12 +189,12 @@ std::string fingerprintOf(const Config& c) {
   ids(c.labels.fence);
   ids(c.labels.vegetation);
   ids(c.labels.moving);
-  o << c.cluster.azimuth_deg << " " << c.cluster.range_m << " " << c.cluster.elevation_deg << " " << c.cluster.min_points
-    << " " << c.cluster.max_range_m << "|" << c.graph.d_max << " " << c.graph.max_nodes << "|" << c.descriptor.d_i << " "
-    << c.descriptor.k_eigen << " " << c.descriptor.rings << " " << c.descriptor.ring_min_m << " "
-    << c.descriptor.ring_max_m << " " << c.descriptor.sectors << "|" << c.match.d_b << " " << c.match.min_cosine << " "
-    << c.match.d_l << " " << c.match.triangle_tol << " " << c.match.t_m << " " << c.match.prune_min_matches << "|"
-    << c.ransac.inlier_threshold << " " << c.ransac.max_iterations << " " << c.ransac.seed << " "
+  o << c.cluster.azimuth_deg << " " << c.cluster.range_m << " " << c.cluster.elevation_deg << " "
+    << c.cluster.min_points << " " << c.cluster.max_range_m << "|" << c.graph.d_max << " " << c.graph.max_nodes << "|"
+    << c.descriptor.d_i << " " << c.descriptor.k_eigen << " " << c.descriptor.rings << " " << c.descriptor.ring_min_m
+    << " " << c.descriptor.ring_max_m << " " << c.descriptor.sectors << "|" << c.match.d_b << " " << c.match.min_cosine
+    << " " << c.match.d_l << " " << c.match.triangle_tol << " " << c.match.t_m << " " << c.match.prune_min_matches
+    << "|" << c.ransac.inlier_threshold << " " << c.ransac.max_iterations << " " << c.ransac.seed << " "
     << c.ransac.min_triangle_height << " " << c.ransac.min_inliers << "|" << c.verify.t_g << " " << c.verify.t_b << " "
     << c.verify.max_translation << " " << c.verify.bev_cell_m << " " << c.verify.bev_radius_m << "|"
     << c.fingerprint.instance_voxel_m << " " << c.fingerprint.background_cell_m << " "

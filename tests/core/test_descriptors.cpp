@@ -206,8 +206,7 @@ TEST(Descriptors, NodeDescriptorsFollowPermutationAndMotion) {
   for (int k = 0; k < n; ++k) q[k] = path[perm[k]];  // q[k] is path node perm[k]
   q = moved(q, T);
   const Eigen::MatrixXf g = nodeDescriptors(q, l, 10.0, 2.0);
-  for (int k = 0; k < n; ++k)
-    EXPECT_LT((g.row(k) - f.row(perm[k])).cwiseAbs().maxCoeff(), 1e-5f) << "node " << perm[k];
+  for (int k = 0; k < n; ++k) EXPECT_LT((g.row(k) - f.row(perm[k])).cwiseAbs().maxCoeff(), 1e-5f) << "node " << perm[k];
 }
 
 TEST(Descriptors, NodeDescriptorsNormalised) {

@@ -170,7 +170,8 @@ class FingerprintBlob : public ::testing::Test {
   // A small scene (a few kB of blob), so that the many single-byte mutations below stay fast under sanitizers.
   static Fingerprint smallFingerprint() {
     LabelledScan s;
-    for (int k = 0; k < 4; ++k) test::addPoints(s, test::makePole(6.0 + 4.5 * k, k % 2 ? 4.0 : -3.5, -1.7, 2.0), test::kPole);
+    for (int k = 0; k < 4; ++k)
+      test::addPoints(s, test::makePole(6.0 + 4.5 * k, k % 2 ? 4.0 : -3.5, -1.7, 2.0), test::kPole);
     test::addPoints(s, test::makeBoxSurface({9, 1, -1}, {2, 0.9, 0.7}, 15, 0.2), test::kCar);
     test::addPoints(s, test::makeFloor(2.013, 12.013, -3.987, 4.013, -1.7, 0.3), test::kRoad);
     test::addPoints(s, test::makeWall(2.05, 6.03, 12.05, 6.03, -1.55, 2.45, 0.3), test::kBuilding);

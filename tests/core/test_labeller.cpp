@@ -50,8 +50,8 @@ TEST(Labeller, SyntheticStreetGetsItsRoles) {
 TEST(Labeller, ATrunkUnderACanopyIsATrunkAPoleIsAPole) {
   LabelledScan s;
   addPoints(s, makeFloor(-20, 20, -20, 20, -1.7, 0.3), kRoad);
-  addPoints(s, makePole(8, 3, -1.7, 1.5, 0.2), kTrunk);   // trunk up into ...
-  for (double x = 5.5; x <= 10.5; x += 0.3)               // ... a canopy 3 to 5 m above the ground
+  addPoints(s, makePole(8, 3, -1.7, 1.5, 0.2), kTrunk);  // trunk up into ...
+  for (double x = 5.5; x <= 10.5; x += 0.3)              // ... a canopy 3 to 5 m above the ground
     for (double y = 0.5; y <= 5.5; y += 0.3)
       if (std::hypot(x - 8, y - 3) < 2.5) s.points.emplace_back(x, y, 1.5 + 0.5 * std::sin(x * y));
   s.labels.resize(s.points.size(), kVegetation);
@@ -120,11 +120,17 @@ TEST(Labeller, RealScansAgreeWithSemanticKitti) {
   SGLC_REQUIRE_REAL_DATA();
   // SemanticKITTI raw ids per role (ground includes sidewalk, parking, other ground and terrain).
   const std::map<std::string, std::vector<std::uint32_t>> truth = {
-      {"ground", {40, 44, 48, 49, 72}}, {"building", {50}}, {"fence", {51}}, {"vegetation", {70}},
-      {"trunk", {71}}, {"pole", {80, 81}}, {"vehicle", {10, 13, 15, 16, 18, 20, 252, 253, 254, 255, 256, 257, 258, 259}}};
+      {"ground", {40, 44, 48, 49, 72}},
+      {"building", {50}},
+      {"fence", {51}},
+      {"vegetation", {70}},
+      {"trunk", {71}},
+      {"pole", {80, 81}},
+      {"vehicle", {10, 13, 15, 16, 18, 20, 252, 253, 254, 255, 256, 257, 258, 259}}};
   const std::map<std::string, std::vector<std::uint32_t>> mine = {
-      {"ground", {id::kGround}}, {"building", {id::kBuilding}}, {"fence", {id::kFence}},
-      {"vegetation", {id::kVegetation}}, {"trunk", {id::kTrunk}}, {"pole", {id::kPole}}, {"vehicle", {id::kVehicle}}};
+      {"ground", {id::kGround}},         {"building", {id::kBuilding}}, {"fence", {id::kFence}},
+      {"vegetation", {id::kVegetation}}, {"trunk", {id::kTrunk}},       {"pole", {id::kPole}},
+      {"vehicle", {id::kVehicle}}};
   std::map<std::string, std::array<double, 3>> tp_fp_fn;
   std::vector<std::string> files;
   const std::filesystem::path root(scansDir());
@@ -133,7 +139,8 @@ TEST(Labeller, RealScansAgreeWithSemanticKitti) {
     const auto p = root / f;
     const auto dir = p.parent_path();
     const auto name = p.filename().string();
-    const auto scan = readScan((dir / "velodyne" / (name + ".bin")).string(), (dir / "labels" / (name + ".label")).string());
+    const auto scan =
+        readScan((dir / "velodyne" / (name + ".bin")).string(), (dir / "labels" / (name + ".label")).string());
     const auto got = labelScene(scan.points, LabellerConfig{});
     for (std::size_t i = 0; i < got.size(); ++i) {
       if (got[i] == id::kNone) continue;
@@ -266,8 +273,7 @@ TEST(PipelineLabels, UnlabelledScansAreLabelledAndReported) {
 TEST(PipelineLabels, AutoModeFillsTheRolesALabelSetLacks) {
   // A street labelled as nuScenes would: no pole or trunk class, poles inside "manmade" (28).
   auto scan = viewFrom(makeStreetWorld(), Mat4d::Identity());
-  for (auto& l : scan.labels)
-    l = l == kRoad ? 24 : l == kCar ? 17 : l == kVegetation ? 30 : 28;
+  for (auto& l : scan.labels) l = l == kRoad ? 24 : l == kCar ? 17 : l == kVegetation ? 30 : 28;
   Config nu;
   nu.labels = labelPreset("nuscenes");
   ScanReport report;
@@ -301,9 +307,11 @@ TEST(PipelineLabels, RealLoopWithoutLabelsIsVerifiedAndNegativesAreRejected) {
   ::testing::Test::RecordProperty("rre_deg", std::to_string(rre));
   EXPECT_LT(rte, 0.06);
   EXPECT_LT(rre, 0.25);
-  for (const auto& [x, y] : std::vector<std::pair<std::string, std::string>>{
-           {"000052", "000088"}, {"000052", "000850"}, {"000088", "000850"}, {"000088", "004501"},
-           {"000850", "004501"}}) {
+  for (const auto& [x, y] : std::vector<std::pair<std::string, std::string>>{{"000052", "000088"},
+                                                                             {"000052", "000850"},
+                                                                             {"000088", "000850"},
+                                                                             {"000088", "004501"},
+                                                                             {"000850", "004501"}}) {
     const auto fx = fp(x), fy = fp(y);
     EXPECT_FALSE(pipeline.verify(fx, fy).is_loop) << x << " vs " << y;
     EXPECT_FALSE(pipeline.verify(fy, fx).is_loop) << y << " vs " << x;

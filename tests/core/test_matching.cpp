@@ -1,6 +1,7 @@
 // Hungarian assignment, descriptor matching and triangle pruning.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -9,7 +10,6 @@
 #include <numeric>
 #include <random>
 #include <set>
-#include <unistd.h>
 
 #include "sglc/matching.hpp"
 #include "test_util.hpp"
@@ -157,11 +157,11 @@ TEST(MatchNodes, ClassAndBoxGates) {
   const Vec3f car(4.0f, 1.8f, 1.5f), pole(0.3f, 0.3f, 5.0f);
   const std::vector<Node> q{node(0, 0, 0, car), node(5, 0, 2, pole), node(9, 9, 1, pole)};
   const std::vector<Node> c{
-      node(0, 0, 2, pole),                              // 0: matches q1 (class 2)
-      node(1, 0, 0, car + Vec3f(2.5f, 0, 0)),           // 1: class 0 but length differs by 2.5 > d_b
-      node(2, 0, 0, car + Vec3f(1.5f, -1.0f, 0.5f)),    // 2: class 0, every dimension within d_b
-      node(3, 0, 1, pole + Vec3f(0, 0, 2.2f)),          // 3: class 1, height differs by 2.2 > d_b
-      node(4, 0, 1, pole),                              // 4: class 1 but dissimilar descriptor
+      node(0, 0, 2, pole),                            // 0: matches q1 (class 2)
+      node(1, 0, 0, car + Vec3f(2.5f, 0, 0)),         // 1: class 0 but length differs by 2.5 > d_b
+      node(2, 0, 0, car + Vec3f(1.5f, -1.0f, 0.5f)),  // 2: class 0, every dimension within d_b
+      node(3, 0, 1, pole + Vec3f(0, 0, 2.2f)),        // 3: class 1, height differs by 2.2 > d_b
+      node(4, 0, 1, pole),                            // 4: class 1 but dissimilar descriptor
   };
   // Descriptors: all the same except candidate 4, which is orthogonal to everything.
   Eigen::MatrixXf dq = Eigen::MatrixXf::Zero(3, 4), dc = Eigen::MatrixXf::Zero(5, 4);
@@ -187,7 +187,7 @@ TEST(MatchNodes, PicksMostSimilarAndRespectsMinCosine) {
   Eigen::MatrixXf dq(2, 3), dc(3, 3);
   dq << 1, 0, 0,  //
       0, 1, 0;
-  dc << 0.6f, 0.8f, 0,  // cos with q0 0.6, with q1 0.8
+  dc << 0.6f, 0.8f, 0,       // cos with q0 0.6, with q1 0.8
       0.95f, 0.0f, 0.3122f,  // cos with q0 ~0.95
       0, 0.1f, 1.0f;         // cos with q1 ~0.0995
   EXPECT_EQ(matchNodes(q, dq, c, dc, MatchConfig{}), (std::vector<Match>{{0, 1}, {1, 0}}));

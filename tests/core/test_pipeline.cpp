@@ -51,8 +51,8 @@ std::vector<PairRow> readPairs(const std::string& path) {
 bool identical(const LoopResult& a, const LoopResult& b) {
   return a.is_loop == b.is_loop && a.score == b.score && a.matches == b.matches && a.inliers == b.inliers &&
          a.graph_similarity == b.graph_similarity && a.background_similarity == b.background_similarity &&
-         (a.T.array() == b.T.array()).all() && a.refined == b.refined && a.fitness == b.fitness &&
-         a.rmse == b.rmse && a.inlier_pairs == b.inlier_pairs;
+         (a.T.array() == b.T.array()).all() && a.refined == b.refined && a.fitness == b.fitness && a.rmse == b.rmse &&
+         a.inlier_pairs == b.inlier_pairs;
 }
 
 void expectSane(const LoopResult& r) {
@@ -83,9 +83,11 @@ class RealPipeline : public ::testing::Test {
     pipeline_ = new Pipeline();
     fps_ = new std::map<std::string, Fingerprint>();
     auto load = [&](const std::string& key, const std::string& dir, const std::string& frame) {
-      (*fps_)[key] = pipeline_->fingerprint(readScan(dir + "/velodyne/" + frame + ".bin", dir + "/labels/" + frame + ".label"));
+      (*fps_)[key] =
+          pipeline_->fingerprint(readScan(dir + "/velodyne/" + frame + ".bin", dir + "/labels/" + frame + ".label"));
     };
-    for (const char* f : {"000052", "000088", "000850", "004501"}) load(std::string("00/") + f, root + "/sequences/00", f);
+    for (const char* f : {"000052", "000088", "000850", "004501"})
+      load(std::string("00/") + f, root + "/sequences/00", f);
     for (const char* f : {"000000", "000001", "000002", "000003"})
       load(std::string("demo/") + f, root + "/extra/segnet4d_demo", f);
     pairs_ = new std::vector<PairRow>(readPairs(root + "/pairs.txt"));
@@ -293,7 +295,8 @@ TEST_F(RealPipeline, RepeatedRunsBitIdentical) {
 
 TEST_F(RealPipeline, FingerprintIsDeterministic) {
   const std::string dir = test::scansDir() + "/sequences/00";
-  const Fingerprint again = pipeline_->fingerprint(readScan(dir + "/velodyne/004501.bin", dir + "/labels/004501.label"));
+  const Fingerprint again =
+      pipeline_->fingerprint(readScan(dir + "/velodyne/004501.bin", dir + "/labels/004501.label"));
   EXPECT_EQ(serialize(again), serialize(fp("00/004501")));
 }
 
@@ -398,7 +401,8 @@ TEST(SyntheticPipeline, NearerRevisitScoresHigher) {
   EXPECT_NEAR(far.score, far.graph_similarity * far.background_similarity * support * std::exp(-t / 10.0), 1e-12);
   Config flat;
   flat.verify.score_distance_m = 0;  // no proximity factor: same decision, plain product
-  const LoopResult plain = Pipeline(flat).verify(q, p.fingerprint(test::viewFrom(world, test::makeT(1.0, 8.0, 0.5, 0.0))));
+  const LoopResult plain =
+      Pipeline(flat).verify(q, p.fingerprint(test::viewFrom(world, test::makeT(1.0, 8.0, 0.5, 0.0))));
   EXPECT_EQ(plain.is_loop, far.is_loop);
   EXPECT_NEAR(plain.score, far.graph_similarity * far.background_similarity * support, 1e-12);
 }
@@ -488,7 +492,8 @@ LabelledScan noBackground() {
 LabelledScan allOneClass() {
   LabelledScan s;
   // Every point a pole, everywhere (a scan labelled by a broken network).
-  for (int k = 0; k < 6; ++k) test::addPoints(s, test::makeFloor(-30 + 10 * k, -25 + 10 * k, -5, 5, -1.7 + 0.3 * k, 0.5), test::kPole);
+  for (int k = 0; k < 6; ++k)
+    test::addPoints(s, test::makeFloor(-30 + 10 * k, -25 + 10 * k, -5, 5, -1.7 + 0.3 * k, 0.5), test::kPole);
   return s;
 }
 
@@ -518,8 +523,12 @@ TEST(SyntheticPipeline, EdgeCaseScans) {
   const Pipeline p;
   const Fingerprint street = p.fingerprint(test::viewFrom(test::makeStreetWorld(), Mat4d::Identity()));
   const std::pair<const char*, LabelledScan> cases[] = {
-      {"empty", emptyScan()},          {"no landmarks", noLandmarks()}, {"no road/building", noBackground()},
-      {"all one class", allOneClass()}, {"all road", allRoad()},          {"single point", singlePoint()},
+      {"empty", emptyScan()},
+      {"no landmarks", noLandmarks()},
+      {"no road/building", noBackground()},
+      {"all one class", allOneClass()},
+      {"all road", allRoad()},
+      {"single point", singlePoint()},
       {"points at the origin", pointAtOrigin()},
   };
   for (const auto& [name, scan] : cases) {

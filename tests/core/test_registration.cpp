@@ -155,7 +155,8 @@ std::vector<Points> instanceClouds(std::uint32_t seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
   const Vec3f centres[] = {{8, 3, -0.5f}, {-6, 9, 0.5f}, {15, -7, 0}, {-12, -10, 1}, {3, -14, 0}};
-  const Vec3f halves[] = {{2.0f, 0.9f, 0.7f}, {0.3f, 0.3f, 2.5f}, {1.0f, 1.0f, 1.0f}, {0.4f, 1.5f, 2.0f}, {2.5f, 0.5f, 1.2f}};
+  const Vec3f halves[] = {
+      {2.0f, 0.9f, 0.7f}, {0.3f, 0.3f, 2.5f}, {1.0f, 1.0f, 1.0f}, {0.4f, 1.5f, 2.0f}, {2.5f, 0.5f, 1.2f}};
   std::vector<Points> out;
   for (int k = 0; k < 5; ++k) {
     Points p;
@@ -348,7 +349,8 @@ TEST(RefinePlanes, InformationIsSmallAlongACorridor) {
   const std::vector<Plane> query = corridorPlanes();
   const Mat4d T = makeT(0.0, 0.0, 0.3, 0.0);
   const PlaneIndex index(query, 1.0);
-  const RefineResult r = refinePlanes(query, index, movedPlanes(query, T.inverse()), {}, Mat4d::Identity(), RefineConfig{});
+  const RefineResult r =
+      refinePlanes(query, index, movedPlanes(query, T.inverse()), {}, Mat4d::Identity(), RefineConfig{});
   const Mat6d& I = r.information;
   EXPECT_LT(I(0, 0), 1e-6 * I(1, 1));  // along the corridor: nothing
   EXPECT_GT(I(1, 1), 1e6);             // across it and vertically: plenty (1 cm sigma, hundreds of planes)
@@ -380,8 +382,8 @@ TEST(PlaneIndex, NearestRespectsDistanceAndNormal) {
   EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(0, 0, 1), 1.0, 0.9), 0);  // 1 is closer, wrong n
   EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(1, 0, 0), 1.0, 0.9), 1);
   EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(-1, 0, 0), 1.0, 0.9), 1);  // |cos|
-  EXPECT_EQ(index.nearest(planes, Vec3f(2.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), 2);   // other voxel
-  EXPECT_EQ(index.nearest(planes, Vec3f(1.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), -1);  // none within 1 m
+  EXPECT_EQ(index.nearest(planes, Vec3f(2.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), 2);    // other voxel
+  EXPECT_EQ(index.nearest(planes, Vec3f(1.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), -1);   // none within 1 m
   EXPECT_EQ(PlaneIndex().nearest({}, Vec3f::Zero(), Vec3f::UnitZ(), 1.0, 0.9), -1);
 }
 

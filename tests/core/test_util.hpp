@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <atomic>
@@ -13,7 +14,6 @@
 #include <random>
 #include <string>
 #include <system_error>
-#include <unistd.h>
 #include <vector>
 
 #include "sglc/types.hpp"
@@ -36,10 +36,10 @@ inline double rad2deg(double r) { return r * 180.0 / std::numbers::pi; }
 // Rigid transform: rotation yaw (about z), then pitch (about y), then roll (about x), plus a translation.
 inline Mat4d makeT(double yaw_deg, double tx, double ty, double tz, double pitch_deg = 0.0, double roll_deg = 0.0) {
   Mat4d T = Mat4d::Identity();
-  T.topLeftCorner<3, 3>() = (Eigen::AngleAxisd(deg2rad(yaw_deg), Vec3d::UnitZ()) *
-                             Eigen::AngleAxisd(deg2rad(pitch_deg), Vec3d::UnitY()) *
-                             Eigen::AngleAxisd(deg2rad(roll_deg), Vec3d::UnitX()))
-                                .toRotationMatrix();
+  T.topLeftCorner<3, 3>() =
+      (Eigen::AngleAxisd(deg2rad(yaw_deg), Vec3d::UnitZ()) * Eigen::AngleAxisd(deg2rad(pitch_deg), Vec3d::UnitY()) *
+       Eigen::AngleAxisd(deg2rad(roll_deg), Vec3d::UnitX()))
+          .toRotationMatrix();
   T.topRightCorner<3, 1>() = Vec3d(tx, ty, tz);
   return T;
 }
@@ -206,10 +206,10 @@ inline std::string scansDir() {
   return std::filesystem::is_directory(dir) ? dir.string() : std::string();
 }
 
-#define SGLC_REQUIRE_REAL_DATA()                                                                              \
-  do {                                                                                                        \
-    if (::sglc::test::scansDir().empty())                                                                     \
-      GTEST_SKIP() << "real data not found: " << SGLC_SHARED_DATA                                             \
+#define SGLC_REQUIRE_REAL_DATA()                                                                             \
+  do {                                                                                                       \
+    if (::sglc::test::scansDir().empty())                                                                    \
+      GTEST_SKIP() << "real data not found: " << SGLC_SHARED_DATA                                            \
                    << "/semantickitti_scans is absent (SemanticKITTI scans are not part of the repository)"; \
   } while (0)
 

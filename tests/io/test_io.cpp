@@ -5,10 +5,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <typeinfo>
 #include <fstream>
 #include <limits>
 #include <string>
+#include <typeinfo>
 
 #include "sglc/io.hpp"
 #include "test_util.hpp"
@@ -170,8 +170,10 @@ TEST(IoDeathTest, DirectoryInsteadOfFileIsInputError) {
     EXPECT_EXIT(
         {
           try {
-            if (which == 0) (void)readKittiBin(path);
-            else (void)readLabels(path);
+            if (which == 0)
+              (void)readKittiBin(path);
+            else
+              (void)readLabels(path);
           } catch (const InputError&) {
             std::exit(0);
           } catch (const std::exception& e) {

@@ -27,9 +27,7 @@ std::string makeSequence(const TempDir& tmp, const std::string& name, const std:
   return dir.string();
 }
 
-std::string poseLine(double x) {
-  return "1 0 0 " + std::to_string(x) + " 0 1 0 0 0 0 1 0\n";
-}
+std::string poseLine(double x) { return "1 0 0 " + std::to_string(x) + " 0 1 0 0 0 0 1 0\n"; }
 
 std::vector<std::int64_t> numbers(const sglc::Sequence& s) {
   std::vector<std::int64_t> out;
@@ -57,10 +55,13 @@ TEST(Sequence, ListsFramesInOrderAndNamesTheSessionAfterTheDirectory) {
 TEST(Sequence, RangeAndEverySelect) {
   TempDir tmp;
   const auto dir = makeSequence(tmp, "s", {0, 1, 2, 3, 4, 5, 6, 7, 8, 9});
-  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("2:6"))), (std::vector<std::int64_t>{2, 3, 4, 5}));
-  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("1:8:3,9"))), (std::vector<std::int64_t>{1, 4, 7, 9}));
+  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("2:6"))),
+            (std::vector<std::int64_t>{2, 3, 4, 5}));
+  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("1:8:3,9"))),
+            (std::vector<std::int64_t>{1, 4, 7, 9}));
   EXPECT_EQ(numbers(sglc::openSequence(dir, {}, 4)), (std::vector<std::int64_t>{0, 4, 8}));
-  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("3:"), 3)), (std::vector<std::int64_t>{3, 6, 9}));
+  EXPECT_EQ(numbers(sglc::openSequence(dir, sglc::FrameSelection::parse("3:"), 3)),
+            (std::vector<std::int64_t>{3, 6, 9}));
   EXPECT_THROW(sglc::openSequence(dir, sglc::FrameSelection::parse("20:30")), sglc::InputError);
   EXPECT_THROW(sglc::openSequence(dir, {}, 0), sglc::InputError);
 }

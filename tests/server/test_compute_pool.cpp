@@ -3,16 +3,16 @@
 
 #include <atomic>
 #include <chrono>
-#include <mutex>
-#include <set>
 #include <functional>
+#include <mutex>
 #include <numeric>
+#include <set>
 #include <stdexcept>
 #include <thread>
 #include <vector>
 
-#include "rpc_error.hpp"
 #include "compute_pool.hpp"
+#include "rpc_error.hpp"
 
 namespace sglc::server {
 namespace {
@@ -46,7 +46,8 @@ TEST(ComputePool, IdleHelpersJoinACall) {
   std::atomic<int> inside{0}, most{0};
   pool.parallelFor(24, [&](std::size_t) {
     const int now = ++inside;
-    for (int seen = most.load(); now > seen && !most.compare_exchange_weak(seen, now);) {}
+    for (int seen = most.load(); now > seen && !most.compare_exchange_weak(seen, now);) {
+    }
     std::this_thread::sleep_for(5ms);
     --inside;
     std::lock_guard lock(m);
@@ -89,7 +90,8 @@ TEST(ComputePool, NeverMoreThanItsThreadsAtWork) {
       auto slot = pool.acquire(kForever, never);
       pool.parallelFor(6, [&](std::size_t) {
         const int now = ++inside;
-        for (int seen = most.load(); now > seen && !most.compare_exchange_weak(seen, now);) {}
+        for (int seen = most.load(); now > seen && !most.compare_exchange_weak(seen, now);) {
+        }
         std::this_thread::sleep_for(2ms);
         --inside;
       });

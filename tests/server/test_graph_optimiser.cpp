@@ -57,8 +57,8 @@ Drive drive(storage::MapStore& store) {
       d.odom.push_back(d.odom.back() * step);
     }
     const auto fp = randomFingerprint(100 + i);
-    storage::NewScan ns{.map = "m", .robot = "r", .session = "s", .seq = i, .odometry_pose = d.odom.back(),
-                        .fingerprint = &fp};
+    storage::NewScan ns{
+        .map = "m", .robot = "r", .session = "s", .seq = i, .odometry_pose = d.odom.back(), .fingerprint = &fp};
     d.ids.push_back(store.addScan(ns));
   }
   // Exact loops between the laps (query = second lap, candidate = first lap, T maps candidate into query).
@@ -129,8 +129,8 @@ TEST(GraphOptimiser, LoopInformationLeavesFreeDirectionsFree) {
     ASSERT_EQ(e.rejected_loops, 0);
     ate_reference = ate(optimised(*store), d.gt);
     // Scans 150 and 30 are the same place; the loop claims 1 m along its x.
-    storage::LoopRecord l{0, d.ids[150], d.ids[30], d.gt[150].inverse() * d.gt[30] * pose(0.0, 1.0, 0.0), 0.8, 0.9,
-                          0.02, 20};
+    storage::LoopRecord l{0,   d.ids[150], d.ids[30], d.gt[150].inverse() * d.gt[30] * pose(0.0, 1.0, 0.0),
+                          0.8, 0.9,        0.02,      20};
     l.information = corridor;
     if (isotropic) l.information->diagonal()[0] = 2.5e5;
     store->addLoop("m", l);
@@ -236,8 +236,8 @@ TEST(GraphOptimiser, DeletedScansAndReplacedLoopsLeaveTheGraph) {
   std::vector<std::int64_t> other;
   for (int i = 0; i < 10; ++i) {
     const auto fp = randomFingerprint(1000 + i);
-    storage::NewScan ns{.map = "m", .robot = "x", .session = "s", .seq = i, .odometry_pose = pose(0, 2.0 * i, 0),
-                        .fingerprint = &fp};
+    storage::NewScan ns{
+        .map = "m", .robot = "x", .session = "s", .seq = i, .odometry_pose = pose(0, 2.0 * i, 0), .fingerprint = &fp};
     other.push_back(store->addScan(ns));
   }
   for (int i = 0; i < 10; ++i)
@@ -282,8 +282,8 @@ TEST(GraphOptimiser, PosesThatAreNotRigidMotionsAreLeftOut) {
   int seq = 0;
   for (const Mat4d& T : {zero, zero, tiny, sheared}) {
     const auto fp = randomFingerprint(500 + seq);
-    storage::NewScan ns{.map = "m", .robot = "bad", .session = "s", .seq = seq++, .odometry_pose = T,
-                        .fingerprint = &fp};
+    storage::NewScan ns{
+        .map = "m", .robot = "bad", .session = "s", .seq = seq++, .odometry_pose = T, .fingerprint = &fp};
     bad.push_back(store->addScan(ns));
   }
   store->addLoop("m", {0, bad[1], bad[0], zero, 0.9, 0.9, 0.02, 30});

@@ -4,8 +4,8 @@
 #include <atomic>
 #include <thread>
 
-#include "rpc_error.hpp"
 #include "memory_budget.hpp"
+#include "rpc_error.hpp"
 #include "stream_registry.hpp"
 
 namespace sglc::server {
@@ -36,7 +36,10 @@ TEST(MemoryBudget, CallsBeyondTheBudgetWaitUntilMemoryIsReturned) {
 
 TEST(MemoryBudget, AScanLargerThanTheBudgetIsAdmittedAlone) {
   MemoryBudget budget(100);
-  { auto big = budget.acquire(500, kNever, kNotCancelled); EXPECT_EQ(budget.inUse(), 500u); }
+  {
+    auto big = budget.acquire(500, kNever, kNotCancelled);
+    EXPECT_EQ(budget.inUse(), 500u);
+  }
   EXPECT_EQ(budget.inUse(), 0u);
   MemoryBudget::Lease growing = budget.acquire(80, kNever, kNotCancelled);
   budget.grow(growing, 80, kNever, kNotCancelled);  // alone in flight: may grow past the budget
@@ -64,7 +67,9 @@ TEST(MemoryBudget, WaitingEndsWithTheCallsDeadlineCancellationOrTheMaximumWait) 
   };
   EXPECT_EQ(code(system_clock::now() + std::chrono::milliseconds(30), kNotCancelled, std::chrono::seconds(30)),
             grpc::StatusCode::DEADLINE_EXCEEDED);
-  EXPECT_EQ(code(kNever, [] { return true; }, std::chrono::seconds(30)), grpc::StatusCode::CANCELLED);
+  EXPECT_EQ(code(
+                kNever, [] { return true; }, std::chrono::seconds(30)),
+            grpc::StatusCode::CANCELLED);
   EXPECT_EQ(code(kNever, kNotCancelled, std::chrono::milliseconds(30)), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(budget.inUse(), 100u);  // failed waits took nothing
   held.release();
@@ -98,7 +103,7 @@ TEST(StreamRegistry, LimitsPerClientAndInTotal) {
   const auto a1 = registry.admit(StreamRegistry::Kind::kIngest, "a", streams[0]);
   registry.admit(StreamRegistry::Kind::kIngest, "a", streams[1]);
   EXPECT_NE(refused(StreamRegistry::Kind::kIngest, "a", streams[2]).find("streams"), std::string::npos);
-  EXPECT_EQ(refused(StreamRegistry::Kind::kWatch, "a", streams[2]), "");  // another kind has its own count
+  EXPECT_EQ(refused(StreamRegistry::Kind::kWatch, "a", streams[2]), "");   // another kind has its own count
   EXPECT_EQ(refused(StreamRegistry::Kind::kIngest, "b", streams[3]), "");  // another client is not affected
   EXPECT_NE(refused(StreamRegistry::Kind::kIngest, "c", streams[4]).find("server"), std::string::npos);  // total
   registry.leave(a1);

@@ -54,8 +54,8 @@ std::vector<Stored> fill(MapStore& store, int robots, int sessions, int per, std
   for (int r = 0; r < robots; ++r)
     for (int s = 0; s < sessions; ++s)
       for (int q = 0; q < per; ++q) {
-        Stored st{0, "r" + std::to_string(r), "s" + std::to_string(s), q, 100.0 * s + q,
-                  randomFingerprint(seed + out.size() * 7919)};
+        Stored st{0, "r" + std::to_string(r), "s" + std::to_string(s),
+                  q, 100.0 * s + q,           randomFingerprint(seed + out.size() * 7919)};
         NewScan ns;
         ns.map = "m";
         ns.robot = st.robot;
@@ -208,9 +208,8 @@ TEST(MapStore, FiltersKeepTheFullTopK) {
     r.self_robot = q.robot;
     r.self_stamp = q.stamp;
     r.exclude_seconds = 150;
-    cases.push_back({"recent by time", r, [&](const Stored& s) {
-                       return !(s.robot == q.robot && std::abs(s.stamp - q.stamp) < 150);
-                     }});
+    cases.push_back({"recent by time", r,
+                     [&](const Stored& s) { return !(s.robot == q.robot && std::abs(s.stamp - q.stamp) < 150); }});
   }
   {
     SearchRequest r{.map = "m", .descriptor = q.fp.descriptor, .k = k};
@@ -539,7 +538,9 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
     again.score = 0.9;
     id_a2 = store->addLoop("m", again);  // replaces the first
     EXPECT_GT(id_a2, id_a);
-    EXPECT_EQ(errorCode([&] { store->addLoop("m", {0, all[0].id, 999999, Mat4d::Identity(), 0, 0, 0, 0}); }),
+    EXPECT_EQ(errorCode([&] {
+                store->addLoop("m", {0, all[0].id, 999999, Mat4d::Identity(), 0, 0, 0, 0});
+              }),
               StorageError::Code::kNotFound);
     auto bad = a;
     bad.T(0, 3) = std::nan("");
@@ -595,9 +596,10 @@ TEST(MapStore, MigratesAVersion1FileForward) {
     all = fill(*store, 1, 1, 4);
   }
   // Turn it back into a version-1 file: no pose-graph tables, no graph_version or graph_loop column.
-  execSql(path,
-          "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
-          " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=1;");
+  execSql(
+      path,
+      "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
+      " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=1;");
   auto store = MapStore::open(options(path));
   EXPECT_EQ(store->stats("m").scans, 4);
   EXPECT_EQ(store->graphVersion("m"), 0);
@@ -623,15 +625,16 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
     store->addLoop("m", {0, all[3].id, all[0].id, rigid(0.1, 1, 2), 0.5, 0.5, 0.1, 5});  // no information
   }
   // Back to a version-2 file: no information column, no graph_loop.
-  execSql(path, "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
-                " PRAGMA user_version=2;");
+  execSql(path,
+          "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
+          " PRAGMA user_version=2;");
   const Mat6d info = someInformation();
   {
     auto store = MapStore::open(options(path));
     auto loops = store->loops("m");
     ASSERT_EQ(loops.size(), 1u);
     EXPECT_FALSE(loops[0].information.has_value());  // recorded before: none
-    EXPECT_EQ(store->optimisedThroughLoop("m"), 0);   // schema 4's column, added by the migration
+    EXPECT_EQ(store->optimisedThroughLoop("m"), 0);  // schema 4's column, added by the migration
     LoopRecord with{0, all[2].id, all[1].id, rigid(-0.2, 3, 0), 0.6, 0.7, 0.08, 7};
     with.information = info;
     store->addLoop("m", with);

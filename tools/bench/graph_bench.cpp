@@ -10,6 +10,8 @@
 // event and the map is optimised again, warm-started, as the server's worker does.
 //
 //   build/bin/sglc-bench-graph [--scans 5000] [--events 50] [--dir /tmp/sglc-bench-graph]
+#include <spdlog/sinks/stdout_sinks.h>
+#include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
@@ -18,8 +20,6 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <random>
-#include <spdlog/sinks/stdout_sinks.h>
-#include <spdlog/spdlog.h>
 
 #include "graph_optimiser.hpp"
 #include "sglc/descriptors.hpp"
@@ -96,8 +96,10 @@ int main(int argc, char** argv) {
   sim::Trajectory traj;
   const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
   const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib)) traj = sim::loadKittiTrajectory(poses, calib);
-  else traj = sim::loopRoute();
+  if (fs::exists(poses) && fs::exists(calib))
+    traj = sim::loadKittiTrajectory(poses, calib);
+  else
+    traj = sim::loopRoute();
   const int n0 = std::min(scans, static_cast<int>(traj.poses.size()));
   const int n1 = std::min(scans - n0, n0);  // r1 repeats r0's start
 
@@ -124,11 +126,21 @@ int main(int argc, char** argv) {
   const auto t_fill = Clock::now();
   for (int i = 0; i < n0; ++i) {
     const auto fp = placeholder(rng);
-    id0.push_back(store->addScan({.map = "m", .robot = "r0", .session = "s", .seq = i, .odometry_pose = odom0[static_cast<std::size_t>(i)], .fingerprint = &fp}));
+    id0.push_back(store->addScan({.map = "m",
+                                  .robot = "r0",
+                                  .session = "s",
+                                  .seq = i,
+                                  .odometry_pose = odom0[static_cast<std::size_t>(i)],
+                                  .fingerprint = &fp}));
   }
   for (int i = 0; i < n1; ++i) {
     const auto fp = placeholder(rng);
-    id1.push_back(store->addScan({.map = "m", .robot = "r1", .session = "s", .seq = i, .odometry_pose = odom1[static_cast<std::size_t>(i)], .fingerprint = &fp}));
+    id1.push_back(store->addScan({.map = "m",
+                                  .robot = "r1",
+                                  .session = "s",
+                                  .seq = i,
+                                  .odometry_pose = odom1[static_cast<std::size_t>(i)],
+                                  .fingerprint = &fp}));
   }
   const double fill_s = std::chrono::duration<double>(Clock::now() - t_fill).count();
 
@@ -148,16 +160,28 @@ int main(int argc, char** argv) {
       std::vector<storage::LoopRecord> g;
       for (std::size_t k = 0; k < std::min<std::size_t>(3, ls.size()); ++k) {
         // loopPoses' T maps `first` (earlier, the candidate) into `second` (the query).
-        storage::LoopRecord r{0, id0[static_cast<std::size_t>(q)], id0[static_cast<std::size_t>(ls[k].first)],
-                              disturbed(ls[k].T, rng, sigma_m, sigma_rad), 0.5, 0.9, sigma_m, 20};
+        storage::LoopRecord r{0,
+                              id0[static_cast<std::size_t>(q)],
+                              id0[static_cast<std::size_t>(ls[k].first)],
+                              disturbed(ls[k].T, rng, sigma_m, sigma_rad),
+                              0.5,
+                              0.9,
+                              sigma_m,
+                              20};
         r.information = info;
         g.push_back(r);
       }
       groups.push_back(std::move(g));
     }
     for (int i = 0; i < n1; ++i) {  // r1 frame i is where r0's frame i was
-      storage::LoopRecord r{0, id1[static_cast<std::size_t>(i)], id0[static_cast<std::size_t>(i)],
-                            disturbed(Mat4d::Identity(), rng, sigma_m, sigma_rad), 0.5, 0.9, sigma_m, 20};
+      storage::LoopRecord r{0,
+                            id1[static_cast<std::size_t>(i)],
+                            id0[static_cast<std::size_t>(i)],
+                            disturbed(Mat4d::Identity(), rng, sigma_m, sigma_rad),
+                            0.5,
+                            0.9,
+                            sigma_m,
+                            20};
       r.information = info;
       groups.push_back({r});
     }
@@ -180,7 +204,8 @@ int main(int argc, char** argv) {
 
   // Sanity: the optimised trajectory against the truth.
   std::map<std::int64_t, Mat4d> opt;
-  for (const auto& p : store->optimisedPoses("m", "", "", 0, std::numeric_limits<std::int64_t>::max())) opt[p.scan_id] = p.pose;
+  for (const auto& p : store->optimisedPoses("m", "", "", 0, std::numeric_limits<std::int64_t>::max()))
+    opt[p.scan_id] = p.pose;
   std::vector<Mat4d> est, truth, odo;
   for (int i = 0; i < n0; ++i) {
     est.push_back(opt.at(id0[static_cast<std::size_t>(i)]));
@@ -194,8 +219,10 @@ int main(int argc, char** argv) {
   out["loops"] = loops;
   out["fill_s"] = fill_s;
   out["cold_optimisation_ms"] = cold.optimise_ms;
-  out["loop_event_ms"] = {{"median", percentile(event_ms, 0.5)}, {"p90", percentile(event_ms, 0.9)},
-                          {"max", percentile(event_ms, 1.0)}, {"n", event_ms.size()}};
+  out["loop_event_ms"] = {{"median", percentile(event_ms, 0.5)},
+                          {"p90", percentile(event_ms, 0.9)},
+                          {"max", percentile(event_ms, 1.0)},
+                          {"n", event_ms.size()}};
   out["ate_odometry_r0_m"] = ate(odo, truth);
   out["ate_optimised_r0_m"] = ate(est, truth);
   std::cout << out.dump(2) << std::endl;

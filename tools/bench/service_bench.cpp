@@ -12,7 +12,6 @@
 //                  resident memory (VmRSS) and peak (VmHWM) from /proc (only for a server started here).
 //
 //   build/bin/sglc-bench [--server ADDR] [--frames 120] [--seconds 20] [--robots 1,4,16] [--rss-scans 10000]
-#include <CLI/CLI.hpp>
 #include <arpa/inet.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -20,6 +19,7 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -133,7 +133,8 @@ int main(int argc, char** argv) {
   std::int64_t rss_scans = 10000;
   app.add_option("--server", server_addr, "use this running server instead of starting one");
   app.add_option("--dir", dir, "scratch directory for a started server (removed first)");
-  app.add_option("--frames", frames, "keyframes rendered for the map (and as many for the visitor)")->check(CLI::Range(8, 2000));
+  app.add_option("--frames", frames, "keyframes rendered for the map (and as many for the visitor)")
+      ->check(CLI::Range(8, 2000));
   app.add_option("--seconds", seconds, "duration of each throughput run")->check(CLI::Range(1.0, 3600.0));
   app.add_option("--robots", robot_counts, "concurrent robots of the throughput runs")->delimiter(',');
   app.add_option("--rss-scans", rss_scans, "map size at which server memory is read (0: skip)");
@@ -215,7 +216,8 @@ int main(int argc, char** argv) {
     std::size_t with_loop = 0, refined = 0;
     for (std::size_t i = 0; i < visitor_frames.size(); ++i) {
       const auto t1 = Clock::now();
-      const auto r = cl.ingest(requestFor(visitor_frames[i], map, "visitor", "run", static_cast<std::int64_t>(i), true));
+      const auto r =
+          cl.ingest(requestFor(visitor_frames[i], map, "visitor", "run", static_cast<std::int64_t>(i), true));
       lat.push_back(msSince(t1));
       ++stored;
       server_total.push_back(r.timing().total_ms());
@@ -293,7 +295,8 @@ int main(int argc, char** argv) {
       threads.emplace_back([&, r] {
         const std::string robot = "fill-r" + std::to_string(r);
         for (std::int64_t k; (k = next++) < rss_scans;)
-          cl.ingest(requestFor(map_frames[static_cast<std::size_t>(k) % map_frames.size()], map, robot, "run", k, false));
+          cl.ingest(
+              requestFor(map_frames[static_cast<std::size_t>(k) % map_frames.size()], map, robot, "run", k, false));
       });
     for (auto& t : threads) t.join();
     const auto stats = cl.getStats(map);

@@ -93,8 +93,10 @@ int main(int argc, char** argv) {
   sim::Trajectory traj;
   const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
   const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib)) traj = sim::loadKittiTrajectory(poses, calib);
-  else traj = sim::loopRoute();
+  if (fs::exists(poses) && fs::exists(calib))
+    traj = sim::loadKittiTrajectory(poses, calib);
+  else
+    traj = sim::loopRoute();
   sim::SimConfig sc;
   sc.threads = 2;
   const sim::Simulator simulator(traj, sc);
@@ -121,7 +123,8 @@ int main(int argc, char** argv) {
     std::vector<double> store_ms, fetch_ms, cold_ms;
     std::vector<std::int64_t> ids;
     for (std::size_t i = 0; i < base.size(); ++i) {
-      storage::NewScan ns{.map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
+      storage::NewScan ns{
+          .map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
       const auto t0 = Clock::now();
       ids.push_back(store->addScan(ns));
       store_ms.push_back(ms(t0));
@@ -173,7 +176,8 @@ int main(int argc, char** argv) {
       out["search_top50_exact"]["scans"] = scans;
       out["search_top50_exact_filtered"] = summary(filtered_ms);
       const auto st = store->stats();
-      out["big_map"] = {{"scans", st.scans}, {"db_bytes", st.db_bytes},
+      out["big_map"] = {{"scans", st.scans},
+                        {"db_bytes", st.db_bytes},
                         {"bytes_per_scan", static_cast<double>(st.db_bytes) / static_cast<double>(st.scans)}};
     }
     t0 = Clock::now();

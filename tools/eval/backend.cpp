@@ -1,8 +1,8 @@
 #include "backend.hpp"
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
 #include <map>
 #include <stdexcept>
@@ -35,8 +35,9 @@ class InProcess final : public Backend {
     std::filesystem::remove_all(o.path + ".index");
     o.sync = storage::StoreOptions::Sync::kOff;
     store_ = storage::MapStore::open(o);
-    store_->createMap(kMap, descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph,
-                                                config.descriptor).scanDim());
+    store_->createMap(
+        kMap, descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph, config.descriptor)
+                  .scanDim());
   }
   std::string name() const override { return "in-process"; }
 
@@ -48,8 +49,7 @@ class InProcess final : public Backend {
     t->total = msSince(t0);
   }
 
-  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q,
-                                      StageTimes* t) override {
+  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
     const auto t0 = Clock::now();
     const auto fp = pipeline_.fingerprint(scan);
     t->fingerprint = msSince(t0);
@@ -159,8 +159,7 @@ class Remote final : public Backend {
     times(r.timing(), t);
   }
 
-  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q,
-                                      StageTimes* t) override {
+  std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
     client::IngestOptions io;
     io.query = true;
     io.query_options = options(q.refine ? Refine::verified : Refine::none, q.candidates);
@@ -221,8 +220,8 @@ class Remote final : public Backend {
     for (const auto& c : in) {
       const auto it = frames_.find(c.scan_id());
       if (it == frames_.end()) continue;  // not one of ours (the map is new, so this does not happen)
-      Candidate e{it->second, c.score(), c.verified(), c.refined(), c.inliers(), Mat4d::Identity(),
-                  c.descriptor_distance()};
+      Candidate e{it->second,  c.score(),         c.verified(),           c.refined(),
+                  c.inliers(), Mat4d::Identity(), c.descriptor_distance()};
       if (client::isSet(c.t_query_candidate())) e.T = client::toMatrix(c.t_query_candidate());
       out.push_back(e);
     }

@@ -9,8 +9,8 @@
 //
 // Writes DIR/summary.json and, through tools/eval/plot.py, the figures (pr_curve.png, trajectory.png,
 // pose_errors.png) from the CSV files it writes beside them.
-#include <CLI/CLI.hpp>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -29,8 +29,8 @@
 
 #include "backend.hpp"
 #include "metrics.hpp"
-#include "sglc/config.hpp"
 #include "sglc/client/client.hpp"
+#include "sglc/config.hpp"
 #include "sim/ground_truth.hpp"
 #include "source.hpp"
 
@@ -55,14 +55,14 @@ class Progress {
   void step(std::size_t done) {
     const double t = seconds(start_);
     const bool last = done == total_;
-    if (tty_ ? (t - shown_ < 0.25 && !last) : (done * 10 / std::max<std::size_t>(total_, 1) == tenth_ && !last))
-      return;
+    if (tty_ ? (t - shown_ < 0.25 && !last) : (done * 10 / std::max<std::size_t>(total_, 1) == tenth_ && !last)) return;
     shown_ = t;
     tenth_ = done * 10 / std::max<std::size_t>(total_, 1);
     const double rate = t > 0 ? static_cast<double>(done) / t : 0;
     const double eta = rate > 0 ? static_cast<double>(total_ - done) / rate : 0;
     const int width = 30;
-    const int fill = static_cast<int>(width * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total_, 1)));
+    const int fill =
+        static_cast<int>(width * static_cast<double>(done) / static_cast<double>(std::max<std::size_t>(total_, 1)));
     std::ostringstream line;
     line << label_ << " [" << std::string(fill, '#') << std::string(width - fill, '.') << "] " << done << "/" << total_
          << "  " << std::fixed << std::setprecision(1) << rate << "/s  ETA " << static_cast<int>(eta) / 60 << "m"
@@ -106,8 +106,12 @@ class Prefetch {
 struct Timings {
   std::map<std::string, std::vector<double>> stages;
   void add(const StageTimes& t) {
-    for (const auto& [name, v] : {std::pair{"fingerprint", t.fingerprint}, {"search", t.search}, {"verify", t.verify},
-                                  {"refine", t.refine}, {"store", t.store}, {"total", t.total}})
+    for (const auto& [name, v] : {std::pair{"fingerprint", t.fingerprint},
+                                  {"search", t.search},
+                                  {"verify", t.verify},
+                                  {"refine", t.refine},
+                                  {"store", t.store},
+                                  {"total", t.total}})
       stages[name].push_back(v);
   }
   static double pct(std::vector<double> v, double p) {
@@ -372,7 +376,10 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
       in_band += band;
       top1 << f << "," << m << "," << cands[0].score << ","
            << (run.source.hasPose(f) && run.source.hasPose(m) ? distance(f, m) : -1.0) << ","
-           << (band ? "between" : r[0] ? "true" : "false") << "\n";
+           << (band   ? "between"
+               : r[0] ? "true"
+                      : "false")
+           << "\n";
     }
     if (!cands.empty() && cands[0].verified && !inBand(f, cands[0].frame)) {
       top[q] = cands[0];
@@ -509,8 +516,8 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
     }
   }
   // The server optimises off the request path: wait for its converged solve of every scan and loop.
-  const auto settled = waitForSettledGraph(cl, map, static_cast<std::int64_t>(total),
-                                           static_cast<std::int64_t>(loops), std::chrono::minutes(5));
+  const auto settled = waitForSettledGraph(cl, map, static_cast<std::int64_t>(total), static_cast<std::int64_t>(loops),
+                                           std::chrono::minutes(5));
   if (!settled.converged())
     std::cerr << "warning: the pose graph did not settle within 5 minutes (last version " << settled.graph_version()
               << ", " << settled.nodes() << " nodes, " << settled.loops() << " loops)\n";
@@ -533,13 +540,16 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
     }
     std::vector<Mat4d> est;
     for (int f : r.frames) {
-      if (!opt.count(f)) throw std::runtime_error("the server has no pose for " + r.name + " frame " + std::to_string(f));
+      if (!opt.count(f))
+        throw std::runtime_error("the server has no pose for " + r.name + " frame " + std::to_string(f));
       est.push_back(opt[f]);
     }
     std::vector<Eigen::Vector3d> odom_aligned;
     const double ate_odom = absoluteTrajectoryError(r.odom, r.gt, &odom_aligned);
     odom_sq += ate_odom * ate_odom * static_cast<double>(r.frames.size());
-    per_robot.push_back({{"robot", r.name}, {"frames", r.frames.size()}, {"ate_odometry", ate_odom},
+    per_robot.push_back({{"robot", r.name},
+                         {"frames", r.frames.size()},
+                         {"ate_odometry", ate_odom},
                          {"ate_optimised", absoluteTrajectoryError(est, r.gt)}});
     for (std::size_t k = 0; k < r.frames.size(); ++k)
       csv << r.frames[k] << "," << r.name << "," << r.gt[k](0, 3) << "," << r.gt[k](1, 3) << "," << odom_aligned[k].x()
@@ -577,7 +587,8 @@ int main(int argc, char** argv) {
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
   int threads = 2;
   LoopQuery query;
-  app.add_option("--protocol", protocol, "pairs, sequence, pose, or all (sequence, then pairs and pose on the same frames)")
+  app.add_option("--protocol", protocol,
+                 "pairs, sequence, pose, or all (sequence, then pairs and pose on the same frames)")
       ->required()
       ->check(CLI::IsMember({"pairs", "sequence", "pose", "all", "slam"}));
   app.add_option("--data", data, "SemanticKITTI-layout sequence directory (velodyne/, labels/, poses.txt, calib.txt)");
@@ -599,7 +610,8 @@ int main(int argc, char** argv) {
   app.add_option("--positive-m", positive_m, "sequence: a true loop is closer than this (m)");
   app.add_option("--negative-m", negative_m, "sequence: a false loop is farther than this (m); between: ignored");
   app.add_option("--exclude-recent", query.exclude_recent, "sequence: skip this many most recent frames");
-  app.add_option("--candidates", query.candidates, "sequence: descriptor neighbours verified per query (at least 1% of frames)");
+  app.add_option("--candidates", query.candidates,
+                 "sequence: descriptor neighbours verified per query (at least 1% of frames)");
   SlamOptions slam;
   app.add_option("--odom-noise", slam.odom_noise, "slam: odometry drift (translation sigma per metre; 0.01 = 1 %)")
       ->check(CLI::Range(0.0, 0.2));
@@ -621,7 +633,8 @@ int main(int argc, char** argv) {
     if (no_labels && label_noise > 0) throw InputError("--label-noise has no effect with --no-labels");
     if (protocol == "slam" && server.empty())
       throw InputError("--protocol slam measures a server's pose graph: give --server ADDR");
-    if (protocol != "sequence" && protocol != "slam" && pairs.empty()) throw InputError("--protocol " + protocol + " needs --pairs FILE");
+    if (protocol != "sequence" && protocol != "slam" && pairs.empty())
+      throw InputError("--protocol " + protocol + " needs --pairs FILE");
     if (protocol == "all" && pose_pairs.empty()) throw InputError("--protocol all needs --pose-pairs FILE");
     if (query.exclude_recent < 0 || query.candidates < 1 || query.candidates > 100)
       throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
@@ -632,8 +645,10 @@ int main(int argc, char** argv) {
     fs::create_directories(out);
 
     std::unique_ptr<FrameSource> source;
-    if (sim) source = simulatedSource({poses, calib, frames, seed, label_noise, beams});
-    else source = directorySource(data, frames);
+    if (sim)
+      source = simulatedSource({poses, calib, frames, seed, label_noise, beams});
+    else
+      source = directorySource(data, frames);
     if (no_labels) source = withoutLabels(std::move(source));
     if (protocol == "sequence" || protocol == "all") {
       const auto n = static_cast<int>(std::ceil(0.01 * static_cast<double>(source->frames().size())));
@@ -641,8 +656,10 @@ int main(int argc, char** argv) {
     }
     std::unique_ptr<Backend> backend;
     const std::string map_name = "eval-" + std::to_string(std::time(nullptr)) + "-" + std::to_string(::getpid());
-    if (server.empty()) backend = inProcessBackend(config, out + "/scratch");
-    else backend = serverBackend(server, token, map_name);
+    if (server.empty())
+      backend = inProcessBackend(config, out + "/scratch");
+    else
+      backend = serverBackend(server, token, map_name);
 
     std::set<int> stored;
     // One invocation may run several protocols over the same stored frames ("all": sequence first, then

@@ -68,12 +68,12 @@ PoseError poseError(const Mat4d& estimate, const Mat4d& ground_truth);
 struct RegistrationResult {
   bool registered = false;  // false: no pose was produced (counts as a failure)
   PoseError error;
-  bool verified = false;    // verification accepted the pair as a loop
+  bool verified = false;  // verification accepted the pair as a loop
 };
 struct RegistrationSummary {
   std::size_t pairs = 0, successes = 0;
-  double rr = 0;             // successes / pairs (0 for no pairs)
-  double rr_verified = 0;    // successes that verification also accepted / pairs
+  double rr = 0;                      // successes / pairs (0 for no pairs)
+  double rr_verified = 0;             // successes that verification also accepted / pairs
   double rte_mean = 0, rre_mean = 0;  // over successes (0 if none)
   double rte_median = 0, rre_median = 0;
 };

@@ -26,12 +26,12 @@ class FrameSource {
 };
 
 struct SimSourceOptions {
-  std::string poses;        // KITTI poses file; empty: the simulator's built-in route
-  std::string calib;        // KITTI calib.txt with the Tr line (needed with poses)
-  std::string frames;       // selection "a:b:s,..." (sglc-sim syntax); empty: all
+  std::string poses;   // KITTI poses file; empty: the simulator's built-in route
+  std::string calib;   // KITTI calib.txt with the Tr line (needed with poses)
+  std::string frames;  // selection "a:b:s,..." (sglc-sim syntax); empty: all
   std::uint64_t seed = 7;
-  double label_noise = 0;   // LabelNoise::fromRate
-  int beams = 64;           // SensorConfig::preset: 32 (HDL-32E-like), 64 (HDL-64E-like), 128
+  double label_noise = 0;  // LabelNoise::fromRate
+  int beams = 64;          // SensorConfig::preset: 32 (HDL-32E-like), 64 (HDL-64E-like), 128
 };
 std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
 

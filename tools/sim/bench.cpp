@@ -112,7 +112,12 @@ void BM_RenderFrames(benchmark::State& state, bool kitti) {
 
 BENCHMARK(BM_WorldBuild)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Render, loop, false)
-    ->Args({64, 1})->Args({64, 2})->Args({32, 1})->Args({128, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+    ->Args({64, 1})
+    ->Args({64, 2})
+    ->Args({32, 1})
+    ->Args({128, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK_CAPTURE(BM_Render, kitti00, true)->Args({64, 1})->Args({64, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_RenderFrames, loop, false)->Args({64, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_RenderFrames, kitti00, true)->Args({64, 2})->Unit(benchmark::kMillisecond)->UseRealTime();

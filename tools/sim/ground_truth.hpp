@@ -13,12 +13,12 @@
 namespace sglc::sim {
 
 struct PairListConfig {
-  double positive_m = 3.0;         // loop if the horizontal (x, y) distance is below this
-  double negative_m = 20.0;        // non-loop if the horizontal distance is above this
-  int min_gap = 50;                // positives need the trajectory frame indices more than this apart
-  int negatives_per_positive = 10; // SSC's "neg_N"
-  int min_negatives = 100;         // at least this many negatives (when that many exist)
-  std::uint64_t seed = 0;          // negative sampling
+  double positive_m = 3.0;          // loop if the horizontal (x, y) distance is below this
+  double negative_m = 20.0;         // non-loop if the horizontal distance is above this
+  int min_gap = 50;                 // positives need the trajectory frame indices more than this apart
+  int negatives_per_positive = 10;  // SSC's "neg_N"
+  int min_negatives = 100;          // at least this many negatives (when that many exist)
+  std::uint64_t seed = 0;           // negative sampling
 };
 
 struct LabelledPair {
@@ -32,8 +32,8 @@ std::vector<LabelledPair> distancePairs(const std::vector<Mat4d>& poses, const s
                                         const PairListConfig& config);
 
 struct LoopPose {
-  int first = 0;   // earlier frame
-  int second = 0;  // later frame
+  int first = 0;                // earlier frame
+  int second = 0;               // later frame
   Mat4d T = Mat4d::Identity();  // maps points of `first` into the LiDAR frame of `second`: p_second = T * p_first
 };
 
@@ -43,8 +43,8 @@ std::vector<LoopPose> loopPoses(const std::vector<Mat4d>& poses, const std::vect
                                 double max_distance = 4.0, int min_gap = 50);
 
 struct OdometryNoise {
-  double translation = 0.0;          // sigma per axis, as a fraction of the distance travelled per step
-  double rotation_deg_per_m = 0.0;   // yaw sigma per metre travelled (roll/pitch get a fifth of it)
+  double translation = 0.0;         // sigma per axis, as a fraction of the distance travelled per step
+  double rotation_deg_per_m = 0.0;  // yaw sigma per metre travelled (roll/pitch get a fifth of it)
   bool any() const { return translation > 0 || rotation_deg_per_m > 0; }
 };
 

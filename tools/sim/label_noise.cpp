@@ -12,8 +12,13 @@ namespace {
 
 bool isThing(std::uint32_t cls) {
   switch (cls) {
-    case label::kCar: case label::kTruck: case label::kOtherVehicle: case label::kPerson:
-    case label::kTrunk: case label::kPole: case label::kTrafficSign:
+    case label::kCar:
+    case label::kTruck:
+    case label::kOtherVehicle:
+    case label::kPerson:
+    case label::kTrunk:
+    case label::kPole:
+    case label::kTrafficSign:
       return true;
     default:
       return cls >= 252 && cls <= 259;
@@ -24,33 +29,51 @@ bool isThing(std::uint32_t cls) {
 std::array<std::uint32_t, 3> confusions(std::uint32_t cls) {
   using namespace label;
   switch (cls) {
-    case kCar: return {kTruck, kOtherVehicle, 0};
-    case kTruck: return {kCar, kOtherVehicle, 0};
-    case kOtherVehicle: return {kCar, kTruck, 0};
-    case kRoad: return {kParking, kSidewalk, 0};
-    case kParking: return {kRoad, kSidewalk, 0};
-    case kSidewalk: return {kRoad, kParking, kTerrain};
-    case kOtherGround: return {kSidewalk, kTerrain, 0};
-    case kBuilding: return {kFence, kVegetation, 0};
-    case kFence: return {kBuilding, kVegetation, 0};
-    case kVegetation: return {kTerrain, kTrunk, kBuilding};
-    case kTrunk: return {kVegetation, kPole, 0};
-    case kTerrain: return {kVegetation, kSidewalk, 0};
-    case kPole: return {kTrafficSign, kTrunk, kBuilding};
-    case kTrafficSign: return {kPole, kBuilding, 0};
-    case kPerson: return {kPole, kTrunk, 0};
+    case kCar:
+      return {kTruck, kOtherVehicle, 0};
+    case kTruck:
+      return {kCar, kOtherVehicle, 0};
+    case kOtherVehicle:
+      return {kCar, kTruck, 0};
+    case kRoad:
+      return {kParking, kSidewalk, 0};
+    case kParking:
+      return {kRoad, kSidewalk, 0};
+    case kSidewalk:
+      return {kRoad, kParking, kTerrain};
+    case kOtherGround:
+      return {kSidewalk, kTerrain, 0};
+    case kBuilding:
+      return {kFence, kVegetation, 0};
+    case kFence:
+      return {kBuilding, kVegetation, 0};
+    case kVegetation:
+      return {kTerrain, kTrunk, kBuilding};
+    case kTrunk:
+      return {kVegetation, kPole, 0};
+    case kTerrain:
+      return {kVegetation, kSidewalk, 0};
+    case kPole:
+      return {kTrafficSign, kTrunk, kBuilding};
+    case kTrafficSign:
+      return {kPole, kBuilding, 0};
+    case kPerson:
+      return {kPole, kTrunk, 0};
     // A network without motion cues labels moving objects as their static class.
-    case kMovingCar: return {kCar, 0, 0};
-    case kMovingPerson: return {kPerson, 0, 0};
-    case kMovingTruck: return {kTruck, 0, 0};
-    case kMovingOtherVehicle: return {kOtherVehicle, 0, 0};
-    default: return {0, 0, 0};
+    case kMovingCar:
+      return {kCar, 0, 0};
+    case kMovingPerson:
+      return {kPerson, 0, 0};
+    case kMovingTruck:
+      return {kTruck, 0, 0};
+    case kMovingOtherVehicle:
+      return {kOtherVehicle, 0, 0};
+    default:
+      return {0, 0, 0};
   }
 }
 
-std::uint32_t relabel(std::uint32_t raw, std::uint32_t cls) {
-  return isThing(cls) ? (cls | (raw & 0xFFFF0000u)) : cls;
-}
+std::uint32_t relabel(std::uint32_t raw, std::uint32_t cls) { return isThing(cls) ? (cls | (raw & 0xFFFF0000u)) : cls; }
 
 }  // namespace
 
@@ -71,7 +94,8 @@ void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, 
     throw InputError("label noise: the frame has no beam/column of its points");
   const std::uint64_t key = hashKeys(seed, 0x1AB1ULL, static_cast<std::uint64_t>(frame.index));
   std::vector<int> image(static_cast<std::size_t>(beams) * columns, -1);
-  for (std::size_t i = 0; i < n; ++i) image[static_cast<std::size_t>(frame.beam[i]) * columns + frame.column[i]] = static_cast<int>(i);
+  for (std::size_t i = 0; i < n; ++i)
+    image[static_cast<std::size_t>(frame.beam[i]) * columns + frame.column[i]] = static_cast<int>(i);
   auto at = [&](int b, int c) -> int {
     if (b < 0 || b >= beams) return -1;
     c = (c % columns + columns) % columns;

@@ -35,7 +35,8 @@ int main(int argc, char** argv) {
   app.add_option("--label-miss", label_miss, "Override: chance to miss a small object")->check(CLI::Range(0.0, 1.0));
   app.add_option("--beams", beams, "64 (HDL-64E-like), 32, 128, or any count spread over +2..-24.8 deg")
       ->capture_default_str();
-  app.add_option("--columns", columns, "Azimuth steps per revolution (default: the preset's)")->check(CLI::Range(8, 65535));
+  app.add_option("--columns", columns, "Azimuth steps per revolution (default: the preset's)")
+      ->check(CLI::Range(8, 65535));
   app.add_option("--fov-up", fov_up, "Elevation of the top beam in deg (with --fov-down: beams spread evenly)")
       ->check(CLI::Range(-90.0, 90.0));
   app.add_option("--fov-down", fov_down, "Elevation of the bottom beam in deg")->check(CLI::Range(-90.0, 90.0));
@@ -49,11 +50,14 @@ int main(int argc, char** argv) {
   app.add_option("--odom-rot-noise", odom_rot, "Odometry yaw sigma in deg per m (default 0.5 * --odom-noise)")
       ->check(CLI::Range(0.0, 10.0));
   app.add_option("--min-gap", pairs.min_gap, "Loop pairs need trajectory frames more than this apart")
-      ->capture_default_str()->check(CLI::NonNegativeNumber);
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--neg-ratio", pairs.negatives_per_positive, "Sampled negatives per positive in pairs_distance.txt")
-      ->capture_default_str()->check(CLI::NonNegativeNumber);
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--threads", threads, "Frames rendered in parallel (output does not depend on it)")
-      ->capture_default_str()->check(CLI::Range(1, 256));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 256));
   app.add_flag("--overwrite", overwrite, "Replace the scans of an earlier run in --out (refused otherwise)");
   app.add_flag("--quiet", quiet, "No progress lines");
   try {
@@ -137,9 +141,10 @@ int main(int argc, char** argv) {
     std::printf("sglc-sim: wrote %d frames to %s\n", s.frames, out_dir.c_str());
     std::printf("  trajectory:   %s, %d frames, selection '%s'\n", sim.trajectory().source.c_str(), sim.numFrames(),
                 frames_spec.empty() ? "all" : frames_spec.c_str());
-    std::printf("  sensor:       %s, %d beams x %d columns, %.0f m; label noise: confusion %.3f, bleed %.3f, miss %.3f\n",
-                sc.name.c_str(), sc.beams(), sc.columns, sc.max_range, cfg.label_noise.confusion,
-                cfg.label_noise.bleed, cfg.label_noise.miss);
+    std::printf(
+        "  sensor:       %s, %d beams x %d columns, %.0f m; label noise: confusion %.3f, bleed %.3f, miss %.3f\n",
+        sc.name.c_str(), sc.beams(), sc.columns, sc.max_range, cfg.label_noise.confusion, cfg.label_noise.bleed,
+        cfg.label_noise.miss);
     std::snprintf(buf, sizeof buf,
                   "  world:        seed %llu, %.0f m of street, %zu primitives (%zu buildings, %zu trees, %zu poles, "
                   "%zu signs, %zu parked vehicles, %zu moving agents), %.1f MB, built in %.2f s\n",
@@ -148,10 +153,11 @@ int main(int argc, char** argv) {
     std::fputs(buf, stdout);
     std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
                 s.bytes / 1e6);
-    std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n", s.frames_per_second,
-                threads, s.seconds);
-    std::printf("  ground truth: %zu loop pairs + %zu negatives in pairs_distance.txt; %zu loop_distance4 rows (%zu reverse)\n",
-                s.positives, s.negatives, s.loop_rows, s.reverse_loop_rows);
+    std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n",
+                s.frames_per_second, threads, s.seconds);
+    std::printf(
+        "  ground truth: %zu loop pairs + %zu negatives in pairs_distance.txt; %zu loop_distance4 rows (%zu reverse)\n",
+        s.positives, s.negatives, s.loop_rows, s.reverse_loop_rows);
     std::printf("  peak memory:  %.0f MB\n", usage_info.ru_maxrss / 1024.0);
     return 0;
   } catch (const std::exception& e) {

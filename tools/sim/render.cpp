@@ -23,11 +23,11 @@ constexpr float kPi = std::numbers::pi_v<float>;
 
 // A primitive in sensor-centred coordinates (world axes, origin at the sensor).
 struct LocalPrim {
-  float ox, oy;      // box: ray origin in the box frame; cylinder / ellipsoid: -centre (x, y)
-  float z0, z1;      // vertical extent relative to the sensor
+  float ox, oy;  // box: ray origin in the box frame; cylinder / ellipsoid: -centre (x, y)
+  float z0, z1;  // vertical extent relative to the sensor
   float hx, hy;
-  float c, s;        // box axis
-  float near;        // horizontal distance from the sensor to the bounding circle (>= 0)
+  float c, s;  // box axis
+  float near;  // horizontal distance from the sensor to the bounding circle (>= 0)
   float jitter;
   float reflectivity;
   std::uint32_t label;
@@ -138,11 +138,16 @@ inline bool inWindow(const LocalPrim& p, const Vec3f& d, const Span& span, float
 
 float groundReflectivity(std::uint32_t cls) {
   switch (cls) {
-    case label::kRoad: return 0.26f;
-    case label::kParking: return 0.35f;
-    case label::kSidewalk: return 0.37f;
-    case label::kTerrain: return 0.42f;
-    default: return 0.35f;
+    case label::kRoad:
+      return 0.26f;
+    case label::kParking:
+      return 0.35f;
+    case label::kSidewalk:
+      return 0.37f;
+    case label::kTerrain:
+      return 0.42f;
+    default:
+      return 0.35f;
   }
 }
 
@@ -198,7 +203,9 @@ inline float fastAtan2(float y, float x) {
   const float mx = std::max(ax, ay);
   if (mx == 0.0f) return 0.0f;
   const float z = std::min(ax, ay) / mx, z2 = z * z;
-  float r = z * (0.99997726f + z2 * (-0.33262347f + z2 * (0.19354346f + z2 * (-0.11643287f + z2 * (0.05265332f + z2 * -0.01172120f)))));
+  float r =
+      z * (0.99997726f +
+           z2 * (-0.33262347f + z2 * (0.19354346f + z2 * (-0.11643287f + z2 * (0.05265332f + z2 * -0.01172120f)))));
   if (ay > ax) r = 0.5f * kPi - r;
   if (x < 0.0f) r = kPi - r;
   return y < 0.0f ? -r : r;
@@ -207,15 +214,15 @@ inline float fastAtan2(float y, float x) {
 }  // namespace
 
 Simulator::Simulator(Trajectory trajectory, SimConfig config)
-    : trajectory_(std::move(trajectory)), config_(std::move(config)),
+    : trajectory_(std::move(trajectory)),
+      config_(std::move(config)),
       world_(trajectory_.poses, config_.seed, config_.world) {
   // The vehicle drives on the simulated ground. KITTI's GPS/INS heights disagree by up to several metres
   // where a street is driven twice (08: 4 m), and the ground takes a blend of the passes; rendering from the
   // recorded heights would put the sensor metres above or below the road. So every pose keeps its x, y and
   // orientation and gets the nominal sensor height over the ground below it; these are the poses the frames
   // are rendered from and that trajectory() reports as ground truth.
-  for (auto& P : trajectory_.poses)
-    P(2, 3) = world_.groundHeight(P(0, 3), P(1, 3)) + config_.world.sensor_height;
+  for (auto& P : trajectory_.poses) P(2, 3) = world_.groundHeight(P(0, 3), P(1, 3)) + config_.world.sensor_height;
   const auto& s = config_.sensor;
   if (s.elevation_deg.empty()) throw InputError("sensor: no beams");
   if (s.elevation_deg.size() > 65535 || s.columns < 8 || s.columns > 65535)
@@ -359,7 +366,8 @@ void Simulator::render(int index, Frame& out, int threads) const {
   {
     std::vector<int> fill(sector_start.begin(), sector_start.end() - 1);
     for (std::size_t i = 0; i < prims.size(); ++i)
-      for (int k = first[i]; k <= last[i]; ++k) sector_items[fill[((k % kSectors) + kSectors) % kSectors]++] = static_cast<int>(i);
+      for (int k = first[i]; k <= last[i]; ++k)
+        sector_items[fill[((k % kSectors) + kSectors) % kSectors]++] = static_cast<int>(i);
   }
 
   // ---- cast: results in a column-major image (pixel = column * beams + beam)
@@ -376,7 +384,8 @@ void Simulator::render(int index, Frame& out, int threads) const {
     for (int c = c_begin; c < c_end; ++c) {
       for (int b = 0; b < B; ++b) {
         if (ego_blocked_[static_cast<std::size_t>(c) * B + b]) continue;
-        const std::uint32_t ray = static_cast<std::uint32_t>(c) * static_cast<std::uint32_t>(B) + static_cast<std::uint32_t>(b);
+        const std::uint32_t ray =
+            static_cast<std::uint32_t>(c) * static_cast<std::uint32_t>(B) + static_cast<std::uint32_t>(b);
         const std::uint64_t ray_key = mix64(frame_key ^ (static_cast<std::uint64_t>(ray) << 20));
         const Vec3f ds(cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]);
         const Vec3f d = R * ds;
@@ -529,7 +538,8 @@ SensorConfig SensorConfig::preset(int beams) {
   if (beams == 64) return hdl64();
   if (beams == 32) return hdl32();
   if (beams == 128) return beams128();
-  if (beams < 1 || beams > 1024) throw InputError("sensor: beams must be between 1 and 1024, got " + std::to_string(beams));
+  if (beams < 1 || beams > 1024)
+    throw InputError("sensor: beams must be between 1 and 1024, got " + std::to_string(beams));
   SensorConfig s = hdl64();
   s.name = "uniform" + std::to_string(beams);
   s.elevation_deg.clear();

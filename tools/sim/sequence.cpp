@@ -59,7 +59,8 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
     std::vector<fs::path> old;
     for (const auto& e : fs::directory_iterator(out / sub, ec)) {
       const std::string stem = e.path().stem().string(), ext = e.path().extension().string();
-      if (stem.size() == 6 && stem.find_first_not_of("0123456789") == std::string::npos && (ext == ".bin" || ext == ".label"))
+      if (stem.size() == 6 && stem.find_first_not_of("0123456789") == std::string::npos &&
+          (ext == ".bin" || ext == ".label"))
         old.push_back(e.path());
     }
     if (old.empty()) continue;
@@ -119,7 +120,8 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
     auto f = openText(out / "loop_distance4.txt");
     f << "# i j T (row-major 3x4): output frames, i earlier, j later, 3-D distance < " << opt.loop_pose_m
       << " m, trajectory frames more than " << opt.pairs.min_gap
-      << " apart. T maps LiDAR points of frame i into the LiDAR frame of frame j: p_j = T * p_i = inv(P_j) * P_i * p_i\n";
+      << " apart. T maps LiDAR points of frame i into the LiDAR frame of frame j: p_j = T * p_i = inv(P_j) * P_i * "
+         "p_i\n";
     char buf[64];
     for (const auto& r : rows) {
       f << r.first << ' ' << r.second;
@@ -203,12 +205,18 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
   info["selection"] = opt.selection_spec;
   info["frames"] = n;
   const auto& s = cfg.sensor;
-  info["sensor"] = {{"name", s.name},           {"beams", s.beams()},
-                    {"elevation_deg", s.elevation_deg}, {"columns", s.columns},
-                    {"max_range", s.max_range}, {"min_range", s.min_range},
-                    {"range_noise", s.range_noise}, {"dropout", s.dropout},
-                    {"far_dropout", s.far_dropout}, {"grazing_dropout", s.grazing_dropout},
-                    {"glass_dropout", s.glass_dropout}, {"intensity_noise", s.intensity_noise}};
+  info["sensor"] = {{"name", s.name},
+                    {"beams", s.beams()},
+                    {"elevation_deg", s.elevation_deg},
+                    {"columns", s.columns},
+                    {"max_range", s.max_range},
+                    {"min_range", s.min_range},
+                    {"range_noise", s.range_noise},
+                    {"dropout", s.dropout},
+                    {"far_dropout", s.far_dropout},
+                    {"grazing_dropout", s.grazing_dropout},
+                    {"glass_dropout", s.glass_dropout},
+                    {"intensity_noise", s.intensity_noise}};
   const auto& st = world.style();
   const auto& ws = world.stats();
   info["world"] = {{"sensor_height", cfg.world.sensor_height},
@@ -232,24 +240,21 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
                    {"memory_bytes", ws.memory_bytes},
                    {"build_seconds", ws.build_seconds},
                    {"content_hash", world.contentHash()}};
-  info["label_noise"] = {{"confusion", cfg.label_noise.confusion},
-                         {"bleed", cfg.label_noise.bleed},
-                         {"miss", cfg.label_noise.miss}};
+  info["label_noise"] = {
+      {"confusion", cfg.label_noise.confusion}, {"bleed", cfg.label_noise.bleed}, {"miss", cfg.label_noise.miss}};
   info["odometry_noise"] = {{"translation", opt.odometry.translation},
                             {"rotation_deg_per_m", opt.odometry.rotation_deg_per_m}};
-  info["pairs_distance"] = {{"positive_m", opt.pairs.positive_m},
-                            {"negative_m", opt.pairs.negative_m},
-                            {"min_gap", opt.pairs.min_gap},
-                            {"negatives_per_positive", opt.pairs.negatives_per_positive},
-                            {"positives", summary.positives},
-                            {"negatives", summary.negatives}};
-  info["loop_distance4"] = {{"max_m", opt.loop_pose_m},
-                            {"rows", summary.loop_rows},
-                            {"reverse_rows", summary.reverse_loop_rows}};
+  info["pairs_distance"] = {
+      {"positive_m", opt.pairs.positive_m}, {"negative_m", opt.pairs.negative_m},
+      {"min_gap", opt.pairs.min_gap},       {"negatives_per_positive", opt.pairs.negatives_per_positive},
+      {"positives", summary.positives},     {"negatives", summary.negatives}};
+  info["loop_distance4"] = {
+      {"max_m", opt.loop_pose_m}, {"rows", summary.loop_rows}, {"reverse_rows", summary.reverse_loop_rows}};
   info["conventions"] = {
       {"points", "sensor (LiDAR) frame: x forward, y left, z up; float32 x y z intensity"},
-      {"labels", "SemanticKITTI raw class id in the low 16 bits, instance id in the high 16 bits (vehicles, "
-                 "persons, trunks, poles, traffic signs)"},
+      {"labels",
+       "SemanticKITTI raw class id in the low 16 bits, instance id in the high 16 bits (vehicles, "
+       "persons, trunks, poles, traffic signs)"},
       {"poses", "LiDAR -> world, world = LiDAR frame of trajectory frame 0; row k = output frame k"},
       {"loop_distance4", "p_j = T * p_i (T maps points of the earlier frame i into the later frame j)"},
       {"pairs_distance", "i later, j earlier; horizontal (x, y) distance"}};

@@ -22,12 +22,12 @@ namespace sglc::sim {
 
 struct SequenceOptions {
   std::string out_dir;
-  std::vector<int> frames;          // trajectory frame indices, ascending
-  std::string selection_spec;       // as given by the user (recorded in sim_info.json)
+  std::vector<int> frames;     // trajectory frame indices, ascending
+  std::string selection_spec;  // as given by the user (recorded in sim_info.json)
   PairListConfig pairs;
   double loop_pose_m = 4.0;
   OdometryNoise odometry;
-  int threads = 2;                  // frames rendered in parallel (each frame single-threaded)
+  int threads = 2;  // frames rendered in parallel (each frame single-threaded)
   // An output folder that already holds scans (NNNNNN.bin / NNNNNN.label) is refused, so that runs never mix;
   // with overwrite, those scans are deleted first.
   bool overwrite = false;
@@ -38,8 +38,8 @@ struct SequenceOptions {
 struct SequenceSummary {
   int frames = 0;
   std::uint64_t points = 0;
-  std::uint64_t bytes = 0;          // written by velodyne/ and labels/
-  double seconds = 0.0;             // rendering + writing frames
+  std::uint64_t bytes = 0;  // written by velodyne/ and labels/
+  double seconds = 0.0;     // rendering + writing frames
   double frames_per_second = 0.0;
   std::size_t positives = 0, negatives = 0, loop_rows = 0, reverse_loop_rows = 0;
 };

@@ -21,10 +21,10 @@ namespace sglc::sim {
 // ---- Trajectory ---------------------------------------------------------------------------------------
 
 struct Trajectory {
-  std::vector<Mat4d> poses;    // LiDAR -> world; the world is the LiDAR frame of frame 0
-  double frame_dt = 0.1;       // seconds between consecutive frames (KITTI: 10 Hz)
+  std::vector<Mat4d> poses;      // LiDAR -> world; the world is the LiDAR frame of frame 0
+  double frame_dt = 0.1;         // seconds between consecutive frames (KITTI: 10 Hz)
   Mat4d Tr = Mat4d::Identity();  // velodyne -> cam0 calibration the poses were converted with
-  std::string source;          // human-readable origin
+  std::string source;            // human-readable origin
 };
 
 // KITTI camera (cam0) poses -> LiDAR poses: T_lidar_i = inv(Tr) * P_i * Tr.
@@ -41,14 +41,14 @@ Trajectory loopRoute();
 struct SensorConfig {
   std::string name = "hdl64";
   std::vector<double> elevation_deg;  // one per beam, top to bottom
-  int columns = 2083;                  // azimuth steps per revolution
-  double max_range = 80.0;             // m
-  double min_range = 1.0;              // m
-  double range_noise = 0.02;           // Gaussian sigma (m)
-  double dropout = 0.01;               // base chance that a return is lost
-  double far_dropout = 0.15;           // extra loss at max range, growing with (range / max_range)^2
-  double grazing_dropout = 0.5;        // extra loss at grazing incidence (cos < 0.2), fading in linearly
-  double glass_dropout = 0.5;          // loss on vehicle windows and facade windows
+  int columns = 2083;                 // azimuth steps per revolution
+  double max_range = 80.0;            // m
+  double min_range = 1.0;             // m
+  double range_noise = 0.02;          // Gaussian sigma (m)
+  double dropout = 0.01;              // base chance that a return is lost
+  double far_dropout = 0.15;          // extra loss at max range, growing with (range / max_range)^2
+  double grazing_dropout = 0.5;       // extra loss at grazing incidence (cos < 0.2), fading in linearly
+  double glass_dropout = 0.5;         // loss on vehicle windows and facade windows
   bool intensity_noise = true;
   // The ego vehicle's rear (a box 0.85 m above ground from 0.5 to 2.7 m behind the sensor, 1.8 m wide) hides
   // the ground straight behind, as in KITTI scans: rays hitting it give no return.
@@ -91,14 +91,14 @@ struct SimConfig {
 };
 
 struct Frame {
-  int index = -1;                    // trajectory frame index
-  double time = 0.0;                 // index * frame_dt (s)
-  Mat4d pose = Mat4d::Identity();    // LiDAR -> world
-  LabelledScan scan;                 // sensor-frame points; labels after label noise
-  std::vector<float> intensity;      // 0..1 per point
+  int index = -1;                           // trajectory frame index
+  double time = 0.0;                        // index * frame_dt (s)
+  Mat4d pose = Mat4d::Identity();           // LiDAR -> world
+  LabelledScan scan;                        // sensor-frame points; labels after label noise
+  std::vector<float> intensity;             // 0..1 per point
   std::vector<std::uint32_t> clean_labels;  // labels before label noise (filled only when label noise is on)
-  std::vector<std::uint16_t> beam;   // beam (row) of each point, 0 = top
-  std::vector<std::uint16_t> column; // azimuth column of each point
+  std::vector<std::uint16_t> beam;          // beam (row) of each point, 0 = top
+  std::vector<std::uint16_t> column;        // azimuth column of each point
 };
 
 class Simulator {

@@ -111,10 +111,10 @@ int main(int argc, char** argv) {
           bg_norm2 += v * v;
         }
       }
-      s["descriptor"] = {{"foreground_nonzero", fg_nonzero}, {"foreground_dims", fg},
-                         {"background_nonzero", bg_nonzero},
-                         {"background_dims", static_cast<int>(fp.descriptor.size()) - fg},
-                         {"foreground_norm", std::sqrt(fg_norm2)}, {"background_norm", std::sqrt(bg_norm2)}};
+      s["descriptor"] = {
+          {"foreground_nonzero", fg_nonzero},       {"foreground_dims", fg},
+          {"background_nonzero", bg_nonzero},       {"background_dims", static_cast<int>(fp.descriptor.size()) - fg},
+          {"foreground_norm", std::sqrt(fg_norm2)}, {"background_norm", std::sqrt(bg_norm2)}};
       out["scans"].push_back(s);
       descriptors.push_back(fp.descriptor);
       names.push_back(name);

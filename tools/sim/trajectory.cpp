@@ -45,9 +45,8 @@ Vec2 routeGroundGradient(double x, double y) {
 
 Trajectory loopRoute() {
   // Street corners of the driven centreline; corners are rounded with a 10 m radius.
-  const std::vector<Vec2> corners = {{0, 0},     {200, 0},   {200, 120}, {0, 120},   {0, 0},
-                                     {200, 0},   {200, 120}, {200, 180}, {140, 180}, {140, 120},
-                                     {200, 120}, {200, 0},   {0, 0}};
+  const std::vector<Vec2> corners = {{0, 0},     {200, 0},   {200, 120}, {0, 120},   {0, 0},   {200, 0}, {200, 120},
+                                     {200, 180}, {140, 180}, {140, 120}, {200, 120}, {200, 0}, {0, 0}};
   constexpr double kRadius = 10.0, kStep = 0.05, kLane = 1.2, kSensorHeight = 1.73;
   struct Sample {
     Vec2 p;

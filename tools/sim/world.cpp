@@ -15,17 +15,26 @@ namespace {
 
 using Vec2 = Eigen::Vector2d;
 
-constexpr double kFar = 24.0;           // the distance raster is clamped here (m)
-constexpr double kDistCell = 1.0;       // distance and occupancy rasters (m)
-constexpr double kHeightCell = 4.0;     // ground height raster (m)
-constexpr double kMargin = 160.0;       // rasters cover the path's bounding box grown by this (m)
-constexpr double kIndexCell = 32.0;     // static primitive index (m)
-constexpr double kDistrictCell = 110.0; // district size (m)
-constexpr double kSegmentCell = 16.0;   // path segment index (m)
+constexpr double kFar = 24.0;            // the distance raster is clamped here (m)
+constexpr double kDistCell = 1.0;        // distance and occupancy rasters (m)
+constexpr double kHeightCell = 4.0;      // ground height raster (m)
+constexpr double kMargin = 160.0;        // rasters cover the path's bounding box grown by this (m)
+constexpr double kIndexCell = 32.0;      // static primitive index (m)
+constexpr double kDistrictCell = 110.0;  // district size (m)
+constexpr double kSegmentCell = 16.0;    // path segment index (m)
 
 // Stream ids, so that every generation pass draws from its own random stream.
 enum Stream : std::uint64_t {
-  kStyle = 1, kDistrictStream, kLots, kBuildings, kFences, kKerb, kYards, kParked, kMoving, kPeople
+  kStyle = 1,
+  kDistrictStream,
+  kLots,
+  kBuildings,
+  kFences,
+  kKerb,
+  kYards,
+  kParked,
+  kMoving,
+  kPeople
 };
 
 Vec2 leftNormal(const Vec2& t) { return {-t.y(), t.x()}; }
@@ -46,8 +55,15 @@ class TiledGrid {
   static constexpr int kTile = 64;
   TiledGrid() = default;
   TiledGrid(double x0, double y0, double cell, int nx, int ny, T fill)
-      : x0_(x0), y0_(y0), cell_(cell), inv_(1.0 / cell), nx_(nx), ny_(ny), fill_(fill),
-        tx_((nx + kTile - 1) / kTile), ty_((ny + kTile - 1) / kTile),
+      : x0_(x0),
+        y0_(y0),
+        cell_(cell),
+        inv_(1.0 / cell),
+        nx_(nx),
+        ny_(ny),
+        fill_(fill),
+        tx_((nx + kTile - 1) / kTile),
+        ty_((ny + kTile - 1) / kTile),
         index_(static_cast<std::size_t>(tx_) * ty_, -1) {}
 
   bool inside(int ix, int iy) const { return ix >= 0 && iy >= 0 && ix < nx_ && iy < ny_; }
@@ -270,7 +286,7 @@ struct Agent {
   int dir = 1;               // +1 along the path, -1 against it
   double offset = 0;         // lateral offset, positive to the left of the path direction (m)
   float length = 0, width = 0, height = 0;
-  std::uint8_t kind = 0;     // 0 car, 1 truck, 2 other vehicle, 3 person
+  std::uint8_t kind = 0;  // 0 car, 1 truck, 2 other vehicle, 3 person
   std::uint32_t label = 0;
   float reflectivity = 0.2f;
 };
@@ -295,8 +311,7 @@ Primitive makeBox(double cx, double cy, const Vec2& axis, double hx, double hy, 
   return p;
 }
 
-Primitive makeCylinder(double cx, double cy, double r, double z0, double z1, std::uint32_t label,
-                       double reflectivity) {
+Primitive makeCylinder(double cx, double cy, double r, double z0, double z1, std::uint32_t label, double reflectivity) {
   Primitive p;
   p.shape = Shape::kCylinder;
   p.cx = cx;
@@ -335,7 +350,8 @@ void appendAgentShape(std::vector<Primitive>& out, double cx, double cy, double 
       const double body_top = 0.22 + 0.5 * H;
       out.push_back(makeBox(cx, cy, heading, L / 2, W / 2, gz + 0.22, gz + body_top, label, refl));
       const Vec2 cab = c - heading * (0.08 * L);
-      Primitive glass = makeBox(cab.x(), cab.y(), heading, 0.28 * L, 0.46 * W, gz + body_top, gz + H, label, 0.6 * refl);
+      Primitive glass =
+          makeBox(cab.x(), cab.y(), heading, 0.28 * L, 0.46 * W, gz + body_top, gz + H, label, 0.6 * refl);
       glass.flags |= kGlass;
       out.push_back(glass);
       break;
@@ -376,10 +392,14 @@ std::uint64_t bitsOf(float v) {
 
 const char* districtName(District d) {
   switch (d) {
-    case District::kUrban: return "urban";
-    case District::kResidential: return "residential";
-    case District::kGreen: return "green";
-    case District::kIndustrial: return "industrial";
+    case District::kUrban:
+      return "urban";
+    case District::kResidential:
+      return "residential";
+    case District::kGreen:
+      return "green";
+    case District::kIndustrial:
+      return "industrial";
   }
   return "?";
 }
@@ -409,8 +429,10 @@ struct World::Impl {
     const double u = unitFromBits(h);
     DistrictInfo d;
     // Mostly residential and urban streets, as along the KITTI odometry routes.
-    d.type = u < 0.5 ? District::kResidential : u < 0.8 ? District::kUrban : u < 0.92 ? District::kGreen
-                                                                                        : District::kIndustrial;
+    d.type = u < 0.5    ? District::kResidential
+             : u < 0.8  ? District::kUrban
+             : u < 0.92 ? District::kGreen
+                        : District::kIndustrial;
     static constexpr double kParking[4] = {0.85, 0.9, 0.3, 0.5};
     d.parking = unitFromBits(mix64(h)) < kParking[static_cast<int>(d.type)];
     static constexpr std::uint32_t kLotGround[4] = {label::kSidewalk, label::kTerrain, label::kTerrain,
@@ -433,8 +455,9 @@ namespace {
 class Generator {
  public:
   explicit Generator(World::Impl& w)
-      : w_(w), occ_(w.dist.centreX(0) - 0.5 * kDistCell, w.dist.centreY(0) - 0.5 * kDistCell, kDistCell,
-                    w.dist.nx(), w.dist.ny(), 0) {}
+      : w_(w),
+        occ_(w.dist.centreX(0) - 0.5 * kDistCell, w.dist.centreY(0) - 0.5 * kDistCell, kDistCell, w.dist.nx(),
+             w.dist.ny(), 0) {}
 
   void run() {
     makeLots();
@@ -518,7 +541,8 @@ class Generator {
       while (s < S - 4.0) {
         const Vec2 p = w_.path.point(s);
         const Vec2 n = side * leftNormal(w_.path.tangent(s));
-        const DistrictInfo d = w_.districtAt(p.x() + n.x() * (st().lotLine() + 10), p.y() + n.y() * (st().lotLine() + 10));
+        const DistrictInfo d =
+            w_.districtAt(p.x() + n.x() * (st().lotLine() + 10), p.y() + n.y() * (st().lotLine() + 10));
         Lot lot{side, s, 0, d.type, kBuildingLot, 0, 0, hashKeys(w_.seed, kLots, side + 2, k++)};
         const double u = rng.unit();
         switch (d.type) {
@@ -665,7 +689,8 @@ class Generator {
     while (a < end - 0.5) {
       double a2 = std::min(a + 5.0, end);
       if (gate > 0 && a < lot.s + gate_at + gate && a2 > lot.s + gate_at) {  // leave an entrance
-        if (a < lot.s + gate_at - 0.5) a2 = lot.s + gate_at;
+        if (a < lot.s + gate_at - 0.5)
+          a2 = lot.s + gate_at;
         else {
           a = lot.s + gate_at + gate;
           continue;
@@ -680,8 +705,10 @@ class Generator {
         if (minDistRect(c, u, hl, hw) >= st().lotLine() - 0.2 && freeRect(c, u, hl, hw, 0.05) &&
             owned(c, lot.s - 20, lot.s + lot.len + 20)) {
           const double gz = ground(c);
-          Primitive p = makeBox(c.x(), c.y(), u, hl, hw, gz - 0.2, gz + h, fence ? label::kFence : label::kVegetation, refl);
-          if (fence) p.pass_through = industrial ? 110 : 50;  // mesh and lattice fences let rays through
+          Primitive p =
+              makeBox(c.x(), c.y(), u, hl, hw, gz - 0.2, gz + h, fence ? label::kFence : label::kVegetation, refl);
+          if (fence)
+            p.pass_through = industrial ? 110 : 50;  // mesh and lattice fences let rays through
           else {
             p.pass_through = 30;
             p.depth_jitter = 0.35f;
@@ -800,8 +827,10 @@ class Generator {
         if (!rng.chance(0.5)) continue;
         const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
         const double hl = rng.uniform(0.2, 0.7), hw = rng.uniform(0.2, 0.4), h = rng.uniform(0.6, 1.3);
-        const Vec2 c = w_.path.point(s) + n * rng.uniform(kerb + 0.4 + hw, std::max(kerb + 0.5 + hw, st().lotLine() - 0.3 - hw));
-        if (minDistRect(c, t, hl, hw) < kerb + 0.2 || !freeRect(c, t, hl, hw, 0.2) || !owned(c, s - 10, s + 10)) continue;
+        const Vec2 c =
+            w_.path.point(s) + n * rng.uniform(kerb + 0.4 + hw, std::max(kerb + 0.5 + hw, st().lotLine() - 0.3 - hw));
+        if (minDistRect(c, t, hl, hw) < kerb + 0.2 || !freeRect(c, t, hl, hw, 0.2) || !owned(c, s - 10, s + 10))
+          continue;
         const double gz = ground(c);
         add(makeBox(c.x(), c.y(), t, hl, hw, gz - 0.1, gz + h, label::kOtherObject, rng.uniform(0.2, 0.5)));
         markRect(c, t, hl, hw);
@@ -816,22 +845,35 @@ class Generator {
     int trees = 0, bushes = 0;
     double depth = 12;
     switch (lot.kind) {
-      case kParkLot: trees = static_cast<int>(lot.len / 9); bushes = static_cast<int>(lot.len / 4); depth = 25; break;
-      case kGardenLot: trees = 1 + rng.below(2); bushes = 3 + rng.below(3); depth = 14; break;
-      case kPlazaLot: trees = 1 + rng.below(3); bushes = rng.below(2); depth = 10; break;
+      case kParkLot:
+        trees = static_cast<int>(lot.len / 9);
+        bushes = static_cast<int>(lot.len / 4);
+        depth = 25;
+        break;
+      case kGardenLot:
+        trees = 1 + rng.below(2);
+        bushes = 3 + rng.below(3);
+        depth = 14;
+        break;
+      case kPlazaLot:
+        trees = 1 + rng.below(3);
+        bushes = rng.below(2);
+        depth = 10;
+        break;
       case kBuildingLot:
         if (lot.setback > 1.0) bushes = 1 + rng.below(4);
         if (lot.setback > 2.5 && rng.chance(0.4)) trees = 1;
         depth = lot.setback;
         break;
-      default: break;
+      default:
+        break;
     }
     for (int k = 0; k < trees; ++k) {
       const double s = lot.s + rng.uniform(1, std::max(1.5, lot.len - 1));
       const Vec2 n = lot.side * leftNormal(w_.path.tangent(s));
       const Vec2 c = w_.path.point(s) + n * (L0 + rng.uniform(1.5, std::max(2.0, depth)));
-      placeTree(c, rng.uniform(0.2, 0.45), rng.uniform(1.8, 3.5), rng.uniform(2.0, 4.5), rng.uniform(2.0, 4.0), L0 + 0.8,
-                lot.s - 20, lot.s + lot.len + 20, rng);
+      placeTree(c, rng.uniform(0.2, 0.45), rng.uniform(1.8, 3.5), rng.uniform(2.0, 4.5), rng.uniform(2.0, 4.0),
+                L0 + 0.8, lot.s - 20, lot.s + lot.len + 20, rng);
     }
     for (int k = 0; k < bushes; ++k) {
       const double s = lot.s + rng.uniform(0.5, std::max(1.0, lot.len - 0.5));
@@ -859,8 +901,8 @@ class Generator {
             moving ? label::kMovingTruck : label::kTruck};
   }
 
-  bool placeVehicle(const Vec2& c, const Vec2& heading, const VehicleDims& v, double min_dist, double s_lo,
-                    double s_hi, Rng& rng) {
+  bool placeVehicle(const Vec2& c, const Vec2& heading, const VehicleDims& v, double min_dist, double s_lo, double s_hi,
+                    Rng& rng) {
     if (minDistRect(c, heading, v.L / 2, v.W / 2) < min_dist) return false;
     if (!freeRect(c, heading, v.L / 2, v.W / 2, 0.2)) return false;
     if (!owned(c, s_lo, s_hi)) return false;
@@ -1016,7 +1058,8 @@ World::World(const std::vector<Mat4d>& poses, std::uint64_t seed, const WorldCon
 
   // Ground height: Gaussian-weighted path heights within 24 m, then the nearest known value outward.
   {
-    const int nx = static_cast<int>((xmax - xmin) / kHeightCell) + 1, ny = static_cast<int>((ymax - ymin) / kHeightCell) + 1;
+    const int nx = static_cast<int>((xmax - xmin) / kHeightCell) + 1,
+              ny = static_cast<int>((ymax - ymin) / kHeightCell) + 1;
     std::vector<double> acc(static_cast<std::size_t>(nx) * ny, 0.0), wsum(acc.size(), 0.0);
     for (const auto& v : w.path.vertices()) {
       const int cx = static_cast<int>((v.x - xmin) / kHeightCell), cy = static_cast<int>((v.y - ymin) / kHeightCell);
@@ -1123,8 +1166,8 @@ void World::movingNear(double time, double x, double y, double radius, std::vect
     const Vec2 c = w.path.point(s) + leftNormal(t) * a.offset;
     if ((c - Vec2(x, y)).norm() > radius + a.length) continue;
     const Vec2 heading = a.dir > 0 ? t : Vec2(-t);
-    appendAgentShape(out, c.x(), c.y(), w.height.bilinear(c.x(), c.y()), heading, a.kind, a.length, a.width,
-                     a.height, a.label, a.reflectivity);
+    appendAgentShape(out, c.x(), c.y(), w.height.bilinear(c.x(), c.y()), heading, a.kind, a.length, a.width, a.height,
+                     a.label, a.reflectivity);
   }
 }
 

@@ -54,22 +54,22 @@ enum PrimitiveFlag : std::uint8_t {
 struct Primitive {
   Shape shape = Shape::kBox;
   std::uint8_t flags = 0;
-  std::uint8_t pass_through = 0;  // per ray, chance (x/255) that a ray passes a porous object (foliage, fences)
-  float depth_jitter = 0.0f;      // foliage: the return comes from up to this deep inside the volume (m)
-  std::uint32_t label = 0;        // SemanticKITTI raw id | instance << 16
-  float reflectivity = 0.3f;      // 0..1, scales the intensity channel
-  double cx = 0.0, cy = 0.0;      // centre in the world (m)
-  float z0 = 0.0f, z1 = 0.0f;     // vertical extent (world z)
-  float hx = 0.0f, hy = 0.0f;     // box half length (along its axis) / half width; cylinder radius (hx);
-                                  // ellipsoid horizontal semi-axes
+  std::uint8_t pass_through = 0;         // per ray, chance (x/255) that a ray passes a porous object (foliage, fences)
+  float depth_jitter = 0.0f;             // foliage: the return comes from up to this deep inside the volume (m)
+  std::uint32_t label = 0;               // SemanticKITTI raw id | instance << 16
+  float reflectivity = 0.3f;             // 0..1, scales the intensity channel
+  double cx = 0.0, cy = 0.0;             // centre in the world (m)
+  float z0 = 0.0f, z1 = 0.0f;            // vertical extent (world z)
+  float hx = 0.0f, hy = 0.0f;            // box half length (along its axis) / half width; cylinder radius (hx);
+                                         // ellipsoid horizontal semi-axes
   float cos_yaw = 1.0f, sin_yaw = 0.0f;  // box axis direction in the world
-  float radius = 0.0f;            // bounding circle in xy (m)
+  float radius = 0.0f;                   // bounding circle in xy (m)
 };
 
 struct WorldConfig {
-  double sensor_height = 1.73;  // LiDAR above the ground under the vehicle (m)
-  bool moving_objects = true;   // moving vehicles on the road and pedestrians on sidewalks
-  double path_extension = 60.0; // the street continues this far beyond both ends of the trajectory (m)
+  double sensor_height = 1.73;   // LiDAR above the ground under the vehicle (m)
+  bool moving_objects = true;    // moving vehicles on the road and pedestrians on sidewalks
+  double path_extension = 60.0;  // the street continues this far beyond both ends of the trajectory (m)
 };
 
 // Street cross-section, drawn once from the seed (lateral distances from the driven path, m).
@@ -95,10 +95,14 @@ struct GroundPatch {
   int dnx = 0, dny = 0;
   std::vector<float> d;
 
-  double hinv = 0.25, dinv = 1.0;      // 1 / cell
+  double hinv = 0.25, dinv = 1.0;  // 1 / cell
 
-  double height(double x, double y) const { return sample(h, hnx, hny, (x - hx0) * hinv - 0.5, (y - hy0) * hinv - 0.5); }
-  double distance(double x, double y) const { return sample(d, dnx, dny, (x - dx0) * dinv - 0.5, (y - dy0) * dinv - 0.5); }
+  double height(double x, double y) const {
+    return sample(h, hnx, hny, (x - hx0) * hinv - 0.5, (y - hy0) * hinv - 0.5);
+  }
+  double distance(double x, double y) const {
+    return sample(d, dnx, dny, (x - dx0) * dinv - 0.5, (y - dy0) * dinv - 0.5);
+  }
 
  private:
   static double sample(const std::vector<float>& v, int nx, int ny, double fx, double fy) {

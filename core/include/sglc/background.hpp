@@ -28,7 +28,8 @@ struct Plane {
 
 // Rotation-invariant ring key: for building and road, the number of occupied one-degree sectors per ring.
 // 2 * rings values, L2-normalised; all zero when no ring is occupied.
-std::vector<float> ringKey(const Points& points, const std::vector<Background>& point_bg, const DescriptorConfig& config);
+std::vector<float> ringKey(const Points& points, const std::vector<Background>& point_bg,
+                           const DescriptorConfig& config);
 
 // Labelled BEV cells within max range, sorted by (iy, ix).
 std::vector<BevCell> bevCells(const Points& points, const std::vector<Background>& point_bg, double cell,

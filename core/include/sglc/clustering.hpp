@@ -11,7 +11,7 @@
 namespace sglc {
 
 struct Cluster {
-  int cls = -1;                     // node class index
+  int cls = -1;                       // node class index
   std::vector<std::uint32_t> points;  // indices into the scan, ascending
 };
 

@@ -50,21 +50,21 @@ struct GraphConfig {
 };
 
 struct DescriptorConfig {
-  double d_i = 2.0;    // distance bin width of node and edge histograms (m); bins = d_max / d_i
-  int k_eigen = 30;    // eigenvectors of the adjacency matrix used in the node descriptor
-  int rings = 24;      // background ring key
+  double d_i = 2.0;  // distance bin width of node and edge histograms (m); bins = d_max / d_i
+  int k_eigen = 30;  // eigenvectors of the adjacency matrix used in the node descriptor
+  int rings = 24;    // background ring key
   double ring_min_m = 5.0;
   double ring_max_m = 50.0;
   int sectors = 360;
 };
 
 struct MatchConfig {
-  double d_b = 2.0;              // max difference of each box dimension (m)
-  double min_cosine = 0.5;       // node descriptor similarity floor
-  double d_l = 20.0;             // neighbourhood radius for local triangles (m)
-  double triangle_tol = 0.25;    // side-length tolerance for "same triangle" (m; reference value)
-  int t_m = 2;                   // triangles that must agree for a match to survive
-  int prune_min_matches = 15;    // prune only when at least this many matches (reference behaviour)
+  double d_b = 2.0;            // max difference of each box dimension (m)
+  double min_cosine = 0.5;     // node descriptor similarity floor
+  double d_l = 20.0;           // neighbourhood radius for local triangles (m)
+  double triangle_tol = 0.25;  // side-length tolerance for "same triangle" (m; reference value)
+  int t_m = 2;                 // triangles that must agree for a match to survive
+  int prune_min_matches = 15;  // prune only when at least this many matches (reference behaviour)
   // Ours: when pruning keeps fewer matches than this, RANSAC gets the unpruned ones instead. Triangles need
   // two neighbours placed within triangle_tol in both scans; under label noise or a large change of heading
   // they can all fail for a true loop, while RANSAC and the verification still reject false ones.
@@ -72,15 +72,15 @@ struct MatchConfig {
 };
 
 struct RansacConfig {
-  double inlier_threshold = 1.0;     // node-centre residual (m)
-  int max_iterations = 2000;         // hypotheses; all triples are tried when there are fewer
+  double inlier_threshold = 1.0;       // node-centre residual (m)
+  int max_iterations = 2000;           // hypotheses; all triples are tried when there are fewer
   std::uint64_t seed = 0x5eed5ca1ULL;  // fixed: results never change run to run
-  double min_triangle_height = 0.5;  // samples flatter than this (m) are degenerate and skipped
+  double min_triangle_height = 0.5;    // samples flatter than this (m) are degenerate and skipped
   int min_inliers = 3;
 };
 
 struct VerifyConfig {
-  double t_g = 0.5;               // S_graph = exp(-mean inlier residual) threshold
+  double t_g = 0.5;  // S_graph = exp(-mean inlier residual) threshold
   // Background agreement threshold. The paper: 0.5 on KITTI, 0.45 where segmentation is worse (Ford Campus).
   // Ours: 0.45, for labels from a real network (simulated KITTI 00 at 5 % label noise: loop_distance4 pairs
   // verified 98.7 % -> 99.4 %, with no more false loops among ten descriptor neighbours per frame at 0 % or
@@ -90,7 +90,7 @@ struct VerifyConfig {
   // Ours: the score is multiplied by exp(-|t| / this), so of two verified candidates the nearer revisit ranks
   // first (<= 0: no such factor). It does not change which candidates are loops.
   double score_distance_m = 10.0;
-  double bev_cell_m = 2.0;        // background agreement grid cell (m); 1 m loses loops under label noise
+  double bev_cell_m = 2.0;  // background agreement grid cell (m); 1 m loses loops under label noise
   // Background agreement grid half-size (m; ours, the reference scores rings out to 50 m). Sparse far cells
   // are occupied by chance; the near street decides (simulated KITTI 00 pairs at 5 % label noise: F1max 0.84
   // with 50 m, 0.94 with 25 m; real negatives that pass the graph check are same-street scans 27-30 m apart
@@ -113,9 +113,9 @@ struct VerifyConfig {
 
 struct FingerprintConfig {
   double instance_voxel_m = 0.25;  // downsampling of instance points kept for fine ICP
-  double background_cell_m = 0.5; // BEV cell of the stored labelled background cloud
+  double background_cell_m = 0.5;  // BEV cell of the stored labelled background cloud
   double background_max_range_m = 50.0;
-  double plane_voxel_m = 1.0;      // background plane features
+  double plane_voxel_m = 1.0;  // background plane features
   int plane_min_points = 8;
   double plane_max_thickness_m = 0.08;  // sqrt of the smallest eigenvalue of the voxel's covariance
   double plane_max_range_m = 60.0;

@@ -27,9 +27,9 @@ struct Fingerprint {
   std::vector<std::uint32_t> instance_offsets;  // node i owns instance_points[offsets[i] .. offsets[i+1])
   Points instance_points;                       // sensor frame, on a 1 cm grid
   std::vector<BevCell> background;
-  std::vector<Plane> planes;                    // centroid on a 1 cm grid, normal on a 1/32767 grid
-  std::vector<float> descriptor;                // scan descriptor (layout.scanDim())
-  std::uint32_t num_points = 0;                 // points in the source scan
+  std::vector<Plane> planes;      // centroid on a 1 cm grid, normal on a 1/32767 grid
+  std::vector<float> descriptor;  // scan descriptor (layout.scanDim())
+  std::uint32_t num_points = 0;   // points in the source scan
 
   // Derived on construction and on load (not serialised): node descriptors and the plane lookup.
   Eigen::MatrixXf node_descriptors;

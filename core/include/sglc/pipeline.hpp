@@ -17,10 +17,10 @@ struct LoopResult {
   // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support x proximity
   // (exp(-|t| / verify.score_distance_m), so the nearer of two revisits ranks first).
   double score = 0.0;
-  int matches = 0;           // node matches after pruning
-  int inliers = 0;           // RANSAC inliers
+  int matches = 0;                     // node matches after pruning
+  int inliers = 0;                     // RANSAC inliers
   double graph_similarity = 0.0;       // S_graph = exp(-mean inlier residual)
-  double background_similarity = 0.0; // BEV agreement at the coarse pose
+  double background_similarity = 0.0;  // BEV agreement at the coarse pose
   // Maps candidate points into the query frame: p_query = T * p_candidate.
   Mat4d T = Mat4d::Identity();
   bool refined = false;
@@ -32,7 +32,7 @@ struct LoopResult {
   // right perturbation T_true = T exp(xi) in the candidate's frame; directions the registration leaves free
   // (a straight corridor) get little. Zero when neither stage ran or was kept.
   Mat6d information = Mat6d::Zero();
-  const char* reason = "";  // why it is not a loop (empty for loops)
+  const char* reason = "";          // why it is not a loop (empty for loops)
   std::vector<Match> inlier_pairs;  // node matches consistent with the coarse T (query node, candidate node)
 };
 

@@ -37,8 +37,8 @@ struct IcpResult {
   Mat4d T = Mat4d::Identity();
   int iterations = 0;
   int correspondences = 0;
-  double rmse = 0.0;       // over the final correspondences (m)
-  double fitness = 0.0;    // share of candidate instance points with a correspondence
+  double rmse = 0.0;                           // over the final correspondences (m)
+  double fitness = 0.0;                        // share of candidate instance points with a correspondence
   std::vector<std::pair<Vec3f, Vec3f>> pairs;  // final (query point, candidate point) correspondences
 };
 
@@ -73,8 +73,7 @@ class PlaneIndex {
   PlaneIndex(const std::vector<Plane>& planes, double voxel);
   // Nearest plane centroid to p within max_dist whose normal agrees with n (|cos| >= min_cos); -1 if none.
   // `planes` must be the vector the index was built from.
-  int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
-              double min_cos) const;
+  int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist, double min_cos) const;
 
  private:
   VoxelMap map_;
@@ -91,8 +90,7 @@ class PlaneIndex {
 Mat6d pointPairInformation(const std::vector<std::pair<Vec3f, Vec3f>>& pairs, const Mat4d& T, double rmse);
 
 RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
-                          const std::vector<Plane>& candidate,
-                          const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T0,
-                          const RefineConfig& config);
+                          const std::vector<Plane>& candidate, const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs,
+                          const Mat4d& T0, const RefineConfig& config);
 
 }  // namespace sglc

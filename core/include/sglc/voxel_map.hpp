@@ -12,8 +12,7 @@ inline std::uint64_t packCell(int x, int y, int z) {
   constexpr std::uint64_t kOffset = 1u << 20;
   constexpr std::uint64_t kMask = (1u << 21) - 1;
   return ((static_cast<std::uint64_t>(x + kOffset) & kMask) << 42) |
-         ((static_cast<std::uint64_t>(y + kOffset) & kMask) << 21) |
-         (static_cast<std::uint64_t>(z + kOffset) & kMask);
+         ((static_cast<std::uint64_t>(y + kOffset) & kMask) << 21) | (static_cast<std::uint64_t>(z + kOffset) & kMask);
 }
 
 class VoxelMap {

@@ -24,8 +24,8 @@
 namespace sglc {
 
 struct SequenceFrame {
-  std::string name;          // file stem, e.g. "000720"
-  std::int64_t number = 0;   // 720
+  std::string name;         // file stem, e.g. "000720"
+  std::int64_t number = 0;  // 720
   std::string bin_path;
   std::string label_path;
   std::optional<Mat4d> pose;
@@ -34,7 +34,7 @@ struct SequenceFrame {
 
 struct Sequence {
   std::string dir;
-  std::string name;  // the directory's base name ("00" for .../sequences/00/)
+  std::string name;                   // the directory's base name ("00" for .../sequences/00/)
   std::vector<SequenceFrame> frames;  // selected frames, ascending
   std::size_t frames_in_dir = 0;      // before selection
   bool has_poses = false;

@@ -15,8 +15,8 @@ namespace {
 
 constexpr double kEps = 1e-12;
 
-void expectPoint(const PrPoint& p, double threshold, double precision, double recall, std::size_t tp,
-                 std::size_t fp, std::size_t fn) {
+void expectPoint(const PrPoint& p, double threshold, double precision, double recall, std::size_t tp, std::size_t fp,
+                 std::size_t fn) {
   EXPECT_EQ(p.threshold, threshold);
   EXPECT_NEAR(p.precision, precision, kEps);
   EXPECT_NEAR(p.recall, recall, kEps);
@@ -40,7 +40,7 @@ PrPoint point(double threshold, double precision, double recall) {
 //   0.5: {0,1,2,3}     TP 2 FP 2 FN 2  P 1/2  R 1/2
 //   0.3: all six       TP 3 FP 3 FN 1  P 1/2  R 3/4   (the FN left is query 1)
 std::vector<Decision> sixDecisions() {
-  return {{0.8, false, true}, {0.3, true, true}, {0.9, true, true},
+  return {{0.8, false, true},  {0.3, true, true}, {0.9, true, true},
           {0.5, false, false}, {0.8, true, true}, {0.3, false, false}};
 }
 
@@ -301,8 +301,8 @@ TEST(PoseError, TranslationIgnoresRotation) {
   const auto e = poseError(est, gt);
   EXPECT_EQ(e.rte_m, 0.0);
   EXPECT_NEAR(e.rre_deg, 30.0, 1e-9);
-  EXPECT_NEAR(poseError(Mat4d::Identity(), pose(Eigen::AngleAxisd(0, Vec3d::UnitY()), Vec3d(0, -3, 4))).rte_m,
-              5.0, kEps);
+  EXPECT_NEAR(poseError(Mat4d::Identity(), pose(Eigen::AngleAxisd(0, Vec3d::UnitY()), Vec3d(0, -3, 4))).rte_m, 5.0,
+              kEps);
 }
 
 RegistrationResult reg(bool registered, double rte, double rre, bool verified = true) {

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <atomic>
@@ -16,7 +17,6 @@
 #include <set>
 #include <string>
 #include <system_error>
-#include <unistd.h>
 #include <vector>
 
 #include "sim/simulator.hpp"
@@ -36,9 +36,9 @@ inline std::string kittiCalibPath(const std::string& seq) {
 inline bool haveKitti(const std::string& seq) {
   return std::filesystem::exists(kittiPosesPath(seq)) && std::filesystem::exists(kittiCalibPath(seq));
 }
-#define SGLC_REQUIRE_KITTI(seq)                                                                                  \
-  if (!::sglc::sim::test::haveKitti(seq))                                                                        \
-  GTEST_SKIP() << "KITTI poses " << ::sglc::sim::test::kittiPosesPath(seq) << " or calib "                       \
+#define SGLC_REQUIRE_KITTI(seq)                                                            \
+  if (!::sglc::sim::test::haveKitti(seq))                                                  \
+  GTEST_SKIP() << "KITTI poses " << ::sglc::sim::test::kittiPosesPath(seq) << " or calib " \
                << ::sglc::sim::test::kittiCalibPath(seq) << " not found (shared data absent)"
 
 inline const Trajectory& loopTrajectory() {

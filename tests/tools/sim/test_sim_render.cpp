@@ -81,9 +81,9 @@ TEST(Render, Hdl64FramesHaveSensiblePointsRangesAndLabels) {
     };
     EXPECT_GT(share({40, 44, 48, 49, 72}), 0.25);  // ground
     EXPECT_LT(share({40, 44, 48, 49, 72}), 0.85);
-    EXPECT_GT(share({50, 51, 70}), 0.03);          // structure
-    EXPECT_GT(share({10, 18, 20}), 0.005);         // parked vehicles
-    EXPECT_GT(count[71] + count[80], 50u);         // trunks and poles
+    EXPECT_GT(share({50, 51, 70}), 0.03);   // structure
+    EXPECT_GT(share({10, 18, 20}), 0.005);  // parked vehicles
+    EXPECT_GT(count[71] + count[80], 50u);  // trunks and poles
   }
 }
 

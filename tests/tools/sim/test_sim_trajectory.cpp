@@ -94,7 +94,8 @@ TEST(GroundTruth, DistancePairsFollowTheProtocol) {
   int pos = 0, neg = 0;
   for (const auto& p : pairs) {
     ASSERT_GT(p.query, p.database);
-    const double d = std::hypot(poses[p.query](0, 3) - poses[p.database](0, 3), poses[p.query](1, 3) - poses[p.database](1, 3));
+    const double d =
+        std::hypot(poses[p.query](0, 3) - poses[p.database](0, 3), poses[p.query](1, 3) - poses[p.database](1, 3));
     if (p.loop) {
       ++pos;
       EXPECT_LT(d, 3.0);
@@ -117,9 +118,8 @@ TEST(GroundTruth, DistancePairsFollowTheProtocol) {
   }));
   cfg.seed = 4;
   const auto other = distancePairs(poses, source, cfg);
-  EXPECT_FALSE(std::equal(pairs.begin(), pairs.end(), other.begin(), [](const auto& a, const auto& b) {
-    return a.query == b.query && a.database == b.database;
-  }));
+  EXPECT_FALSE(std::equal(pairs.begin(), pairs.end(), other.begin(),
+                          [](const auto& a, const auto& b) { return a.query == b.query && a.database == b.database; }));
 }
 
 TEST(GroundTruth, LoopPosesMapEarlierIntoLater) {

@@ -34,8 +34,8 @@ TEST(World, HasEveryKindOfObject) {
   EXPECT_GT(s.moving_agents, 5u);
   std::set<std::uint32_t> classes;
   for (const auto& p : loopWorld().statics()) classes.insert(label::classOf(p.label));
-  for (std::uint32_t c : {label::kCar, label::kBuilding, label::kVegetation, label::kTrunk, label::kPole,
-                          label::kTrafficSign})
+  for (std::uint32_t c :
+       {label::kCar, label::kBuilding, label::kVegetation, label::kTrunk, label::kPole, label::kTrafficSign})
     EXPECT_TRUE(classes.count(c)) << "class " << c;
   const auto& st = loopWorld().style();
   EXPECT_GE(st.lane_width, 3.0);

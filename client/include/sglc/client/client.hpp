@@ -74,10 +74,10 @@ struct CallOptions {
 
 // What to do with a scan besides storing it.
 struct IngestOptions {
-  std::optional<double> stamp;          // seconds, the robot's clock
-  std::optional<Mat4d> odometry_pose;   // the scan's pose in its session's odometry frame
-  bool store_raw = false;               // also keep the raw cloud on the server
-  bool query = false;                   // look for loops first (against the scans stored before it)
+  std::optional<double> stamp;         // seconds, the robot's clock
+  std::optional<Mat4d> odometry_pose;  // the scan's pose in its session's odometry frame
+  bool store_raw = false;              // also keep the raw cloud on the server
+  bool query = false;                  // look for loops first (against the scans stored before it)
   v1::QueryOptions query_options;
 };
 
@@ -87,7 +87,8 @@ v1::ScanKey makeKey(const std::string& map, const std::string& robot, const std:
 // "other" (SCOPE_OTHER_ROBOTS), "sessions" (SCOPE_SESSIONS). Throws InputError on anything else.
 v1::Scope parseScope(const std::string& name);
 // The full request for Ingest; packs the scan. Throws InputError when point and label counts differ.
-v1::IngestRequest makeIngestRequest(const v1::ScanKey& key, const LabelledScan& scan, const IngestOptions& options = {});
+v1::IngestRequest makeIngestRequest(const v1::ScanKey& key, const LabelledScan& scan,
+                                    const IngestOptions& options = {});
 
 class Client;
 namespace detail {
@@ -130,8 +131,8 @@ class IngestSession {
   [[noreturn]] void failStream(const char* what);
   void drainStream();
   struct Outstanding {
-    bool in_stream = true;            // response still to be read from the stream
-    v1::IngestResponse response;      // when !in_stream: already known (chunked scan)
+    bool in_stream = true;        // response still to be read from the stream
+    v1::IngestResponse response;  // when !in_stream: already known (chunked scan)
   };
   std::shared_ptr<const detail::ClientCore> core_;
   std::unique_ptr<State> state_;

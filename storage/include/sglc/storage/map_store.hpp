@@ -49,10 +49,10 @@ class StorageError : public std::runtime_error {
 
 struct IndexOptions {
   enum class Type { kExact, kIvf };
-  Type type = Type::kExact;  // exact (flat L2) or approximate (IVF-flat) search
-  int ivf_nlist = 0;         // IVF cells; 0 = about sqrt(scans)
-  int ivf_nprobe = 48;       // cells visited per search
-  int ivf_min_scans = 20000; // below this many scans an IVF map is searched exactly (training needs data)
+  Type type = Type::kExact;   // exact (flat L2) or approximate (IVF-flat) search
+  int ivf_nlist = 0;          // IVF cells; 0 = about sqrt(scans)
+  int ivf_nprobe = 48;        // cells visited per search
+  int ivf_min_scans = 20000;  // below this many scans an IVF map is searched exactly (training needs data)
 };
 
 struct StoreOptions {
@@ -60,7 +60,7 @@ struct StoreOptions {
   enum class Sync { kOff, kNormal, kFull };
   Sync sync = Sync::kFull;  // SQLite synchronous mode: kFull survives power loss, kNormal only process crashes
   int busy_timeout_ms = 5000;
-  double cache_mb = 256;    // fingerprints kept in memory (least recently used evicted)
+  double cache_mb = 256;       // fingerprints kept in memory (least recently used evicted)
   bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
   double max_db_mb = 0;        // quota: writes beyond it fail with kFull (0: unlimited)
   IndexOptions index;
@@ -94,9 +94,9 @@ struct NewScan {
   std::string map;
   std::string robot;
   std::string session;
-  std::int64_t seq = 0;               // sequence number within the session (unique there)
-  std::optional<double> stamp;        // seconds, caller's clock
-  std::optional<Mat4d> odometry_pose; // the robot's pose in its session frame
+  std::int64_t seq = 0;                // sequence number within the session (unique there)
+  std::optional<double> stamp;         // seconds, caller's clock
+  std::optional<Mat4d> odometry_pose;  // the robot's pose in its session frame
   const Fingerprint* fingerprint = nullptr;
   const LabelledScan* raw = nullptr;  // also keep the raw cloud (off by default: it is ~1.9 MB per scan)
 };
@@ -117,7 +117,7 @@ struct SearchRequest {
   std::string map;
   std::vector<float> descriptor;
   int k = 50;
-  std::vector<std::string> robots;    // only these robots (empty: all)
+  std::vector<std::string> robots;  // only these robots (empty: all)
   std::vector<std::string> exclude_robots;
   std::vector<std::string> sessions;  // only these sessions, as "robot/session" (split at the first '/')
   std::vector<std::pair<std::string, std::string>> session_refs;  // and these (robot, session) (both empty: all)
