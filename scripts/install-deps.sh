@@ -15,6 +15,8 @@ PACKAGES=(
   libceres-dev
   # tests, benchmarks, Python clients and plots
   libgtest-dev libgmock-dev libbenchmark-dev
+  # the format check of scripts/test.sh, and scripts/tidy.sh
+  clang-format clang-tidy
   python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib
   # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)
   python3-scipy

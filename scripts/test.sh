@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
-# Sets up a fresh Debian 12 machine, builds, and runs the whole test suite twice: a Release build and an
-# AddressSanitizer + UndefinedBehaviorSanitizer build. Exits non-zero on any failure.
+# Sets up a fresh Debian 12 machine, checks the formatting, builds, and runs the whole test suite twice: a
+# Release build and an AddressSanitizer + UndefinedBehaviorSanitizer build. Exits non-zero on any failure.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
+scripts/check-format.sh
 scripts/build.sh
 (cd build && ctest --output-on-failure -j "$(nproc)")
 
