@@ -1,0 +1,96 @@
+#!/usr/bin/env python3
+"""The dependency map of docs/ARCHITECTURE.md, checked on every #include of every module.
+
+Each module may include only the project headers of the modules below it, and only the external libraries it
+is allowed to depend on. Prints every violation (file:line and the rule) and exits 1 if there is any.
+"""
+import os
+import re
+import sys
+
+ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", ".."))
+
+TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp"}
+ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
+IO_HEADERS = {"sglc/io.hpp", "sglc/sequence.hpp", "sglc/frame_selection.hpp"}
+
+# Project headers by the module that provides them.
+def provider(header):
+    if header in TYPES_HEADERS:
+        return "types"
+    if header in ENGINE_HEADERS:
+        return "core"
+    if header in IO_HEADERS:
+        return "io"
+    for prefix, module in (("sglc/storage/", "storage"), ("sglc/wire/", "wire"), ("sglc/v1/", "proto"),
+                           ("sglc/client/", "client"), ("sim/", "sim")):
+        if header.startswith(prefix):
+            return module
+    return None
+
+# External libraries, by include prefix.
+EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/": "grpc", "grpc/": "grpc",
+            "google/protobuf/": "protobuf", "sqlite3.h": "sqlite", "faiss/": "faiss", "spdlog/": "spdlog",
+            "ceres/": "ceres", "nlohmann/": "json", "CLI/": "cli11", "benchmark/": "benchmark",
+            "gtest/": "gtest"}
+
+# module: (source directories, project modules it may include, external libraries it may use)
+LAYERS = {
+    "types": (["core/src/types.cpp", "core/src/rigid.cpp", "core/src/names.cpp"], {"types"}, {"eigen"}),
+    "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "yaml", "zlib"}),
+    "io": (["io"], {"types", "io"}, {"eigen"}),
+    "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
+    "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
+    "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
+    "server": (["server/src"], {"types", "core", "storage", "proto", "wire"},
+               {"eigen", "grpc", "protobuf", "spdlog", "ceres", "json", "yaml", "cli11"}),
+}
+
+INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^>"]+)[>"]')
+
+
+def sources(paths):
+    for p in paths:
+        full = os.path.join(ROOT, p)
+        if os.path.isfile(full):
+            yield full
+            continue
+        for dirpath, _, names in os.walk(full):
+            for n in sorted(names):
+                if n.endswith((".cpp", ".hpp", ".h")):
+                    yield os.path.join(dirpath, n)
+
+
+def main():
+    problems, checked = [], 0
+    claimed = {os.path.join(ROOT, f) for f in LAYERS["types"][0]}
+    for module, (paths, allowed, external) in LAYERS.items():
+        for path in sources(paths):
+            if module != "types" and path in claimed:
+                continue  # the types sources sit in core/src but belong to the types layer
+            checked += 1
+            own_dir = os.path.dirname(path)
+            for line_no, line in enumerate(open(path, encoding="utf-8"), 1):
+                m = INCLUDE.match(line)
+                if not m:
+                    continue
+                header = m.group(1)
+                where = f"{os.path.relpath(path, ROOT)}:{line_no}"
+                if os.path.exists(os.path.join(own_dir, header)) and provider(header) is None:
+                    continue  # a private header beside it
+                owner = provider(header)
+                if owner is not None:
+                    if owner not in allowed:
+                        problems.append(f"{where}: {module} includes {header} ({owner}), not in {sorted(allowed)}")
+                    continue
+                lib = next((v for k, v in EXTERNAL.items() if header.startswith(k)), None)
+                if lib is not None and lib not in external:
+                    problems.append(f"{where}: {module} includes {header} ({lib}), not in {sorted(external)}")
+    for p in problems:
+        print(p)
+    print(f"{checked} files checked, {len(problems)} include(s) against the dependency map")
+    return 1 if problems else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
