@@ -120,7 +120,7 @@ struct GraphOptimiser::MapGraph {
   std::int64_t last_scan = 0, last_loop = 0;
   std::int64_t map_session = -1;  // the session whose odometry frame is the map frame
   bool converged = false;         // the last solve ended by convergence (not by its iteration or time bound)
-  int continuations = 0;          // unconverged solves in a row
+  int continuations = 0;          // solves since the last new scans or loops (each one continued the previous)
 };
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
@@ -217,6 +217,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
       // the database failed too: the event says 0
     }
     event.failed = true;
+    event.converged = false;
     event.error = e.what();
     spdlog::error(
         "{}",
@@ -237,9 +238,12 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   if (!slot) slot = std::make_unique<MapGraph>();
   MapGraph& g = *slot;
 
-  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above).
-  auto nodes = store_.graphNodes(map, g.last_scan);
+  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above). Loops are
+  // read before scans: ingest stores a scan before its loops, so every loop read here finds its scans among the
+  // nodes read after it (read the other way round, a scan and its loop stored between the two reads would give
+  // a loop without its node, skipped and never read again).
   auto loops = store_.loops(map, g.last_loop);
+  auto nodes = store_.graphNodes(map, g.last_scan);
   // Loops with ids up to solved_through are reflected in the poses the solve starts from: the last solve's,
   // or, for a fresh graph (server start, after a deletion), the poses kept in the database, so that a restart
   // continues from where the last run stopped.
@@ -494,8 +498,8 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   event.converged = g.converged;
   // Stopped at a bound: carry on from here soon (the worker; optimiseNow callers see converged = false), but
   // not forever on a graph that never meets Ceres' tolerances.
-  g.continuations = g.converged ? 0 : g.continuations + 1;
-  if (!g.converged && g.continuations <= options_.max_continuations) {
+  g.continuations = changed ? 0 : g.continuations + 1;  // new rows: a new problem
+  if (!g.converged && g.continuations < options_.max_continuations) {
     {
       std::lock_guard lock(mutex_);
       if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;

@@ -47,7 +47,7 @@ struct GraphOptimiserOptions {
   std::chrono::milliseconds debounce{200};  // wait this long after a loop for more before optimising
   double max_seconds = 5.0;                 // per optimisation
   int max_iterations = 100;
-  int max_continuations = 10;  // solves in a row that may go on from an unconverged one
+  int max_continuations = 10;  // solves that go on from an unconverged one without new scans or loops
   double loss_scale = 1.0;     // Cauchy loss scale on whitened loop residuals
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.

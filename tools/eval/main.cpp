@@ -423,9 +423,6 @@ void sequenceProtocol(Run& run, const LoopQuery& query, double positive_m, doubl
   run.summary["at_f1max"] = {{"true_loops", tp}, {"false_loops", fp}};
 }
 
-// SLAM protocol: the frames go to a running server as one or two robots with drifting odometry and loop
-// queries; the server's pose graph corrects them. Two robots: the first drives the first 60 % of the frames,
-// the second the last 60 %, with its odometry in an unrelated frame.
 // The map's first converged pose-graph event covering at least `nodes` scans and `loops` loops, or the last event
 // seen when `timeout` passes first (converged() false then).
 v1::MapEvent waitForSettledGraph(const client::Client& cl, const std::string& map, std::int64_t nodes,
@@ -445,10 +442,13 @@ v1::MapEvent waitForSettledGraph(const client::Client& cl, const std::string& ma
     }
   }
   reader->Finish();  // cancelled or deadline: the event decides
-  if (!(last.converged() && last.nodes() >= nodes && last.loops() >= loops)) last.set_converged(false);
+  if (last.failed() || !(last.converged() && last.nodes() >= nodes && last.loops() >= loops)) last.set_converged(false);
   return last;
 }
 
+// SLAM protocol: the frames go to a running server as one or two robots with drifting odometry and loop
+// queries; the server's pose graph corrects them. Two robots: the first drives the first 60 % of the frames,
+// the second the last 60 %, with its odometry in an unrelated frame.
 struct SlamOptions {
   double odom_noise = 0.01;
   int robots = 1;
