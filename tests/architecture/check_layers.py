@@ -2,7 +2,9 @@
 """The dependency map of docs/ARCHITECTURE.md, checked on every #include of every module.
 
 Each module may include only the project headers of the modules below it, and only the external libraries it
-is allowed to depend on. Prints every violation (file:line and the rule) and exits 1 if there is any.
+is allowed to depend on: a header that is neither the C++ standard library, a known POSIX header, a project
+header nor one of the named libraries is itself a violation, as is a relative include that leaves its
+directory. Prints every violation (file:line and the rule) and exits 1 if there is any.
 """
 import os
 import re
@@ -12,7 +14,9 @@ ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.pat
 
 TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp"}
 ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
-IO_HEADERS = {"sglc/io.hpp", "sglc/sequence.hpp", "sglc/frame_selection.hpp"}
+IO_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "io/include/sglc"))}
+TYPES_FILES = [f"core/{d}/{n}" for d, ext in (("include/sglc", "hpp"), ("src", "cpp"))
+               for n in (f"types.{ext}", f"rigid.{ext}", f"names.{ext}")]
 
 # Project headers by the module that provides them.
 def provider(header):
@@ -29,14 +33,20 @@ def provider(header):
     return None
 
 # External libraries, by include prefix.
-EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/": "grpc", "grpc/": "grpc",
-            "google/protobuf/": "protobuf", "sqlite3.h": "sqlite", "faiss/": "faiss", "spdlog/": "spdlog",
-            "ceres/": "ceres", "nlohmann/": "json", "CLI/": "cli11", "benchmark/": "benchmark",
-            "gtest/": "gtest"}
+EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/": "grpc", "grpc++/": "grpc",
+            "grpc/": "grpc", "absl/": "grpc", "google/protobuf/": "protobuf", "sqlite3.h": "sqlite",
+            "faiss/": "faiss", "omp.h": "openmp", "cblas.h": "blas", "spdlog/": "spdlog", "ceres/": "ceres",
+            "nlohmann/": "json", "CLI/": "cli11", "benchmark/": "benchmark", "gtest/": "gtest", "gmock/": "gtest",
+            "pybind11/": "pybind11", "pqxx/": "postgres", "libpq-fe.h": "postgres", "pcl/": "pcl"}
+# Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
+POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
+         "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
+         "sys/time.h", "time.h", "dirent.h", "pthread.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
+ALL = {"types", "core", "io", "storage", "proto", "wire", "client", "sim"}
 LAYERS = {
-    "types": (["core/src/types.cpp", "core/src/rigid.cpp", "core/src/names.cpp"], {"types"}, {"eigen"}),
+    "types": (TYPES_FILES, {"types"}, {"eigen"}),
     "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "yaml", "zlib"}),
     "io": (["io"], {"types", "io"}, {"eigen"}),
     "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
@@ -44,6 +54,9 @@ LAYERS = {
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
     "server": (["server/src"], {"types", "core", "storage", "proto", "wire"},
                {"eigen", "grpc", "protobuf", "spdlog", "ceres", "json", "yaml", "cli11"}),
+    # The command line is a client: it reads files, it does not run the engine or open the database.
+    "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),
+    "tools": (["tools"], ALL, {"eigen", "grpc", "protobuf", "json", "cli11", "benchmark", "spdlog", "yaml"}),
 }
 
 INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^>"]+)[>"]')
@@ -63,7 +76,7 @@ def sources(paths):
 
 def main():
     problems, checked = [], 0
-    claimed = {os.path.join(ROOT, f) for f in LAYERS["types"][0]}
+    claimed = {os.path.join(ROOT, f) for f in TYPES_FILES}
     for module, (paths, allowed, external) in LAYERS.items():
         for path in sources(paths):
             if module != "types" and path in claimed:
@@ -76,15 +89,24 @@ def main():
                     continue
                 header = m.group(1)
                 where = f"{os.path.relpath(path, ROOT)}:{line_no}"
+                if header.startswith("..") or "/../" in header:
+                    problems.append(f"{where}: {module} includes {header}, outside its own directory")
+                    continue
                 if os.path.exists(os.path.join(own_dir, header)) and provider(header) is None:
                     continue  # a private header beside it
+                if module == "tools" and provider(header) is None and '"' in line:
+                    continue  # tools' own headers and the server's private ones (benchmarks)
                 owner = provider(header)
                 if owner is not None:
                     if owner not in allowed:
                         problems.append(f"{where}: {module} includes {header} ({owner}), not in {sorted(allowed)}")
                     continue
                 lib = next((v for k, v in EXTERNAL.items() if header.startswith(k)), None)
-                if lib is not None and lib not in external:
+                if lib is None:
+                    if header in POSIX or ("/" not in header and "." not in header):
+                        continue  # the operating system, the C++ standard library
+                    problems.append(f"{where}: {module} includes {header}, which the map does not know")
+                elif lib not in external:
                     problems.append(f"{where}: {module} includes {header} ({lib}), not in {sorted(external)}")
     for p in problems:
         print(p)
