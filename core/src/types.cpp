@@ -5,7 +5,7 @@
 namespace sglc {
 
 void validateScan(const LabelledScan& scan) {
-  if (scan.points.size() != scan.labels.size())
+  if (!scan.labels.empty() && scan.points.size() != scan.labels.size())
     throw InputError("scan has " + std::to_string(scan.points.size()) + " points but " +
                      std::to_string(scan.labels.size()) + " labels");
   for (std::size_t i = 0; i < scan.points.size(); ++i)

@@ -1,4 +1,4 @@
-// KITTI / SemanticKITTI readers and writers, and validateScan.
+// KITTI / SemanticKITTI readers and writers.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -291,31 +291,6 @@ TEST(Io, RealScanReads) {
   EXPECT_EQ(scan.points.size() * 16, std::filesystem::file_size(dir + "/velodyne/000052.bin"));
   EXPECT_EQ(scan.labels.size(), scan.points.size());
   EXPECT_GT(scan.points.size(), 100000u);  // an HDL-64 scan (SOURCE.md: 120-127 k points)
-  EXPECT_NO_THROW(validateScan(scan));
-}
-
-TEST(ValidateScan, SizeMismatch) {
-  LabelledScan scan;
-  scan.points = samplePoints();
-  scan.labels = {1, 2, 3};
-  EXPECT_THROW(validateScan(scan), InputError);
-  scan.labels = {1, 2, 3, 4, 5};
-  EXPECT_THROW(validateScan(scan), InputError);
-  scan.labels = {1, 2, 3, 4};
-  EXPECT_NO_THROW(validateScan(scan));
-  EXPECT_NO_THROW(validateScan(LabelledScan{}));
-}
-
-TEST(ValidateScan, NonFinitePointNamed) {
-  LabelledScan scan;
-  scan.points = samplePoints();
-  scan.labels = {1, 2, 3, 4};
-  scan.points[3].y() = std::numeric_limits<float>::quiet_NaN();
-  const std::string msg = inputErrorMessage([&] { validateScan(scan); });
-  EXPECT_NE(msg.find("point 3"), std::string::npos) << msg;
-  scan.points[3].y() = 0;
-  scan.points[1].z() = -std::numeric_limits<float>::infinity();
-  EXPECT_NE(inputErrorMessage([&] { validateScan(scan); }).find("point 1"), std::string::npos);
 }
 
 }  // namespace

@@ -51,21 +51,19 @@ class SimSource final : public FrameSource {
 class DirSource final : public FrameSource {
  public:
   DirSource(const std::string& dir, const std::string& spec) : dir_(dir) {
+    // Every frame's files and pose (pair files may name frames outside the selection), the selected ones in order.
     const auto seq = openSequence(dir);
-    const int max_frame = static_cast<int>(seq.frames.back().number);
-    const auto wanted = FrameSelection::parse(spec).frames(max_frame + 1);
-    std::map<int, const SequenceFrame*> by_number;
-    for (const auto& f : seq.frames) by_number[static_cast<int>(f.number)] = &f;
+    const auto selection = FrameSelection::parse(spec);
     Mat4d Tr = Mat4d::Identity();
     const auto calib = fs::path(dir) / "calib.txt";
     if (fs::exists(calib)) Tr = readCalibTr(calib.string());
     const Mat4d Tr_inv = Tr.inverse();
     for (const auto& f : seq.frames) {
-      files_[static_cast<int>(f.number)] = {f.bin_path, f.label_path};
-      if (f.pose) poses_[static_cast<int>(f.number)] = Tr_inv * *f.pose * Tr;
+      const int number = static_cast<int>(f.number);
+      files_[number] = {f.bin_path, f.label_path};
+      if (f.pose) poses_[number] = Tr_inv * *f.pose * Tr;
+      if (selection.contains(f.number)) frames_.push_back(number);
     }
-    for (int w : wanted)
-      if (by_number.count(w)) frames_.push_back(w);
     if (frames_.empty()) throw InputError(dir + ": no frame matches --frames '" + spec + "'");
   }
   const std::vector<int>& frames() const override { return frames_; }

@@ -32,8 +32,9 @@ class InputError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// Checks a scan before any work: equal point/label counts and finite coordinates.
-// Throws InputError naming the first offending point.
+// Checks a scan before sending or any work, by the rules a server applies: one label per point or none at all
+// (an unlabelled scan, which the labeller labels), and finite coordinates. Throws InputError naming the first
+// offending point.
 void validateScan(const LabelledScan& scan);
 
 }  // namespace sglc
