@@ -11,8 +11,7 @@ namespace sglc {
 namespace {
 
 LabelledScan fourPoints() {
-  return {{{1.5f, -2.25f, 0.125f}, {-40.0f, 12.5f, -1.75f}, {0.0f, 0.0f, 0.0f}, {79.9f, -0.001f, 3.0f}},
-          {1, 2, 3, 4}};
+  return {{{1.5f, -2.25f, 0.125f}, {-40.0f, 12.5f, -1.75f}, {0.0f, 0.0f, 0.0f}, {79.9f, -0.001f, 3.0f}}, {1, 2, 3, 4}};
 }
 
 std::string errorOf(const LabelledScan& scan) {
