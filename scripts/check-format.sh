@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Fails (listing the files) when a tracked C++ file differs from what .clang-format makes of it.
+# Fails (listing the files) when a C++ file (tracked, or new and not ignored) differs from what .clang-format
+# makes of it.
 # `scripts/check-format.sh --fix` rewrites them instead. The tree is formatted with clang-format 14 (Debian 12).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -7,7 +8,7 @@ command -v clang-format >/dev/null || { echo "clang-format is not installed (scr
 version=$(clang-format --version | grep -oE '[0-9]+\.[0-9]+' | head -1)
 [ "${version%%.*}" = 14 ] || echo "warning: clang-format $version; the tree is formatted with 14" >&2
 files=()
-while IFS= read -r -d '' f; do files+=("$f"); done < <(git ls-files -z '*.cpp' '*.hpp' '*.h' '*.cc')
+while IFS= read -r -d '' f; do files+=("$f"); done < <(git ls-files -z --cached --others --exclude-standard '*.cpp' '*.hpp' '*.h' '*.cc')
 if [ "${1:-}" = "--fix" ]; then
   clang-format -i "${files[@]}"
   exit 0
