@@ -5,158 +5,22 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
-#include <unordered_set>
+#include <tuple>
 
 #include "call.hpp"
 #include "log_line.hpp"
+#include "query_codec.hpp"
 #include "rpc_error.hpp"
+#include "sglc/closing/ingestor.hpp"
+#include "sglc/closing/loop_finder.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
 
 namespace sglc::server {
 namespace {
-
-// Who is asking and what they may see.
-struct Asker {
-  std::string map, robot, session;
-  std::int64_t seq = 0;
-  std::optional<double> stamp;
-  std::int64_t self_scan = 0;  // a stored query scan never matches itself
-};
-
-void findLoops(const ServiceState& state, const grpc::ServerContextBase* ctx, const Fingerprint& query,
-               const Asker& who, const v1::QueryOptions& opt, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
-               v1::Timing* timing) {
-  const auto top_k = opt.top_k() ? opt.top_k() : 5u;
-  if (top_k > 100) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "top_k must be at most 100");
-  const auto candidates = opt.candidates() ? opt.candidates() : std::max(top_k, 10u);
-  if (candidates > 200) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "candidates must be at most 200");
-  if (opt.exclude_recent() < 0 || !std::isfinite(opt.exclude_seconds()) || opt.exclude_seconds() < 0)
-    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "exclude_recent and exclude_seconds must be >= 0");
-  const bool refine = opt.refine_set() ? opt.refine() : true;
-  if (opt.known_loops() && !refine)
-    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "known_loops asks for poses: it cannot go with refine = false");
-  const bool include_rejected = opt.include_rejected() || opt.known_loops();
-  if (opt.has_min_score() && !std::isfinite(opt.min_score()))
-    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "min_score is not finite");
-
-  storage::SearchRequest req;
-  req.map = who.map;
-  req.descriptor = query.descriptor;
-  req.k = static_cast<int>(candidates);
-  req.self_robot = who.robot;
-  req.self_session = who.session;
-  req.self_seq = who.seq;
-  req.exclude_recent = opt.exclude_recent();
-  req.self_stamp = who.stamp;
-  req.exclude_seconds = opt.exclude_seconds();
-  if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
-  switch (opt.scope()) {
-    case v1::SCOPE_UNSPECIFIED:
-    case v1::SCOPE_WHOLE_MAP:
-      break;
-    case v1::SCOPE_SAME_ROBOT:
-    case v1::SCOPE_OTHER_ROBOTS:
-      if (who.robot.empty())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "scope SAME_ROBOT / OTHER_ROBOTS needs the query's robot");
-      (opt.scope() == v1::SCOPE_SAME_ROBOT ? req.robots : req.exclude_robots).push_back(who.robot);
-      break;
-    case v1::SCOPE_SESSIONS:
-      if (opt.sessions().empty() && opt.session_refs().empty())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
-                       "scope SESSIONS needs at least one 'robot/session' in sessions or one session_refs entry");
-      for (const auto& s : opt.sessions()) {
-        const auto slash = s.find('/');
-        if (slash == std::string::npos)
-          throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "sessions entry '" + s + "' is not 'robot/session'");
-        req.session_refs.emplace_back(s.substr(0, slash), s.substr(slash + 1));
-      }
-      for (const auto& r : opt.session_refs()) req.session_refs.emplace_back(r.robot(), r.session());
-      break;
-    default:
-      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "unknown scope");
-  }
-  auto& store = state.store();
-  auto t0 = Clock::now();
-  std::vector<storage::SearchHit> hits;
-  if (opt.verify_scan_ids_size() > 0) {
-    if (opt.verify_scan_ids_size() > 200)
-      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids: at most 200");
-    std::unordered_set<std::int64_t> seen;
-    for (const auto id : opt.verify_scan_ids()) {
-      if (!seen.insert(id).second)
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "verify_scan_ids repeats scan " + std::to_string(id));
-      const auto info = store.scanInfo(id);
-      const auto fp = info && info->map == who.map ? store.fingerprint(id) : nullptr;
-      if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + who.map + "' has no scan " + std::to_string(id));
-      if (fp->descriptor.size() != query.descriptor.size())
-        throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
-                       "scan " + std::to_string(id) + " has another descriptor layout");
-      double d2 = 0;
-      for (std::size_t i = 0; i < query.descriptor.size(); ++i)
-        d2 += std::pow(double(query.descriptor[i]) - double(fp->descriptor[i]), 2);
-      hits.push_back({id, static_cast<float>(std::sqrt(d2))});
-    }
-  } else {
-    hits = store.search(req);
-  }
-  timing->set_search_ms(msSince(t0));
-
-  struct Verified {
-    storage::SearchHit hit;
-    std::shared_ptr<const Fingerprint> fp;
-    LoopResult result;
-  };
-  std::vector<Verified> results;
-  t0 = Clock::now();
-  // Candidates are verified independently (in parallel when compute threads are idle) and kept in search order.
-  std::vector<std::optional<Verified>> verified(hits.size());
-  state.compute().parallelFor(hits.size(), [&](std::size_t i) {
-    checkAlive(ctx);
-    auto fp = store.fingerprint(hits[i].scan_id);
-    if (!fp) return;  // deleted meanwhile
-    auto r = state.pipeline().verify(query, *fp);
-    if (r.is_loop || include_rejected) verified[i] = Verified{hits[i], std::move(fp), std::move(r)};
-  });
-  for (auto& v : verified)
-    if (v) results.push_back(std::move(*v));
-  timing->set_verify_ms(msSince(t0));
-  std::stable_sort(results.begin(), results.end(), [](const Verified& a, const Verified& b) {
-    if (a.result.is_loop != b.result.is_loop) return a.result.is_loop;
-    if (a.result.score != b.result.score) return a.result.score > b.result.score;
-    return a.hit.scan_id < b.hit.scan_id;
-  });
-  if (opt.has_min_score())
-    std::erase_if(results, [&](const Verified& v) { return v.result.is_loop && v.result.score < opt.min_score(); });
-  if (results.size() > top_k) results.resize(top_k);
-  t0 = Clock::now();
-  if (refine)
-    state.compute().parallelFor(results.size(), [&](std::size_t i) {
-      checkAlive(ctx);
-      state.pipeline().refine(query, *results[i].fp, results[i].result, opt.known_loops());
-    });
-  timing->set_refine_ms(msSince(t0));
-  for (const auto& v : results) {
-    auto* c = out->Add();
-    c->set_scan_id(v.hit.scan_id);
-    if (auto info = store.scanInfo(v.hit.scan_id)) {
-      c->set_robot(info->robot);
-      c->set_session(info->session);
-      c->set_seq(info->seq);
-    }
-    c->set_score(v.result.score);
-    c->set_verified(v.result.is_loop);
-    c->set_inliers(v.result.inliers);
-    c->set_fitness(v.result.fitness);
-    c->set_rmse(v.result.rmse);
-    c->set_refined(v.result.refined);
-    if (v.result.refined && !v.result.information.isZero()) wire::encodeInformation(v.result.information, c);
-    c->set_descriptor_distance(v.hit.distance);
-    wire::toTransform(v.result.T, c->mutable_t_query_candidate());
-  }
-}
 
 v1::LabelSource toWire(ScanReport::LabelSource source) {
   switch (source) {
@@ -183,21 +47,27 @@ void reportScan(const ScanReport& report, const std::string& map, const std::str
             {{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq}, {"warnings", report.warnings}}));
 }
 
-// Throws ALREADY_EXISTS unless the stored scan `id` is what this request would have stored (a retry).
-void requireSameScan(const storage::MapStore& store, std::int64_t id, const Fingerprint& fp,
-                     const v1::IngestRequest& req, const std::optional<Mat4d>& pose) {
+// Engine work of a call: spread over the compute pool's idle threads, abandoned when the call is.
+closing::Execution executionOf(const ServiceState& state, const grpc::ServerContextBase* ctx) {
+  return {[&state](std::size_t n, const std::function<void(std::size_t)>& fn) { state.compute().parallelFor(n, fn); },
+          [ctx] { checkAlive(ctx); }};
+}
+
+// The request's fields after the key's names and the caller's access are checked.
+closing::IngestInput ingestInput(const v1::IngestRequest& req) {
   const auto& key = req.key();
-  const auto info = store.scanInfo(id);
-  const auto stored = store.fingerprint(id);
-  const bool same = info && stored && serialize(*stored) == serialize(fp) &&
-                    info->stamp == (req.has_stamp() ? std::optional<double>(req.stamp()) : std::nullopt) &&
-                    info->odometry_pose.has_value() == pose.has_value() && (!pose || *info->odometry_pose == *pose) &&
-                    info->has_raw == req.store_raw();
-  if (!same)
-    throw RpcError(grpc::StatusCode::ALREADY_EXISTS, "robot '" + key.robot() + "' session '" + key.session() +
-                                                         "' seq " + std::to_string(key.seq()) +
-                                                         " already holds a different scan (scan " + std::to_string(id) +
-                                                         "); an identical retry would answer OK");
+  closing::IngestInput in;
+  in.key = {key.map(), key.robot(), key.session(), key.seq()};
+  if (req.has_stamp()) {
+    if (!std::isfinite(req.stamp())) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "stamp is not finite");
+    in.stamp = req.stamp();
+  }
+  if (req.has_odometry_pose() && req.odometry_pose().m_size() > 0)
+    in.odometry_pose = wire::decodeRigidTransform(req.odometry_pose(), "odometry_pose");
+  in.store_raw = req.store_raw();
+  in.query = req.query();
+  if (in.query) in.query_options = fromWire(req.query_options());
+  return in;
 }
 
 }  // namespace
@@ -211,11 +81,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   wire::checkName("key.robot", key.robot());
   wire::checkName("key.session", key.session());
   TokenTable::require(grant, key.map());
-  if (req.has_stamp() && !std::isfinite(req.stamp()))
-    throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "stamp is not finite");
-  std::optional<Mat4d> pose;
-  if (req.has_odometry_pose() && req.odometry_pose().m_size() > 0)
-    pose = wire::decodeRigidTransform(req.odometry_pose(), "odometry_pose");
+  auto input = ingestInput(req);
   auto& store = state.store();
   if (!store.findMap(key.map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + key.map() + "'");
   MemoryBudget::Lease own;
@@ -225,80 +91,30 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   const auto scan = wire::decodeScan(points, labels, state.limits().max_points);
   checkAlive(ctx);
 
-  // Engine work holds a compute slot; the database write below does not.
+  const closing::LoopFinder finder(state.pipeline(), store);
+  auto* graph = state.graph();
+  closing::Ingestor::LoopsRecorded recorded;
+  if (graph) recorded = [graph](const std::string& map) { graph->loopsAdded(map); };
+  const closing::Ingestor ingestor(state.pipeline(), store, finder, std::move(recorded));
+  // Engine work holds a compute slot; the database write does not.
   auto slot = state.compute().acquire(ctx);
-  auto t0 = Clock::now();
-  ScanReport report;
-  const auto fp = state.pipeline().fingerprint(scan, &report);
-  resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
-  reportScan(report, key.map(), key.robot(), key.seq(), resp);
-  // A retry of a stored scan answers as the first call did (its loops exclude the stored copy of itself).
-  auto stored = store.findScan(key.map(), key.robot(), key.session(), key.seq());
-  if (stored) requireSameScan(store, *stored, fp, req, pose);
-  if (req.query()) {
-    Asker who{key.map(), key.robot(), key.session(), key.seq(), std::nullopt, stored.value_or(0)};
-    if (req.has_stamp()) who.stamp = req.stamp();
-    findLoops(state, ctx, fp, who, req.query_options(), resp->mutable_loops(), resp->mutable_timing());
-  }
+  auto pending = ingestor.compute(scan, std::move(input), executionOf(state, ctx));
   slot.release();
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
-  t0 = Clock::now();
-  if (!stored) {
-    storage::NewScan ns;
-    ns.map = key.map();
-    ns.robot = key.robot();
-    ns.session = key.session();
-    ns.seq = key.seq();
-    if (req.has_stamp()) ns.stamp = req.stamp();
-    ns.odometry_pose = pose;
-    ns.fingerprint = &fp;
-    ns.raw = req.store_raw() ? &scan : nullptr;
-    try {
-      resp->set_scan_id(store.addScan(ns));
-    } catch (const storage::StorageError& e) {
-      // The same request on another connection (a client retrying before its first call answered) may have
-      // stored it first.
-      if (e.code() != storage::StorageError::Code::kAlreadyExists) throw;
-      stored = store.findScan(key.map(), key.robot(), key.session(), key.seq());
-      if (!stored) throw;
-      requireSameScan(store, *stored, fp, req, pose);
-      auto* loops = resp->mutable_loops();
-      for (int i = loops->size() - 1; i >= 0; --i)
-        if (loops->Get(i).scan_id() == *stored) loops->DeleteSubrange(i, 1);
-    }
-  }
-  if (stored) {
-    resp->set_scan_id(*stored);
-    resp->set_already_stored(true);
-  }
-  resp->mutable_timing()->set_store_ms(msSince(t0));
-  // Verified loops join the map's pose graph (the scan is stored: a failure here must not fail the call; a
-  // loop recorded again for the same pair replaces the first).
-  if (auto* graph = state.graph(); graph && pose) {
-    bool added = false;
-    for (const auto& loop : resp->loops()) {
-      if (!loop.verified()) continue;
-      try {
-        // The engine's own pose (the rigid check guards what clients send; a loop it fails is only logged).
-        storage::LoopRecord r;
-        r.query_scan = resp->scan_id();
-        r.candidate_scan = loop.scan_id();
-        r.T = wire::decodeRigidTransform(loop.t_query_candidate(), "loop");
-        r.score = loop.score();
-        r.inliers = loop.inliers();
-        r.fitness = loop.fitness();
-        r.rmse = loop.rmse();
-        r.information = wire::decodeInformation(loop);
-        state.store().addLoop(key.map(), r);
-        added = true;
-      } catch (const std::exception& e) {
-        spdlog::warn("{}", logLine({{"event", "loop_not_recorded"}, {"scan", resp->scan_id()}, {"error", e.what()}}));
-      }
-    }
-    if (added) graph->loopsAdded(key.map());
-  }
+  const auto done = ingestor.commit(std::move(pending), scan);
+
+  reportScan(done.report, key.map(), key.robot(), key.seq(), resp);
+  toWire(done.loops, resp->mutable_loops());
+  auto* timing = resp->mutable_timing();
+  toWire(done.timing.query, timing);
+  timing->set_fingerprint_ms(done.timing.fingerprint_ms);
+  timing->set_store_ms(done.timing.store_ms);
+  resp->set_scan_id(done.scan_id);
+  resp->set_already_stored(done.already_stored);
+  for (const auto& error : done.unrecorded_loops)
+    spdlog::warn("{}", logLine({{"event", "loop_not_recorded"}, {"scan", done.scan_id}, {"error", error}}));
   resp->set_seq(key.seq());
-  resp->mutable_timing()->set_total_ms(msSince(t_start));
+  timing->set_total_ms(msSince(t_start));
 }
 
 storage::MapStore& ServiceState::store() const {
@@ -325,7 +141,8 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     TokenTable::require(grant, req->map());
     auto& store = state_.store();
     if (!store.findMap(req->map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");
-    Asker who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
+    const closing::LoopFinder finder(state_.pipeline(), store);
+    closing::QueryOrigin who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
     if (req->has_stamp()) who.stamp = req->stamp();
     std::shared_ptr<const Fingerprint> fp;
     auto slot = state_.compute().acquire(ctx);
@@ -337,17 +154,14 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
       reportScan(report, req->map(), req->robot(), req->seq(), resp);
       resp->mutable_timing()->set_fingerprint_ms(msSince(t0));
     } else if (req->has_scan_id()) {
-      const auto info = store.scanInfo(req->scan_id());
-      if (!info || info->map != req->map())
-        throw RpcError(grpc::StatusCode::NOT_FOUND,
-                       "map '" + req->map() + "' has no scan " + std::to_string(req->scan_id()));
-      fp = store.fingerprint(req->scan_id());
-      if (!fp) throw RpcError(grpc::StatusCode::NOT_FOUND, "scan " + std::to_string(req->scan_id()) + " was deleted");
-      who = {req->map(), info->robot, info->session, info->seq, info->stamp, req->scan_id()};
+      std::tie(fp, who) = finder.storedQuery(req->map(), req->scan_id());
     } else {
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "give either scan or scan_id");
     }
-    findLoops(state_, ctx, *fp, who, req->options(), resp->mutable_candidates(), resp->mutable_timing());
+    closing::QueryTiming timing;
+    const auto options = fromWire(req->options());
+    toWire(finder.find(*fp, who, options, executionOf(state_, ctx), &timing), resp->mutable_candidates());
+    toWire(timing, resp->mutable_timing());
     resp->mutable_timing()->set_total_ms(msSince(t_start));
   });
 }

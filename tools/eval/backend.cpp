@@ -2,12 +2,12 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <filesystem>
 #include <map>
 #include <stdexcept>
 
 #include "sglc/client/client.hpp"
+#include "sglc/closing/loop_finder.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 
@@ -21,20 +21,21 @@ const char* kRobot = "eval";
 const char* kSession = "run";
 const char* kMap = "eval";
 
-struct Ranked {
-  std::int64_t scan_id;
-  Candidate c;
-};
+// A fresh map database in `dir` (synchronous=OFF: a crashed evaluation is run again).
+std::unique_ptr<storage::MapStore> openStore(const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  storage::StoreOptions o;
+  o.path = (std::filesystem::path(dir) / "eval.db").string();
+  std::filesystem::remove(o.path);
+  std::filesystem::remove_all(o.path + ".index");
+  o.sync = storage::StoreOptions::Sync::kOff;
+  return storage::MapStore::open(o);
+}
+
 class InProcess final : public Backend {
  public:
-  InProcess(const Config& config, const std::string& dir) : pipeline_(config) {
-    std::filesystem::create_directories(dir);
-    storage::StoreOptions o;
-    o.path = (std::filesystem::path(dir) / "eval.db").string();
-    std::filesystem::remove(o.path);
-    std::filesystem::remove_all(o.path + ".index");
-    o.sync = storage::StoreOptions::Sync::kOff;
-    store_ = storage::MapStore::open(o);
+  InProcess(const Config& config, const std::string& dir)
+      : pipeline_(config), store_(openStore(dir)), finder_(pipeline_, *store_) {
     store_->createMap(
         kMap, descriptorLayout(static_cast<int>(config.labels.node_classes.size()), config.graph, config.descriptor)
                   .scanDim());
@@ -53,19 +54,17 @@ class InProcess final : public Backend {
     const auto t0 = Clock::now();
     const auto fp = pipeline_.fingerprint(scan);
     t->fingerprint = msSince(t0);
-    auto t1 = Clock::now();
-    storage::SearchRequest req;
-    req.map = kMap;
-    req.descriptor = fp.descriptor;
-    req.k = q.candidates;
-    req.self_robot = kRobot;
-    req.self_session = kSession;
-    req.self_seq = frame;
-    req.exclude_recent = q.exclude_recent;
-    std::vector<std::int64_t> ids;
-    for (const auto& h : store_->search(req)) ids.push_back(h.scan_id);
-    t->search = msSince(t1);
-    auto out = verifyIds(fp, ids, q.refine ? Refine::verified : Refine::none, t);
+    // What the server back-end asks for (Remote::queryThenAdd), through the same use case.
+    closing::QueryOptions o;
+    o.top_k = static_cast<std::uint32_t>(q.candidates);
+    o.candidates = static_cast<std::uint32_t>(q.candidates);
+    o.include_rejected = true;
+    o.refine = q.refine;
+    o.exclude_recent = q.exclude_recent;
+    closing::QueryTiming qt;
+    const auto found = finder_.find(fp, {kMap, kRobot, kSession, frame, std::nullopt, 0}, o, {}, &qt);
+    times(qt, t);
+    auto out = convert(found);
     store(frame, fp, t);
     t->total = msSince(t0);
     return out;
@@ -74,9 +73,20 @@ class InProcess final : public Backend {
   std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {
     const auto t0 = Clock::now();
     const auto fp = store_->fingerprint(idOf(query));
-    std::vector<std::int64_t> ids;
-    for (int c : candidates) ids.push_back(idOf(c));
-    auto out = verifyIds(*fp, ids, refine, t);
+    // The candidates as the service's verify_scan_ids gives them, without its limit of 200 per call.
+    std::vector<storage::SearchHit> hits;
+    for (int c : candidates) {
+      const auto id = idOf(c);
+      hits.push_back({id, closing::descriptorDistance(fp->descriptor, store_->fingerprint(id)->descriptor)});
+    }
+    closing::Ranking ranking;
+    ranking.top_k = hits.size();
+    ranking.include_rejected = true;
+    ranking.refine = refine != Refine::none;
+    ranking.known_loops = refine == Refine::known_loops;
+    closing::QueryTiming qt;
+    auto out = convert(finder_.verify(*fp, hits, ranking, {}, &qt));
+    times(qt, t);
     t->total = msSince(t0);
     return out;
   }
@@ -95,51 +105,23 @@ class InProcess final : public Backend {
     frames_[id] = frame;
     t->store = msSince(t0);
   }
-  std::vector<Candidate> verifyIds(const Fingerprint& query, const std::vector<std::int64_t>& ids, Refine refine,
-                                   StageTimes* t) {
-    auto t0 = Clock::now();
-    std::vector<Ranked> ranked;
-    std::vector<std::shared_ptr<const Fingerprint>> fps;
-    std::vector<LoopResult> results;
-    for (const auto id : ids) {
-      auto fp = store_->fingerprint(id);
-      auto r = pipeline_.verify(query, *fp);
-      double d2 = 0;
-      for (std::size_t i = 0; i < query.descriptor.size(); ++i)
-        d2 += std::pow(double(query.descriptor[i]) - double(fp->descriptor[i]), 2);
-      Candidate c{frames_.at(id), r.score, r.is_loop, false, r.inliers, r.T, static_cast<float>(std::sqrt(d2))};
-      ranked.push_back({id, c});
-      fps.push_back(std::move(fp));
-      results.push_back(std::move(r));
-    }
-    t->verify = msSince(t0);
-    // Refine in the final order (the same results as the service, which refines after ordering).
-    std::vector<std::size_t> order(ranked.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
-      const auto& x = ranked[a];
-      const auto& y = ranked[b];
-      if (x.c.verified != y.c.verified) return x.c.verified;
-      if (x.c.score != y.c.score) return x.c.score > y.c.score;
-      return x.scan_id < y.scan_id;
-    });
-    t0 = Clock::now();
+  static void times(const closing::QueryTiming& in, StageTimes* t) {
+    t->search = in.search_ms;
+    t->verify = in.verify_ms;
+    t->refine = in.refine_ms;
+  }
+  std::vector<Candidate> convert(const std::vector<closing::FoundLoop>& found) const {
     std::vector<Candidate> out;
-    for (const auto i : order) {
-      auto c = ranked[i].c;
-      if (refine != Refine::none) {  // refine() itself skips rejected pairs unless they are known loops
-        pipeline_.refine(query, *fps[i], results[i], refine == Refine::known_loops);
-        c.T = results[i].T;
-        c.refined = results[i].refined;
-      }
-      out.push_back(c);
+    for (const auto& f : found) {
+      const auto& r = f.result;
+      out.push_back({frames_.at(f.scan_id), r.score, r.is_loop, r.refined, r.inliers, r.T, f.descriptor_distance});
     }
-    t->refine = msSince(t0);
     return out;
   }
 
   Pipeline pipeline_;
   std::unique_ptr<storage::MapStore> store_;
+  closing::LoopFinder finder_;
   std::map<int, std::int64_t> ids_;
   std::map<std::int64_t, int> frames_;
 };

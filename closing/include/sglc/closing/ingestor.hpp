@@ -1,0 +1,87 @@
+// The ingest use case: fingerprint a scan, optionally look for its loops in the map, store it (idempotently:
+// the identical scan re-sent for a stored key answers as the first time did), and record its verified loops
+// for the pose graph. Free of any transport; the caller sequences the two phases around its own resources
+// (a compute slot for the engine work, none for the database write).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sglc/closing/loop_finder.hpp"
+#include "sglc/closing/loop_query.hpp"
+#include "sglc/pipeline.hpp"
+#include "sglc/storage/map_store.hpp"
+
+namespace sglc::closing {
+
+struct ScanKey {
+  std::string map, robot, session;
+  std::int64_t seq = 0;
+};
+
+// One scan's request (the scan's points and labels travel beside it).
+struct IngestInput {
+  ScanKey key;
+  std::optional<double> stamp;
+  std::optional<Mat4d> odometry_pose;  // a rigid motion (the caller has checked it)
+  bool store_raw = false;              // keep the raw cloud too
+  bool query = false;                  // look for loops before storing
+  QueryOptions query_options;
+};
+
+struct IngestTiming {
+  double fingerprint_ms = 0, store_ms = 0;
+  QueryTiming query;
+};
+
+struct Ingested {
+  std::int64_t scan_id = 0;     // set by commit
+  bool already_stored = false;  // the key held this identical scan already
+  ScanReport report;            // where the labels came from, warnings
+  std::vector<FoundLoop> loops;
+  // Verified loops that could not be recorded for the pose graph, and why (the scan is stored regardless).
+  std::vector<std::string> unrecorded_loops;
+  IngestTiming timing;
+};
+
+// The result of the engine phase, to be committed.
+struct PendingScan {
+  IngestInput input;
+  Fingerprint fingerprint;
+  std::optional<std::int64_t> stored;  // the key's scan, when it is stored already
+  Ingested outcome;
+};
+
+class Ingestor {
+ public:
+  // Told the map after verified loops were recorded for it.
+  using LoopsRecorded = std::function<void(const std::string& map)>;
+
+  // All must outlive the ingestor. Verified loops of scans with an odometry pose are recorded (MapStore::
+  // addLoop) only when `loops_recorded` is given: without a pose graph nobody reads them.
+  Ingestor(const Pipeline& pipeline, storage::MapStore& store, const LoopFinder& finder,
+           LoopsRecorded loops_recorded = {})
+      : pipeline_(pipeline), store_(store), finder_(finder), loops_recorded_(std::move(loops_recorded)) {}
+
+  // Engine work: the fingerprint, the retry check (StorageError kAlreadyExists when the key holds a different
+  // scan) and, with input.query, the loops (excluding the stored copy of a retried scan). The map must exist.
+  PendingScan compute(const LabelledScan& scan, IngestInput input, const Execution& exec) const;
+
+  // Database work: stores the scan (unless it was stored already, or another call stored the identical scan
+  // meanwhile: then its own copy leaves the loops) and records its verified loops.
+  Ingested commit(PendingScan pending, const LabelledScan& scan) const;
+
+ private:
+  void requireSameScan(std::int64_t id, const Fingerprint& fp, const IngestInput& input) const;
+  void recordLoops(Ingested& out, const IngestInput& input) const;
+
+  const Pipeline& pipeline_;
+  storage::MapStore& store_;
+  const LoopFinder& finder_;
+  LoopsRecorded loops_recorded_;
+};
+
+}  // namespace sglc::closing

@@ -1,0 +1,59 @@
+// The query use case: candidates from the map (descriptor search or a given list), verification, ranking and
+// refinement. Free of any transport: the gRPC service and the in-process evaluation call the same code.
+#pragma once
+
+#include <memory>
+#include <utility>
+#include <vector>
+
+#include "sglc/closing/loop_query.hpp"
+#include "sglc/pipeline.hpp"
+#include "sglc/storage/map_store.hpp"
+
+namespace sglc::closing {
+
+// The L2 distance between two descriptors of the same length (computed in double, returned as float, as
+// the map's search reports it).
+float descriptorDistance(const std::vector<float>& a, const std::vector<float>& b);
+
+// What happens to verified candidates (the part of QueryOptions the ranking needs, without limits).
+struct Ranking {
+  std::size_t top_k = 5;
+  bool include_rejected = false;
+  std::optional<double> min_score;
+  bool refine = true;
+  bool known_loops = false;
+};
+
+class LoopFinder {
+ public:
+  // Both must outlive the finder. Thread-safe: any number of queries at once.
+  LoopFinder(const Pipeline& pipeline, const storage::MapStore& store) : pipeline_(pipeline), store_(store) {}
+
+  // A stored scan as the query: its fingerprint and its origin (so it excludes itself and its recent
+  // neighbours). StorageError kNotFound when `map` has no such scan.
+  std::pair<std::shared_ptr<const Fingerprint>, QueryOrigin> storedQuery(const std::string& map,
+                                                                         std::int64_t scan_id) const;
+
+  // Checks the options (InputError saying which is wrong; StorageError kNotFound for a listed scan the map
+  // does not have), finds the candidates, verifies each, orders them (accepted first, then by score, then by
+  // scan id), keeps the top_k and refines those. Each answer carries its scan's robot, session and seq.
+  std::vector<FoundLoop> find(const Fingerprint& query, const QueryOrigin& origin, const QueryOptions& options,
+                              const Execution& exec, QueryTiming* timing) const;
+
+  // The steps after the search: verifies `hits` (in parallel when exec allows; a scan deleted meanwhile is
+  // skipped), orders, trims and refines as `ranking` says. Answers carry no robot, session or seq.
+  std::vector<FoundLoop> verify(const Fingerprint& query, const std::vector<storage::SearchHit>& hits,
+                                const Ranking& ranking, const Execution& exec, QueryTiming* timing) const;
+
+ private:
+  std::vector<storage::SearchHit> candidates(const Fingerprint& query, const QueryOrigin& origin,
+                                             const QueryOptions& options, std::uint32_t k) const;
+  std::vector<storage::SearchHit> listed(const Fingerprint& query, const std::string& map,
+                                         const std::vector<std::int64_t>& ids) const;
+
+  const Pipeline& pipeline_;
+  const storage::MapStore& store_;
+};
+
+}  // namespace sglc::closing

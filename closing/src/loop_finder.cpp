@@ -1,0 +1,187 @@
+#include "sglc/closing/loop_finder.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <unordered_set>
+
+namespace sglc::closing {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+using storage::StorageError;
+
+constexpr std::uint32_t kMaxTopK = 100;
+constexpr std::uint32_t kMaxCandidates = 200;
+constexpr int kMaxListed = 200;
+
+// The options' checks, in the order a caller with several mistakes learns of them.
+Ranking checkedRanking(const QueryOptions& opt, std::uint32_t* candidates) {
+  Ranking r;
+  r.top_k = opt.top_k ? opt.top_k : 5u;
+  if (r.top_k > kMaxTopK) throw InputError("top_k must be at most 100");
+  *candidates = opt.candidates ? opt.candidates : std::max<std::uint32_t>(static_cast<std::uint32_t>(r.top_k), 10u);
+  if (*candidates > kMaxCandidates) throw InputError("candidates must be at most 200");
+  if (opt.exclude_recent < 0 || !std::isfinite(opt.exclude_seconds) || opt.exclude_seconds < 0)
+    throw InputError("exclude_recent and exclude_seconds must be >= 0");
+  r.refine = opt.refine;
+  r.known_loops = opt.known_loops;
+  if (r.known_loops && !r.refine) throw InputError("known_loops asks for poses: it cannot go with refine = false");
+  r.include_rejected = opt.include_rejected || opt.known_loops;
+  if (opt.min_score && !std::isfinite(*opt.min_score)) throw InputError("min_score is not finite");
+  r.min_score = opt.min_score;
+  return r;
+}
+
+// Where the search may look: the scope as filters of the search request.
+void applyScope(const QueryOptions& opt, const QueryOrigin& who, storage::SearchRequest* req) {
+  switch (opt.scope) {
+    case Scope::kWholeMap:
+      break;
+    case Scope::kSameRobot:
+    case Scope::kOtherRobots:
+      if (who.robot.empty()) throw InputError("scope SAME_ROBOT / OTHER_ROBOTS needs the query's robot");
+      (opt.scope == Scope::kSameRobot ? req->robots : req->exclude_robots).push_back(who.robot);
+      break;
+    case Scope::kSessions:
+      if (opt.sessions.empty() && opt.session_refs.empty())
+        throw InputError("scope SESSIONS needs at least one 'robot/session' in sessions or one session_refs entry");
+      for (const auto& s : opt.sessions) {
+        const auto slash = s.find('/');
+        if (slash == std::string::npos) throw InputError("sessions entry '" + s + "' is not 'robot/session'");
+        req->session_refs.emplace_back(s.substr(0, slash), s.substr(slash + 1));
+      }
+      for (const auto& r : opt.session_refs) req->session_refs.emplace_back(r.robot, r.session);
+      break;
+  }
+}
+
+}  // namespace
+
+void Execution::forEach(std::size_t n, const std::function<void(std::size_t)>& fn) const {
+  if (parallel_for) {
+    parallel_for(n, fn);
+    return;
+  }
+  for (std::size_t i = 0; i < n; ++i) fn(i);
+}
+
+float descriptorDistance(const std::vector<float>& a, const std::vector<float>& b) {
+  double d2 = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) d2 += std::pow(double(a[i]) - double(b[i]), 2);
+  return static_cast<float>(std::sqrt(d2));
+}
+
+std::pair<std::shared_ptr<const Fingerprint>, QueryOrigin> LoopFinder::storedQuery(const std::string& map,
+                                                                                   std::int64_t scan_id) const {
+  const auto info = store_.scanInfo(scan_id);
+  if (!info || info->map != map)
+    throw StorageError(StorageError::Code::kNotFound, "map '" + map + "' has no scan " + std::to_string(scan_id));
+  auto fp = store_.fingerprint(scan_id);
+  if (!fp) throw StorageError(StorageError::Code::kNotFound, "scan " + std::to_string(scan_id) + " was deleted");
+  return {std::move(fp), QueryOrigin{map, info->robot, info->session, info->seq, info->stamp, scan_id}};
+}
+
+std::vector<storage::SearchHit> LoopFinder::listed(const Fingerprint& query, const std::string& map,
+                                                   const std::vector<std::int64_t>& ids) const {
+  if (ids.size() > kMaxListed) throw InputError("verify_scan_ids: at most 200");
+  std::vector<storage::SearchHit> hits;
+  std::unordered_set<std::int64_t> seen;
+  for (const auto id : ids) {
+    if (!seen.insert(id).second) throw InputError("verify_scan_ids repeats scan " + std::to_string(id));
+    const auto info = store_.scanInfo(id);
+    const auto fp = info && info->map == map ? store_.fingerprint(id) : nullptr;
+    if (!fp) throw StorageError(StorageError::Code::kNotFound, "map '" + map + "' has no scan " + std::to_string(id));
+    if (fp->descriptor.size() != query.descriptor.size())
+      throw InputError("scan " + std::to_string(id) + " has another descriptor layout");
+    hits.push_back({id, descriptorDistance(query.descriptor, fp->descriptor)});
+  }
+  return hits;
+}
+
+std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query, const QueryOrigin& who,
+                                                       const QueryOptions& opt, std::uint32_t k) const {
+  storage::SearchRequest req;
+  req.map = who.map;
+  req.descriptor = query.descriptor;
+  req.k = static_cast<int>(k);
+  req.self_robot = who.robot;
+  req.self_session = who.session;
+  req.self_seq = who.seq;
+  req.exclude_recent = opt.exclude_recent;
+  req.self_stamp = who.stamp;
+  req.exclude_seconds = opt.exclude_seconds;
+  if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
+  applyScope(opt, who, &req);  // checked even when the candidates are listed
+  if (!opt.verify_scan_ids.empty()) return listed(query, who.map, opt.verify_scan_ids);
+  return store_.search(req);
+}
+
+std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOrigin& origin,
+                                        const QueryOptions& options, const Execution& exec, QueryTiming* timing) const {
+  std::uint32_t n_candidates = 0;
+  const auto ranking = checkedRanking(options, &n_candidates);
+  const auto t0 = Clock::now();
+  const auto hits = candidates(query, origin, options, n_candidates);
+  timing->search_ms = msSince(t0);
+  auto found = verify(query, hits, ranking, exec, timing);
+  for (auto& f : found)
+    if (const auto info = store_.scanInfo(f.scan_id)) {
+      f.robot = info->robot;
+      f.session = info->session;
+      f.seq = info->seq;
+    }
+  return found;
+}
+
+std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::vector<storage::SearchHit>& hits,
+                                          const Ranking& ranking, const Execution& exec, QueryTiming* timing) const {
+  struct Verified {
+    FoundLoop loop;
+    std::shared_ptr<const Fingerprint> fp;
+  };
+  auto t0 = Clock::now();
+  // Candidates are verified independently (at once where exec allows) and kept in search order.
+  std::vector<std::optional<Verified>> verified(hits.size());
+  exec.forEach(hits.size(), [&](std::size_t i) {
+    exec.checkAlive();
+    auto fp = store_.fingerprint(hits[i].scan_id);
+    if (!fp) return;  // deleted meanwhile
+    auto r = pipeline_.verify(query, *fp);
+    if (!r.is_loop && !ranking.include_rejected) return;
+    Verified v;
+    v.loop.scan_id = hits[i].scan_id;
+    v.loop.descriptor_distance = hits[i].distance;
+    v.loop.result = std::move(r);
+    v.fp = std::move(fp);
+    verified[i] = std::move(v);
+  });
+  std::vector<Verified> results;
+  for (auto& v : verified)
+    if (v) results.push_back(std::move(*v));
+  timing->verify_ms = msSince(t0);
+  std::stable_sort(results.begin(), results.end(), [](const Verified& a, const Verified& b) {
+    if (a.loop.result.is_loop != b.loop.result.is_loop) return a.loop.result.is_loop;
+    if (a.loop.result.score != b.loop.result.score) return a.loop.result.score > b.loop.result.score;
+    return a.loop.scan_id < b.loop.scan_id;
+  });
+  if (ranking.min_score)
+    std::erase_if(results,
+                  [&](const Verified& v) { return v.loop.result.is_loop && v.loop.result.score < *ranking.min_score; });
+  if (results.size() > ranking.top_k) results.resize(ranking.top_k);
+  t0 = Clock::now();
+  if (ranking.refine)
+    exec.forEach(results.size(), [&](std::size_t i) {
+      exec.checkAlive();
+      pipeline_.refine(query, *results[i].fp, results[i].loop.result, ranking.known_loops);
+    });
+  timing->refine_ms = msSince(t0);
+  std::vector<FoundLoop> out;
+  out.reserve(results.size());
+  for (auto& v : results) out.push_back(std::move(v.loop));
+  return out;
+}
+
+}  // namespace sglc::closing

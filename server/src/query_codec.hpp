@@ -1,0 +1,16 @@
+// The loop query's messages <-> the use case's plain types (sglc/closing/loop_query.hpp).
+#pragma once
+
+#include <vector>
+
+#include "sglc/closing/loop_query.hpp"
+#include "sglc/v1/sglc.pb.h"
+
+namespace sglc::server {
+
+// Throws WireError for a scope this server does not know.
+closing::QueryOptions fromWire(const v1::QueryOptions& options);
+void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::RepeatedPtrField<v1::Candidate>* out);
+void toWire(const closing::QueryTiming& timing, v1::Timing* out);
+
+}  // namespace sglc::server

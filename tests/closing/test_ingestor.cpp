@@ -1,0 +1,135 @@
+// The ingest use case: store, retries, loops before storing, loops recorded for the pose graph.
+#include <gtest/gtest.h>
+
+#include <vector>
+
+#include "closing_test_util.hpp"
+#include "sglc/closing/ingestor.hpp"
+#include "sglc/rigid.hpp"
+
+namespace sglc::closing {
+namespace {
+
+using storage::StorageError;
+
+class IngestorTest : public ::testing::Test, public test::TwoStreets {
+ protected:
+  IngestorTest() : scan(test::viewFrom(test::makeStreetWorld(7), test::kQueryPose)) {}
+
+  IngestInput input(std::int64_t seq, bool with_pose = true) const {
+    IngestInput in;
+    in.key = {"m", "r3", "t", seq};
+    in.stamp = 12.5;
+    if (with_pose) in.odometry_pose = test::kQueryPose;
+    in.query = true;
+    return in;
+  }
+  Ingested ingest(const Ingestor& ingestor, const IngestInput& in) const {
+    return ingestor.commit(ingestor.compute(scan, in, {}), scan);
+  }
+
+  LabelledScan scan;
+  std::vector<std::string> told;  // maps the ingestor reported recorded loops for
+  Ingestor::LoopsRecorded recorder() {
+    return [this](const std::string& map) { told.push_back(map); };
+  }
+};
+
+TEST_F(IngestorTest, StoresTheScanAndAnswersItsLoopsFoundBeforeIt) {
+  const LoopFinder finder(pipeline, *store);
+  const Ingestor ingestor(pipeline, *store, finder);
+  const auto done = ingest(ingestor, input(0));
+  EXPECT_GT(done.scan_id, 0);
+  EXPECT_FALSE(done.already_stored);
+  EXPECT_EQ(done.report.label_source, ScanReport::LabelSource::kProvided);
+  ASSERT_EQ(done.loops.size(), 2u);  // the two stored views of this street
+  for (const auto& l : done.loops) EXPECT_TRUE(scans.at(l.scan_id).same_place);
+  const auto info = store->scanInfo(done.scan_id);
+  ASSERT_TRUE(info);
+  EXPECT_EQ(info->robot, "r3");
+  EXPECT_EQ(info->stamp, 12.5);
+  EXPECT_EQ(info->odometry_pose, test::kQueryPose);
+  EXPECT_FALSE(info->has_raw);
+  EXPECT_TRUE(store->loops("m").empty());  // no pose graph was given: nothing recorded
+}
+
+TEST_F(IngestorTest, AnIdenticalRetryAnswersAsTheFirstCallAndADifferentScanIsRefused) {
+  const LoopFinder finder(pipeline, *store);
+  const Ingestor ingestor(pipeline, *store, finder);
+  const auto first = ingest(ingestor, input(0));
+  const auto again = ingest(ingestor, input(0));
+  EXPECT_TRUE(again.already_stored);
+  EXPECT_EQ(again.scan_id, first.scan_id);
+  ASSERT_EQ(again.loops.size(), first.loops.size());  // the stored copy of itself is not a loop
+  for (std::size_t i = 0; i < first.loops.size(); ++i) EXPECT_EQ(again.loops[i].scan_id, first.loops[i].scan_id);
+  auto changed = input(0);
+  changed.stamp = 13.0;
+  try {
+    ingest(ingestor, changed);
+    FAIL() << "a different scan under a stored key was accepted";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kAlreadyExists);
+    EXPECT_NE(std::string(e.what()).find("already holds a different scan"), std::string::npos) << e.what();
+  }
+}
+
+// Two calls with the same scan race: both computed before either stored. The second to commit answers as a
+// retry, without the first's copy among its loops.
+TEST_F(IngestorTest, ARacingIdenticalCallAnswersAsARetry) {
+  const LoopFinder finder(pipeline, *store);
+  const Ingestor ingestor(pipeline, *store, finder);
+  auto a = ingestor.compute(scan, input(0), {});
+  auto b = ingestor.compute(scan, input(0), {});
+  const auto first = ingestor.commit(std::move(a), scan);
+  const auto second = ingestor.commit(std::move(b), scan);
+  EXPECT_FALSE(first.already_stored);
+  EXPECT_TRUE(second.already_stored);
+  EXPECT_EQ(second.scan_id, first.scan_id);
+  for (const auto& l : second.loops) EXPECT_NE(l.scan_id, first.scan_id);
+}
+
+TEST_F(IngestorTest, VerifiedLoopsOfAScanWithAPoseAreRecordedForThePoseGraph) {
+  const LoopFinder finder(pipeline, *store);
+  const Ingestor ingestor(pipeline, *store, finder, recorder());
+  auto in = input(0);
+  in.query_options.include_rejected = true;
+  const auto done = ingest(ingestor, in);
+  EXPECT_TRUE(done.unrecorded_loops.empty());
+  ASSERT_EQ(told, std::vector<std::string>{"m"});
+  const auto recorded = store->loops("m");
+  ASSERT_EQ(recorded.size(), 2u);  // the two accepted ones, not the rejected ones
+  for (const auto& r : recorded) {
+    EXPECT_EQ(r.query_scan, done.scan_id);
+    const auto it = std::find_if(done.loops.begin(), done.loops.end(),
+                                 [&](const FoundLoop& l) { return l.scan_id == r.candidate_scan; });
+    ASSERT_NE(it, done.loops.end());
+    EXPECT_TRUE(it->result.is_loop);
+    EXPECT_EQ(r.T, orthonormalised(it->result.T));
+    EXPECT_EQ(r.score, it->result.score);
+    EXPECT_EQ(r.inliers, it->result.inliers);
+    ASSERT_TRUE(r.information);
+    EXPECT_EQ(*r.information, it->result.information);
+  }
+  // Without an odometry pose the scan is no pose-graph node: its loops are not recorded.
+  told.clear();
+  const auto no_pose = ingest(ingestor, input(1, false));
+  EXPECT_FALSE(no_pose.loops.empty());
+  EXPECT_TRUE(told.empty());
+  EXPECT_EQ(store->loops("m").size(), 2u);
+}
+
+TEST_F(IngestorTest, RawCloudsAreKeptOnlyWhenAsked) {
+  const LoopFinder finder(pipeline, *store);
+  const Ingestor ingestor(pipeline, *store, finder);
+  auto in = input(0);
+  in.store_raw = true;
+  in.query = false;
+  const auto done = ingest(ingestor, in);
+  EXPECT_TRUE(done.loops.empty());
+  const auto raw = store->rawScan(done.scan_id);
+  ASSERT_TRUE(raw);
+  EXPECT_EQ(raw->points.size(), scan.points.size());
+}
+
+}  // namespace
+}  // namespace sglc::closing

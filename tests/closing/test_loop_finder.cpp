@@ -1,0 +1,236 @@
+// The query use case over a real map database: two streets, views of each stored by two robots.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "closing_test_util.hpp"
+#include "sglc/closing/loop_finder.hpp"
+
+namespace sglc::closing {
+namespace {
+
+using storage::StorageError;
+using test::rotationErrorDeg;
+using test::translationError;
+
+class LoopFinderTest : public ::testing::Test, public test::TwoStreets {};
+
+TEST_F(LoopFinderTest, FindsTheStoredViewsOfTheSamePlaceFirstWithTheirPosesAndOwners) {
+  const LoopFinder finder(pipeline, *store);
+  QueryOptions o;
+  o.include_rejected = true;
+  QueryTiming t;
+  const auto found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 4u);  // every stored scan is a candidate (10 by default)
+  // The two views of the same street are accepted, the other street's rejected and ranked after them.
+  EXPECT_TRUE(found[0].result.is_loop);
+  EXPECT_TRUE(found[1].result.is_loop);
+  EXPECT_FALSE(found[2].result.is_loop);
+  EXPECT_FALSE(found[3].result.is_loop);
+  EXPECT_GE(found[0].result.score, found[1].result.score);
+  for (const auto& f : found) {
+    const auto& expected = scans.at(f.scan_id);
+    EXPECT_EQ(f.robot, expected.robot);
+    EXPECT_EQ(f.session, "s");
+    EXPECT_EQ(f.seq, expected.seq);
+    EXPECT_GT(f.descriptor_distance, 0.0f);
+    if (!f.result.is_loop) {
+      EXPECT_FALSE(f.result.refined);  // a rejected candidate gets no pose without known_loops
+      continue;
+    }
+    EXPECT_TRUE(expected.same_place);
+    ASSERT_TRUE(f.result.refined);
+    const Mat4d truth = test::kQueryPose.inverse() * expected.pose;  // candidate -> query
+    EXPECT_LT(translationError(f.result.T, truth), 0.1) << f.result.T;
+    EXPECT_LT(rotationErrorDeg(f.result.T, truth), 0.5) << f.result.T;
+    EXPECT_FALSE(f.result.information.isZero());
+  }
+}
+
+TEST_F(LoopFinderTest, TopKMinScoreAndRejectedCandidatesAreHonoured) {
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  QueryOptions o;  // rejected candidates are left out by default
+  auto found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  o.top_k = 1;
+  found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 1u);
+  o.top_k = 0;
+  o.min_score = found[0].result.score + 1e-9;  // above the best accepted score: nothing accepted remains
+  EXPECT_TRUE(finder.find(query, origin("r3"), o, {}, &t).empty());
+  o.min_score.reset();
+  o.refine = false;
+  found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  EXPECT_FALSE(found[0].result.refined);
+}
+
+TEST_F(LoopFinderTest, ScopeAndExclusionsLimitTheCandidates) {
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  QueryOptions o;
+  o.include_rejected = true;
+  o.scope = Scope::kSameRobot;
+  auto found = finder.find(query, origin("r1"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  for (const auto& f : found) EXPECT_EQ(f.robot, "r1");
+  o.scope = Scope::kOtherRobots;
+  found = finder.find(query, origin("r1"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  for (const auto& f : found) EXPECT_EQ(f.robot, "r2");
+  o.scope = Scope::kSessions;
+  o.sessions = {"r2/s"};
+  found = finder.find(query, origin("r1"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  for (const auto& f : found) EXPECT_EQ(f.robot, "r2");
+  // Robot r1 asking from seq 5 of session s, excluding 10 either side: its own scans (seq 0 and 1) go.
+  o = {};
+  o.include_rejected = true;
+  o.exclude_recent = 10;
+  auto who = origin("r1");
+  who.seq = 5;
+  found = finder.find(query, who, o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  for (const auto& f : found) EXPECT_EQ(f.robot, "r2");
+  // A stored query scan never matches itself.
+  who = origin("r3");
+  who.self_scan = same_place_id;
+  found = finder.find(query, who, o, {}, &t);
+  ASSERT_EQ(found.size(), 3u);
+  for (const auto& f : found) EXPECT_NE(f.scan_id, same_place_id);
+}
+
+TEST_F(LoopFinderTest, ListedScansAreVerifiedWithoutASearch) {
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  QueryOptions o;
+  o.include_rejected = true;
+  o.verify_scan_ids = {other_place_id, same_place_id};
+  auto found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  EXPECT_EQ(found[0].scan_id, same_place_id);  // accepted first, whatever the listed order
+  EXPECT_EQ(found[1].scan_id, other_place_id);
+  EXPECT_EQ(found[0].descriptor_distance,
+            descriptorDistance(query.descriptor, store->fingerprint(same_place_id)->descriptor));
+  // known_loops estimates a pose for the rejected one too.
+  o.known_loops = true;
+  found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  EXPECT_FALSE(found[1].result.is_loop);
+  EXPECT_TRUE(found[1].result.refined);
+}
+
+TEST_F(LoopFinderTest, AStoredScanQueriesAsItsOwnOrigin) {
+  const LoopFinder finder(pipeline, *store);
+  const auto [fp, who] = finder.storedQuery("m", same_place_id);
+  ASSERT_TRUE(fp);
+  EXPECT_EQ(who.robot, "r1");
+  EXPECT_EQ(who.seq, 0);
+  EXPECT_EQ(who.self_scan, same_place_id);
+  QueryTiming t;
+  for (const auto& f : finder.find(*fp, who, {}, {}, &t)) EXPECT_NE(f.scan_id, same_place_id);
+  try {
+    finder.storedQuery("other", same_place_id);
+    FAIL() << "a scan of another map was found";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kNotFound);
+    EXPECT_STREQ(e.what(), ("map 'other' has no scan " + std::to_string(same_place_id)).c_str());
+  }
+}
+
+// Each mistake in the options is reported with what is wrong, before any work.
+TEST_F(LoopFinderTest, BadOptionsSayWhatIsWrong) {
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  auto expectInput = [&](const QueryOptions& o, const QueryOrigin& who, const std::string& message) {
+    try {
+      finder.find(query, who, o, {}, &t);
+      ADD_FAILURE() << "accepted; expected: " << message;
+    } catch (const StorageError& e) {
+      ADD_FAILURE() << "StorageError " << e.what() << "; expected: " << message;
+    } catch (const InputError& e) {
+      EXPECT_EQ(std::string(e.what()), message);
+    }
+  };
+  QueryOptions o;
+  o.top_k = 101;
+  expectInput(o, origin("r3"), "top_k must be at most 100");
+  o = {};
+  o.candidates = 201;
+  expectInput(o, origin("r3"), "candidates must be at most 200");
+  o = {};
+  o.exclude_recent = -1;
+  expectInput(o, origin("r3"), "exclude_recent and exclude_seconds must be >= 0");
+  o = {};
+  o.exclude_seconds = std::numeric_limits<double>::quiet_NaN();
+  expectInput(o, origin("r3"), "exclude_recent and exclude_seconds must be >= 0");
+  o = {};
+  o.known_loops = true;
+  o.refine = false;
+  expectInput(o, origin("r3"), "known_loops asks for poses: it cannot go with refine = false");
+  o = {};
+  o.min_score = std::numeric_limits<double>::infinity();
+  expectInput(o, origin("r3"), "min_score is not finite");
+  o = {};
+  o.scope = Scope::kSameRobot;
+  expectInput(o, origin(""), "scope SAME_ROBOT / OTHER_ROBOTS needs the query's robot");
+  o.scope = Scope::kSessions;
+  expectInput(o, origin("r3"),
+              "scope SESSIONS needs at least one 'robot/session' in sessions or one session_refs entry");
+  o.sessions = {"r1-s"};
+  expectInput(o, origin("r3"), "sessions entry 'r1-s' is not 'robot/session'");
+  o = {};
+  o.verify_scan_ids = {same_place_id, same_place_id};
+  expectInput(o, origin("r3"), "verify_scan_ids repeats scan " + std::to_string(same_place_id));
+  o.verify_scan_ids.assign(201, 1);
+  expectInput(o, origin("r3"), "verify_scan_ids: at most 200");
+  o.verify_scan_ids = {987654};
+  try {
+    finder.find(query, origin("r3"), o, {}, &t);
+    FAIL() << "an unknown listed scan was accepted";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kNotFound);
+    EXPECT_STREQ(e.what(), "map 'm' has no scan 987654");
+  }
+}
+
+// However the caller runs the items (here: backwards, as a parallel pool may), the answer is the same.
+TEST_F(LoopFinderTest, TheAnswerDoesNotDependOnHowItemsRun) {
+  const LoopFinder finder(pipeline, *store);
+  QueryOptions o;
+  o.include_rejected = true;
+  o.known_loops = true;
+  QueryTiming t;
+  const auto serial = finder.find(query, origin("r3"), o, {}, &t);
+  Execution backwards;
+  backwards.parallel_for = [](std::size_t n, const std::function<void(std::size_t)>& fn) {
+    for (std::size_t i = n; i-- > 0;) fn(i);
+  };
+  const auto reversed = finder.find(query, origin("r3"), o, backwards, &t);
+  ASSERT_EQ(serial.size(), reversed.size());
+  for (std::size_t i = 0; i < serial.size(); ++i) {
+    EXPECT_EQ(serial[i].scan_id, reversed[i].scan_id);
+    EXPECT_EQ(serial[i].result.score, reversed[i].result.score);
+    EXPECT_EQ(serial[i].result.T, reversed[i].result.T);
+  }
+}
+
+TEST_F(LoopFinderTest, AnAbandonedCallStopsWithTheCallersError) {
+  const LoopFinder finder(pipeline, *store);
+  Execution cancelled;
+  int checks = 0;
+  cancelled.check_alive = [&] {
+    ++checks;
+    throw std::runtime_error("cancelled");
+  };
+  QueryTiming t;
+  EXPECT_THROW(finder.find(query, origin("r3"), {}, cancelled, &t), std::runtime_error);
+  EXPECT_EQ(checks, 1);  // the first item stops the rest
+}
+
+}  // namespace
+}  // namespace sglc::closing
