@@ -1,0 +1,19 @@
+// Each map's descriptor index as the store keeps it: loaded from its snapshot or rebuilt from the scans on
+// open, searched with the catalogue's names turned into filters, and snapshotted on close.
+#pragma once
+
+#include <vector>
+
+#include "store_core.hpp"
+
+namespace sglc::storage::map_index {
+
+// Fills m's index from its snapshot when one of m's generation exists (and snapshots are on), else from the
+// scan rows. Called while opening, before any other thread sees the store.
+void load(StoreCore& core, MapState& m);
+std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& request);
+// Writes every map's snapshot; a map with deletions since its index was built gets none (the next open
+// rebuilds it without the deleted scans).
+void snapshot(StoreCore& core);
+
+}  // namespace sglc::storage::map_index

@@ -1,0 +1,107 @@
+// Deleting a session's or a robot's scans with everything that hangs on them (blobs, loops, optimised poses,
+// session frames, then the session and robot rows), in one transaction, and out of the index and the cache.
+#include <array>
+#include <unordered_set>
+
+#include "scan_table.hpp"
+
+namespace sglc::storage::scan_table {
+namespace {
+
+using Code = StorageError::Code;
+
+// The statements of one kind of deletion, all bound to ?1 = the map's id and ?2 = the session's or robot's id:
+// first the ids of the scans removed, then the rows in dependency order.
+struct Deletion {
+  const char* scan_ids;
+  std::array<const char*, 7> rows;
+};
+
+constexpr Deletion kSession = {
+    "SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2",
+    {"DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
+     "DELETE FROM loops WHERE query_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2) OR"
+     " candidate_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
+     "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
+     "DELETE FROM session_frames WHERE session_id IN"
+     " (SELECT session_id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
+     "DELETE FROM scans WHERE map_id = ?1 AND session_id = ?2", "DELETE FROM sessions WHERE id = ?2", nullptr}};
+
+constexpr Deletion kRobot = {
+    "SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2",
+    {"DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
+     "DELETE FROM loops WHERE query_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2) OR"
+     " candidate_scan IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
+     "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
+     "DELETE FROM session_frames WHERE session_id IN"
+     " (SELECT session_id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
+     "DELETE FROM scans WHERE map_id = ?1 AND robot_id = ?2", "DELETE FROM sessions WHERE robot_id = ?2",
+     "DELETE FROM robots WHERE id = ?2"}};
+
+// Runs `deletion` for `id` (the caller holds the write lock); `update` then fixes the catalogue under the
+// exclusive state lock, with the commit. Returns the number of scans removed from the index.
+template <typename UpdateCatalogue>
+std::int64_t deleteScans(StoreCore& core, MapState& m, const Deletion& deletion, std::int64_t id,
+                         UpdateCatalogue update) {
+  const auto& db = core.writer();
+  sql::Transaction tx(db);
+  std::unordered_set<std::int64_t> ids;
+  {
+    sql::Stmt st(db, deletion.scan_ids);
+    st.bind(1, m.id).bind(2, id);
+    while (st.step()) ids.insert(st.i64(0));
+  }
+  for (const char* text : deletion.rows)
+    if (text) sql::Stmt(db, text).bind(1, m.id).bind(2, id).run();
+  sql::Stmt(db, "UPDATE maps SET generation = generation + 1 WHERE id = ?").bind(1, m.id).run();
+  std::unique_lock lock(core.state_mutex);
+  tx.commit();
+  m.generation += 1;
+  const auto removed = m.index->remove(ids);
+  update();
+  for (auto sid : ids) core.cache.erase(sid);
+  return removed;
+}
+
+}  // namespace
+
+std::int64_t deleteSession(StoreCore& core, const std::string& map, const std::string& robot,
+                           const std::string& session) {
+  std::lock_guard write(core.write_mutex);
+  MapState* m;
+  std::int64_t session_id;
+  {
+    std::shared_lock lock(core.state_mutex);
+    m = &core.catalogue.map(map);
+    auto r = m->robots.find(robot);
+    if (r == m->robots.end()) throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
+    auto s = m->sessions.find({r->second, session});
+    if (s == m->sessions.end())
+      throw StorageError(Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
+    session_id = s->second;
+  }
+  return deleteScans(core, *m, kSession, session_id, [&] {
+    for (auto it = m->sessions.begin(); it != m->sessions.end();)
+      it = it->second == session_id ? m->sessions.erase(it) : std::next(it);
+  });
+}
+
+std::int64_t deleteRobot(StoreCore& core, const std::string& map, const std::string& robot) {
+  std::lock_guard write(core.write_mutex);
+  MapState* m;
+  std::int64_t robot_id;
+  {
+    std::shared_lock lock(core.state_mutex);
+    m = &core.catalogue.map(map);
+    auto r = m->robots.find(robot);
+    if (r == m->robots.end()) throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
+    robot_id = r->second;
+  }
+  return deleteScans(core, *m, kRobot, robot_id, [&] {
+    m->robots.erase(robot);
+    for (auto it = m->sessions.begin(); it != m->sessions.end();)
+      it = it->first.first == robot_id ? m->sessions.erase(it) : std::next(it);
+  });
+}
+
+}  // namespace sglc::storage::scan_table

@@ -1,0 +1,167 @@
+#include "schema.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <random>
+#include <vector>
+
+namespace sglc::storage {
+namespace {
+
+namespace fs = std::filesystem;
+using Code = StorageError::Code;
+
+constexpr std::int32_t kApplicationId = 0x53474C43;  // "SGLC": marks our SQLite files
+
+// Forward migrations: kMigrations[v] upgrades a file from user_version v to v + 1.
+const std::vector<const char*> kMigrations = {
+    // 0 -> 1: the initial schema.
+    R"sql(
+    CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
+    CREATE TABLE maps(
+      id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, descriptor_dim INTEGER NOT NULL,
+      created_at REAL NOT NULL, generation INTEGER NOT NULL DEFAULT 0);
+    CREATE TABLE robots(
+      id INTEGER PRIMARY KEY, map_id INTEGER NOT NULL REFERENCES maps(id), name TEXT NOT NULL,
+      UNIQUE(map_id, name));
+    CREATE TABLE sessions(
+      id INTEGER PRIMARY KEY, robot_id INTEGER NOT NULL REFERENCES robots(id), name TEXT NOT NULL,
+      created_at REAL NOT NULL, UNIQUE(robot_id, name));
+    CREATE TABLE scans(
+      id INTEGER PRIMARY KEY AUTOINCREMENT, map_id INTEGER NOT NULL REFERENCES maps(id),
+      robot_id INTEGER NOT NULL REFERENCES robots(id), session_id INTEGER NOT NULL REFERENCES sessions(id),
+      seq INTEGER NOT NULL, stamp REAL, pose BLOB, descriptor BLOB NOT NULL,
+      fingerprint_bytes INTEGER NOT NULL, has_raw INTEGER NOT NULL, created_at REAL NOT NULL,
+      UNIQUE(session_id, seq));
+    CREATE INDEX scans_by_map ON scans(map_id, id);
+    -- Large payloads apart, so that rebuilding the index reads only the small rows above.
+    CREATE TABLE scan_blobs(
+      scan_id INTEGER PRIMARY KEY REFERENCES scans(id), fingerprint BLOB NOT NULL, raw BLOB);
+    )sql",
+    // 1 -> 2: the pose graph (verified loops, optimised poses, session frames).
+    R"sql(
+    CREATE TABLE loops(
+      id INTEGER PRIMARY KEY AUTOINCREMENT, map_id INTEGER NOT NULL REFERENCES maps(id),
+      query_scan INTEGER NOT NULL REFERENCES scans(id), candidate_scan INTEGER NOT NULL REFERENCES scans(id),
+      t BLOB NOT NULL, score REAL NOT NULL, inliers INTEGER NOT NULL, fitness REAL NOT NULL, rmse REAL NOT NULL,
+      created_at REAL NOT NULL, UNIQUE(query_scan, candidate_scan));
+    CREATE INDEX loops_by_map ON loops(map_id, id);
+    CREATE INDEX loops_by_candidate ON loops(candidate_scan);
+    CREATE TABLE optimised_poses(scan_id INTEGER PRIMARY KEY REFERENCES scans(id), pose BLOB NOT NULL);
+    CREATE TABLE session_frames(
+      session_id INTEGER PRIMARY KEY REFERENCES sessions(id), t BLOB NOT NULL, connected INTEGER NOT NULL);
+    ALTER TABLE maps ADD COLUMN graph_version INTEGER NOT NULL DEFAULT 0;
+    )sql",
+    // 2 -> 3: the information matrix of each loop's pose (36 doubles; NULL for loops recorded before).
+    R"sql(
+    ALTER TABLE loops ADD COLUMN information BLOB;
+    )sql",
+    // 3 -> 4: the last loop the stored optimised poses account for (0: unknown, all loops are new).
+    R"sql(
+    ALTER TABLE maps ADD COLUMN graph_loop INTEGER NOT NULL DEFAULT 0;
+    )sql",
+};
+
+// The file may be opened for writing: the path is a file (or can become one) in a writable place.
+void checkPath(const std::string& file) {
+  if (file.empty()) throw StorageError(Code::kInvalidArgument, "database path is empty");
+  const fs::path path(file);
+  std::error_code ec;
+  const bool existed = fs::exists(path, ec);
+  if (existed && fs::is_directory(path, ec))
+    throw StorageError(Code::kInvalidArgument, file + ": is a directory, not a database file");
+  if (!existed && path.has_parent_path()) {
+    fs::create_directories(path.parent_path(), ec);
+    if (ec)
+      throw StorageError(
+          ec == std::errc::permission_denied || ec == std::errc::read_only_file_system ? Code::kReadOnly : Code::kIo,
+          path.parent_path().string() + ": cannot create directory: " + ec.message());
+  }
+  if (!existed) {
+    const auto dir = path.has_parent_path() ? path.parent_path() : fs::path(".");
+    if (::access(dir.c_str(), W_OK) != 0)
+      throw StorageError(Code::kReadOnly, dir.string() + ": directory is not writable, cannot create " + file);
+  } else if (::access(file.c_str(), W_OK) != 0) {
+    throw StorageError(Code::kReadOnly, file + ": database file is not writable");
+  }
+}
+
+// The file is an SGLC map (or a new, empty SQLite file) of a schema this build reads; returns its version.
+std::int64_t checkedVersion(const sql::Db& db, const std::string& file) {
+  std::int64_t app_id = 0, version = 0, objects = 0;
+  try {
+    sql::Stmt a(db, "PRAGMA application_id");
+    if (a.step()) app_id = a.i64(0);
+    sql::Stmt v(db, "PRAGMA user_version");
+    if (v.step()) version = v.i64(0);
+    sql::Stmt o(db, "SELECT count(*) FROM sqlite_master");
+    if (o.step()) objects = o.i64(0);
+  } catch (const StorageError& e) {
+    if (e.code() == Code::kCorrupt)
+      throw StorageError(Code::kCorrupt, file + ": not an SGLC map database (not SQLite, or damaged)");
+    throw;
+  }
+  if (app_id != kApplicationId && !(app_id == 0 && objects == 0))
+    throw StorageError(Code::kCorrupt, file + ": a foreign SQLite database, not an SGLC map");
+  if (version > kSchemaVersion)
+    throw StorageError(Code::kNewerSchema, file + ": schema version " + std::to_string(version) +
+                                               " is newer than this build supports (" + std::to_string(kSchemaVersion) +
+                                               "); upgrade the software");
+  return version;
+}
+
+void configure(const sql::Db& db, const StoreOptions& options) {
+  // WAL lets readers run during a write; it must be set outside a transaction.
+  {
+    sql::Stmt wal(db, "PRAGMA journal_mode=WAL");
+    if (!wal.step() || wal.text(0) != "wal")
+      throw StorageError(Code::kIo, options.path + ": cannot switch to WAL journal mode");
+  }
+  const char* sync = options.sync == StoreOptions::Sync::kFull     ? "FULL"
+                     : options.sync == StoreOptions::Sync::kNormal ? "NORMAL"
+                                                                   : "OFF";
+  db.exec(std::string("PRAGMA synchronous=") + sync);
+  db.exec("PRAGMA foreign_keys=ON");
+  if (options.max_db_mb > 0) {
+    const auto pages = static_cast<std::int64_t>(options.max_db_mb * 1024 * 1024 / 4096);
+    db.exec("PRAGMA max_page_count=" + std::to_string(std::max<std::int64_t>(pages, 16)));
+  }
+}
+
+// Forward migrations from `version`, each in its own transaction with the version bump.
+void migrate(const sql::Db& db, std::int64_t version) {
+  for (auto v = version; v < kSchemaVersion; ++v) {
+    sql::Transaction tx(db);
+    db.exec(kMigrations[static_cast<std::size_t>(v)]);
+    if (v == 0) {
+      std::random_device rd;
+      const auto token = (static_cast<std::uint64_t>(rd()) << 32) ^ rd();
+      sql::Stmt(db, "INSERT INTO meta(key, value) VALUES('token', ?)").bind(1, std::to_string(token)).run();
+      db.exec("PRAGMA application_id=" + std::to_string(kApplicationId));
+    }
+    db.exec("PRAGMA user_version=" + std::to_string(v + 1));
+    tx.commit();
+  }
+}
+
+}  // namespace
+
+OpenedDatabase openDatabase(const StoreOptions& options) {
+  checkPath(options.path);
+  OpenedDatabase db;
+  db.lock = ProcessLock(options.path);
+  db.writer = sql::Db(options.path, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, options.busy_timeout_ms);
+  const auto version = checkedVersion(db.writer, options.path);
+  configure(db.writer, options);
+  migrate(db.writer, version);
+  {
+    sql::Stmt t(db.writer, "SELECT value FROM meta WHERE key = 'token'");
+    if (!t.step()) throw StorageError(Code::kCorrupt, options.path + ": meta table has no token");
+    db.token = t.text(0);
+  }
+  return db;
+}
+
+}  // namespace sglc::storage
