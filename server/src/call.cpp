@@ -4,7 +4,7 @@
 
 #include <cmath>
 
-#include "log_line.hpp"
+#include "sglc/log/log_line.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/types.hpp"
 #include "sglc/wire/error.hpp"
@@ -71,9 +71,9 @@ grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, con
   if (!status.ok()) line["error"] = status.error_message();
   if (!detail.empty()) line["detail"] = detail;
   if (status.ok())
-    spdlog::info("{}", logLine(line));
+    spdlog::info("{}", logging::logLine(line));
   else
-    spdlog::warn("{}", logLine(line));
+    spdlog::warn("{}", logging::logLine(line));
   return status;
 }
 

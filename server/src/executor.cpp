@@ -2,7 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
-#include "log_line.hpp"
+#include "sglc/log/log_line.hpp"
 
 namespace sglc::server {
 
@@ -39,7 +39,7 @@ void Executor::loop() {
       task();
     } catch (const std::exception& e) {
       // Tasks handle their own errors: one that escapes is a bug, logged like every other line (JSON).
-      spdlog::error("{}", logLine({{"event", "executor_task_threw"}, {"error", e.what()}}));
+      spdlog::error("{}", logging::logLine({{"event", "executor_task_threw"}, {"error", e.what()}}));
     }
     lock.lock();
   }

@@ -19,8 +19,8 @@
 
 #include "call.hpp"
 #include "io_poller.hpp"
-#include "log_line.hpp"
 #include "service.hpp"
+#include "sglc/log/log_line.hpp"
 
 namespace {
 
@@ -332,11 +332,11 @@ int main(int argc, char** argv) {
     io_poller.start();
     auto* health = server->GetHealthCheckService();
     health->SetServingStatus(false);  // NOT_SERVING until the map database is loaded
-    spdlog::info("{}", sglc::server::logLine({{"event", "listening"},
-                                              {"address", s.listen},
-                                              {"port", port},
-                                              {"tls", !s.tls_cert.empty()},
-                                              {"auth", state->tokens().enabled()}}));
+    spdlog::info("{}", sglc::logging::logLine({{"event", "listening"},
+                                               {"address", s.listen},
+                                               {"port", port},
+                                               {"tls", !s.tls_cert.empty()},
+                                               {"auth", state->tokens().enabled()}}));
 
     const auto t0 = std::chrono::steady_clock::now();
     std::unique_ptr<sglc::storage::MapStore> store;
@@ -353,7 +353,7 @@ int main(int argc, char** argv) {
     state->attach(store.get(), graph.get());
     health->SetServingStatus(true);
     spdlog::info(
-        "{}", sglc::server::logLine(
+        "{}", sglc::logging::logLine(
                   {{"event", "serving"},
                    {"db", s.db},
                    {"maps", st.maps},
@@ -365,7 +365,7 @@ int main(int argc, char** argv) {
 
     int sig = 0;
     sigwait(&signals, &sig);
-    spdlog::info("{}", sglc::server::logLine({{"event", "shutdown"}, {"signal", sig}}));
+    spdlog::info("{}", sglc::logging::logLine({{"event", "shutdown"}, {"signal", sig}}));
     health->SetServingStatus(false);
     graph->stop();  // loops recorded from now on are optimised after the next start
     // Watchers end; ingest streams end after the request they are working on; new streams are refused.

@@ -11,11 +11,11 @@
 #include <tuple>
 
 #include "call.hpp"
-#include "log_line.hpp"
 #include "query_codec.hpp"
 #include "rpc_error.hpp"
 #include "sglc/closing/ingestor.hpp"
 #include "sglc/closing/loop_finder.hpp"
+#include "sglc/log/log_line.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
 
@@ -43,7 +43,7 @@ void reportScan(const ScanReport& report, const std::string& map, const std::str
   if (!report.warnings.empty())
     spdlog::warn(
         "{}",
-        logLine(
+        logging::logLine(
             {{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq}, {"warnings", report.warnings}}));
 }
 
@@ -112,7 +112,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   resp->set_scan_id(done.scan_id);
   resp->set_already_stored(done.already_stored);
   for (const auto& error : done.unrecorded_loops)
-    spdlog::warn("{}", logLine({{"event", "loop_not_recorded"}, {"scan", done.scan_id}, {"error", error}}));
+    spdlog::warn("{}", logging::logLine({{"event", "loop_not_recorded"}, {"scan", done.scan_id}, {"error", error}}));
   resp->set_seq(key.seq());
   timing->set_total_ms(msSince(t_start));
 }

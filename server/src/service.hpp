@@ -9,14 +9,18 @@
 #include "auth.hpp"
 #include "compute_pool.hpp"
 #include "executor.hpp"
-#include "graph_optimiser.hpp"
 #include "memory_budget.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
 #include "stream_registry.hpp"
 
 namespace sglc::server {
+
+using posegraph::GraphEvent;
+using posegraph::GraphOptimiser;
+using posegraph::GraphOptimiserOptions;
 
 struct ServiceLimits {
   std::size_t max_points = 2'000'000;                     // per scan

@@ -26,8 +26,9 @@ def provider(header):
         return "core"
     if header in IO_HEADERS:
         return "io"
-    for prefix, module in (("sglc/storage/", "storage"), ("sglc/closing/", "closing"), ("sglc/wire/", "wire"),
-                           ("sglc/v1/", "proto"), ("sglc/client/", "client"), ("sim/", "sim")):
+    for prefix, module in (("sglc/storage/", "storage"), ("sglc/closing/", "closing"), ("sglc/posegraph/", "posegraph"),
+                           ("sglc/log/", "log"), ("sglc/wire/", "wire"), ("sglc/v1/", "proto"),
+                           ("sglc/client/", "client"), ("sim/", "sim")):
         if header.startswith(prefix):
             return module
     return None
@@ -44,7 +45,7 @@ POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h"
          "sys/time.h", "time.h", "dirent.h", "pthread.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
-ALL = {"types", "core", "io", "storage", "closing", "proto", "wire", "client", "sim"}
+ALL = {"types", "core", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
 LAYERS = {
     "types": (TYPES_FILES, {"types"}, {"eigen"}),
     "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "yaml", "zlib"}),
@@ -52,10 +53,14 @@ LAYERS = {
     "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
     # The use cases: the engine and the map database, nothing of any transport.
     "closing": (["closing"], {"types", "core", "storage", "closing"}, {"eigen"}),
+    # One JSON object per log line.
+    "log": (["log"], {"log"}, {"json"}),
+    # Each map's pose graph: the map database's graph tables and Ceres.
+    "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph"}, {"eigen", "ceres", "spdlog"}),
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
-    "server": (["server/src"], {"types", "core", "storage", "closing", "proto", "wire"},
-               {"eigen", "grpc", "protobuf", "spdlog", "ceres", "json", "yaml", "cli11"}),
+    "server": (["server/src"], {"types", "core", "storage", "closing", "posegraph", "log", "proto", "wire"},
+               {"eigen", "grpc", "protobuf", "spdlog", "json", "yaml", "cli11"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.
     "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),
     "tools": (["tools"], ALL, {"eigen", "grpc", "protobuf", "json", "cli11", "benchmark", "spdlog", "yaml"}),

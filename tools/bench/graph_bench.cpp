@@ -21,8 +21,8 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
-#include "graph_optimiser.hpp"
 #include "sglc/descriptors.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sim/ground_truth.hpp"
 #include "sim/simulator.hpp"
@@ -191,11 +191,11 @@ int main(int argc, char** argv) {
   for (std::size_t k = 0; k + static_cast<std::size_t>(timed) < groups.size(); ++k)
     for (const auto& r : groups[k]) loops += store->addLoop("m", r) > 0;
 
-  server::GraphOptimiserOptions o;
+  posegraph::GraphOptimiserOptions o;
   o.max_seconds = 60;
   o.max_continuations = 0;  // each timed optimiseNow is the only solve of its loops
   // Its worker's start-up solve of the map may run first; optimiseNow then returns that solve's event.
-  server::GraphOptimiser graph(*store, o);
+  posegraph::GraphOptimiser graph(*store, o);
   const auto cold = graph.optimiseNow("m");
   std::vector<double> event_ms;
   for (std::size_t k = groups.size() - static_cast<std::size_t>(timed); k < groups.size(); ++k) {

@@ -7,9 +7,9 @@
 #include <random>
 
 #include "../storage/storage_test_util.hpp"
-#include "graph_optimiser.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
 
-namespace sglc::server {
+namespace sglc::posegraph {
 namespace {
 
 using storage::testing::options;
@@ -344,4 +344,4 @@ TEST(GraphOptimiser, AFailedSolveIsReportedAndTheMapKeepsItsPoses) {
 }
 
 }  // namespace
-}  // namespace sglc::server
+}  // namespace sglc::posegraph

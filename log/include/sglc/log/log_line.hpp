@@ -4,7 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-namespace sglc::server {
+namespace sglc::logging {
 
 // logLine({{"event", "optimised"}, {"map", name}, {"ms", 12.5}}) -> {"event":"optimised","map":"...","ms":12.5}
 // Bytes that are not UTF-8 are replaced, so a line is always valid JSON.
@@ -12,4 +12,4 @@ inline std::string logLine(const nlohmann::ordered_json& fields) {
   return fields.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
 }
 
-}  // namespace sglc::server
+}  // namespace sglc::logging

@@ -1,4 +1,4 @@
-// Keeps each map's pose graph optimised, off the request path.
+// Keeps each map's pose graph optimised, off the request path (the graph itself and its solve: map_graph.hpp).
 //
 // Ingest records verified loops in the map database and calls loopsAdded(); a worker thread then reads the
 // new graph rows (scans with odometry poses, loops), optimises the map's pose graph warm-started from its last
@@ -26,7 +26,9 @@
 
 #include "sglc/storage/map_store.hpp"
 
-namespace sglc::server {
+namespace sglc::posegraph {
+
+class MapGraph;
 
 struct GraphEvent {
   std::int64_t graph_version = 0;
@@ -88,10 +90,11 @@ class GraphOptimiser {
   bool stopping() const;
 
  private:
-  struct MapGraph;
   void run();
   GraphEvent optimise(const std::string& map);
   GraphEvent solve(const std::string& map);
+  // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
+  void continueIfUnconverged(const std::string& map, const MapGraph& graph);
   void publish(const std::string& map, const GraphEvent& event);
 
   storage::MapStore& store_;
@@ -111,4 +114,4 @@ class GraphOptimiser {
   std::thread worker_;
 };
 
-}  // namespace sglc::server
+}  // namespace sglc::posegraph

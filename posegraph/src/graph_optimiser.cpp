@@ -1,0 +1,222 @@
+#include "sglc/posegraph/graph_optimiser.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <unordered_map>
+
+#include "map_graph.hpp"
+#include "sglc/log/log_line.hpp"
+#include "sglc/rigid.hpp"
+
+namespace sglc::posegraph {
+
+using Clock = std::chrono::steady_clock;
+
+GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
+    : store_(store), options_(options) {
+  const auto now = Clock::now();
+  for (const auto& m : store_.listMaps())
+    if (!store_.loops(m.name).empty()) due_[m.name] = now;
+  worker_ = std::thread([this] { run(); });
+}
+
+GraphOptimiser::~GraphOptimiser() {
+  stop();
+  if (worker_.joinable()) worker_.join();
+}
+
+void GraphOptimiser::stop() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  changed_.notify_all();
+}
+
+bool GraphOptimiser::stopping() const {
+  std::lock_guard lock(mutex_);
+  return stop_;
+}
+
+void GraphOptimiser::loopsAdded(const std::string& map) {
+  {
+    std::lock_guard lock(mutex_);
+    if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+  }
+  wake_.notify_all();
+}
+
+void GraphOptimiser::scansRemoved(const std::string& map) {
+  {
+    std::lock_guard lock(mutex_);
+    stale_.insert(map);
+    due_[map] = Clock::now();
+  }
+  wake_.notify_all();
+}
+
+std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map, std::int64_t after,
+                                                         std::chrono::milliseconds timeout) {
+  std::unique_lock lock(mutex_);
+  const bool ready = changed_.wait_for(lock, timeout, [&] {
+    if (stop_) return true;
+    const auto it = latest_.find(map);
+    return it != latest_.end() && it->second.graph_version > after;
+  });
+  const auto it = latest_.find(map);
+  if (!ready || stop_ || it == latest_.end() || it->second.graph_version <= after) return std::nullopt;
+  return it->second;
+}
+
+void GraphOptimiser::run() {
+  std::unique_lock lock(mutex_);
+  while (!stop_) {
+    if (due_.empty()) {
+      wake_.wait(lock);
+      continue;
+    }
+    auto next =
+        std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
+    if (next->second > Clock::now()) {
+      wake_.wait_until(lock, next->second);
+      continue;
+    }
+    const std::string map = next->first;
+    due_.erase(next);
+    lock.unlock();
+    optimise(map);  // never throws: a failure becomes the map's failed event
+    lock.lock();
+  }
+}
+
+GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise(map); }
+
+GraphEvent GraphOptimiser::optimise(const std::string& map) {
+  std::lock_guard one(optimise_mutex_);
+  try {
+    return solve(map);
+  } catch (const std::exception& e) {
+    // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
+    graphs_.erase(map);
+    GraphEvent event = latest(map).value_or(GraphEvent{});
+    try {
+      if (!event.graph_version) event.graph_version = store_.graphVersion(map);
+    } catch (const std::exception&) {
+      // the database failed too: the event says 0
+    }
+    event.failed = true;
+    event.converged = false;
+    event.error = e.what();
+    spdlog::error(
+        "{}",
+        logging::logLine(
+            {{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version}, {"error", event.error}}));
+    publish(map, event);
+    return event;
+  }
+}
+
+GraphEvent GraphOptimiser::solve(const std::string& map) {
+  const auto t0 = Clock::now();
+  auto& slot = graphs_[map];
+  {
+    std::lock_guard lock(mutex_);
+    if (stale_.erase(map)) slot.reset();
+  }
+  if (!slot) slot = std::make_unique<MapGraph>();
+  MapGraph& g = *slot;
+
+  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above). Loops are
+  // read before scans: ingest stores a scan before its loops, so every loop read here finds its scans among the
+  // nodes read after it (read the other way round, a scan and its loop stored between the two reads would give
+  // a loop without its node, skipped and never read again).
+  const auto loops = store_.loops(map, g.lastLoop());
+  const auto nodes = store_.graphNodes(map, g.lastScan());
+  // Loops with ids up to solved_through are reflected in the poses the solve starts from: the last solve's,
+  // or, for a fresh graph (server start, after a deletion), the poses kept in the database, so that a restart
+  // continues from where the last run stopped.
+  std::int64_t solved_through = g.lastLoop();
+  const bool fresh = g.empty();
+  std::unordered_map<std::int64_t, Mat4d> kept;
+  if (fresh) {
+    for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
+      if (!rigidMotionError(p.pose)) kept[p.scan_id] = orthonormalised(p.pose);  // else start from odometry
+    solved_through = store_.optimisedThroughLoop(map);
+  }
+  const bool changed = g.absorb(map, loops, nodes, kept);
+  // A solved graph with nothing new would only be solved again to the same poses: report the last event, no new
+  // version (a request queued while an optimisation was running is often already covered by it).
+  if (!fresh && !changed && g.converged()) {
+    std::lock_guard lock(mutex_);
+    const auto it = latest_.find(map);
+    if (it != latest_.end()) return it->second;
+  }
+
+  const auto solution = g.solve(options_, solved_through);
+  GraphEvent event;
+  event.graph_version = store_.saveOptimised(map, g.poses(), g.frames(), g.lastLoop());
+  event.loops = static_cast<std::int64_t>(g.loopCount());
+  event.nodes = static_cast<std::int64_t>(g.nodeCount());
+  event.rejected_loops = solution.rejected_loops;
+  event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  event.converged = solution.converged;
+  g.countSolve(changed);  // new rows: a new problem
+  continueIfUnconverged(map, g);
+  spdlog::info("{}", logging::logLine({{"event", "optimised"},
+                                       {"map", map},
+                                       {"version", event.graph_version},
+                                       {"nodes", event.nodes},
+                                       {"loops", event.loops},
+                                       {"rejected", event.rejected_loops},
+                                       {"iterations", solution.iterations},
+                                       {"converged", event.converged},
+                                       {"ms", std::round(event.optimise_ms * 10) / 10}}));
+  publish(map, event);
+  return event;
+}
+
+// Stopped at a bound: carry on from here soon (the worker; optimiseNow callers see converged = false), but not
+// forever on a graph that never meets Ceres' tolerances.
+void GraphOptimiser::continueIfUnconverged(const std::string& map, const MapGraph& g) {
+  if (g.converged() || g.continuations() >= options_.max_continuations) return;
+  {
+    std::lock_guard lock(mutex_);
+    if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+  }
+  wake_.notify_all();
+}
+
+void GraphOptimiser::publish(const std::string& map, const GraphEvent& event) {
+  {
+    std::lock_guard lock(mutex_);
+    latest_[map] = event;
+  }
+  changed_.notify_all();
+  std::lock_guard lock(listeners_mutex_);
+  for (const auto& [id, listener] : listeners_) listener(map, event);
+}
+
+std::optional<GraphEvent> GraphOptimiser::latest(const std::string& map) const {
+  std::lock_guard lock(mutex_);
+  const auto it = latest_.find(map);
+  if (it == latest_.end()) return std::nullopt;
+  return it->second;
+}
+
+std::uint64_t GraphOptimiser::subscribe(Listener listener) {
+  std::lock_guard lock(listeners_mutex_);
+  const auto id = next_listener_++;
+  listeners_[id] = std::move(listener);
+  return id;
+}
+
+void GraphOptimiser::unsubscribe(std::uint64_t id) {
+  std::lock_guard lock(listeners_mutex_);
+  listeners_.erase(id);
+}
+
+}  // namespace sglc::posegraph
