@@ -31,13 +31,15 @@ void Ingestor::requireSameScan(std::int64_t id, const Fingerprint& fp, const Ing
                            "); an identical retry would answer OK");
 }
 
-PendingScan Ingestor::compute(const LabelledScan& scan, IngestInput input, const Execution& exec) const {
+PendingScan Ingestor::compute(const LabelledScan& scan, IngestInput input, const Execution& exec,
+                              const ReportListener& on_report) const {
   PendingScan p;
   p.input = std::move(input);
   const auto& key = p.input.key;
   const auto t0 = Clock::now();
   p.fingerprint = pipeline_.fingerprint(scan, &p.outcome.report);
   p.outcome.timing.fingerprint_ms = msSince(t0);
+  if (on_report) on_report(p.outcome.report);
   // A retry of a stored scan answers as the first call did (its loops exclude the stored copy of itself).
   p.stored = store_.findScan(key.map, key.robot, key.session, key.seq);
   if (p.stored) requireSameScan(*p.stored, p.fingerprint, p.input);

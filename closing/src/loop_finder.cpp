@@ -55,6 +55,8 @@ void applyScope(const QueryOptions& opt, const QueryOrigin& who, storage::Search
       }
       for (const auto& r : opt.session_refs) req->session_refs.emplace_back(r.robot, r.session);
       break;
+    case Scope::kUnknown:
+      throw InputError("unknown scope");
   }
 }
 

@@ -1,6 +1,5 @@
 #include "query_codec.hpp"
 
-#include "sglc/wire/error.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 
 namespace sglc::server {
@@ -18,7 +17,7 @@ closing::Scope scopeOf(v1::Scope scope) {
     case v1::SCOPE_SESSIONS:
       return closing::Scope::kSessions;
     default:
-      throw wire::WireError("unknown scope");
+      return closing::Scope::kUnknown;  // refused by the finder, in its order of checks
   }
 }
 

@@ -8,7 +8,7 @@
 
 namespace sglc::server {
 
-// Throws WireError for a scope this server does not know.
+// A scope this server does not know becomes Scope::kUnknown (the finder refuses it).
 closing::QueryOptions fromWire(const v1::QueryOptions& options);
 void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::RepeatedPtrField<v1::Candidate>* out);
 void toWire(const closing::QueryTiming& timing, v1::Timing* out);

@@ -98,12 +98,13 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   const closing::Ingestor ingestor(state.pipeline(), store, finder, std::move(recorded));
   // Engine work holds a compute slot; the database write does not.
   auto slot = state.compute().acquire(ctx);
-  auto pending = ingestor.compute(scan, std::move(input), executionOf(state, ctx));
+  auto pending = ingestor.compute(scan, std::move(input), executionOf(state, ctx), [&](const ScanReport& report) {
+    reportScan(report, key.map(), key.robot(), key.seq(), resp);
+  });
   slot.release();
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
   const auto done = ingestor.commit(std::move(pending), scan);
 
-  reportScan(done.report, key.map(), key.robot(), key.seq(), resp);
   toWire(done.loops, resp->mutable_loops());
   auto* timing = resp->mutable_timing();
   toWire(done.timing.query, timing);

@@ -64,13 +64,15 @@ TEST_F(IngestorTest, AnIdenticalRetryAnswersAsTheFirstCallAndADifferentScanIsRef
   for (std::size_t i = 0; i < first.loops.size(); ++i) EXPECT_EQ(again.loops[i].scan_id, first.loops[i].scan_id);
   auto changed = input(0);
   changed.stamp = 13.0;
+  int reports = 0;  // the scan's report comes as soon as it is fingerprinted, before the retry check fails
   try {
-    ingest(ingestor, changed);
+    ingestor.compute(scan, changed, {}, [&](const ScanReport&) { ++reports; });
     FAIL() << "a different scan under a stored key was accepted";
   } catch (const StorageError& e) {
     EXPECT_EQ(e.code(), StorageError::Code::kAlreadyExists);
     EXPECT_NE(std::string(e.what()).find("already holds a different scan"), std::string::npos) << e.what();
   }
+  EXPECT_EQ(reports, 1);
 }
 
 // Two calls with the same scan race: both computed before either stored. The second to commit answers as a

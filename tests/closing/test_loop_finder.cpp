@@ -178,6 +178,11 @@ TEST_F(LoopFinderTest, BadOptionsSayWhatIsWrong) {
   o = {};
   o.scope = Scope::kSameRobot;
   expectInput(o, origin(""), "scope SAME_ROBOT / OTHER_ROBOTS needs the query's robot");
+  o.scope = Scope::kUnknown;  // a scope the caller's wire format does not know
+  expectInput(o, origin("r3"), "unknown scope");
+  o.top_k = 101;  // the numeric options are checked first
+  expectInput(o, origin("r3"), "top_k must be at most 100");
+  o.top_k = 0;
   o.scope = Scope::kSessions;
   expectInput(o, origin("r3"),
               "scope SESSIONS needs at least one 'robot/session' in sessions or one session_refs entry");

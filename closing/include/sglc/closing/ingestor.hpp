@@ -66,9 +66,14 @@ class Ingestor {
            LoopsRecorded loops_recorded = {})
       : pipeline_(pipeline), store_(store), finder_(finder), loops_recorded_(std::move(loops_recorded)) {}
 
+  // Told where the scan's labels came from and what may keep it from closing loops, as soon as it is
+  // fingerprinted (before the checks that may still fail the call).
+  using ReportListener = std::function<void(const ScanReport&)>;
+
   // Engine work: the fingerprint, the retry check (StorageError kAlreadyExists when the key holds a different
   // scan) and, with input.query, the loops (excluding the stored copy of a retried scan). The map must exist.
-  PendingScan compute(const LabelledScan& scan, IngestInput input, const Execution& exec) const;
+  PendingScan compute(const LabelledScan& scan, IngestInput input, const Execution& exec,
+                      const ReportListener& on_report = {}) const;
 
   // Database work: stores the scan (unless it was stored already, or another call stored the identical scan
   // meanwhile: then its own copy leaves the loops) and records its verified loops.

@@ -13,8 +13,9 @@
 
 namespace sglc::closing {
 
-// Which stored scans a query may match.
-enum class Scope { kWholeMap, kSameRobot, kOtherRobots, kSessions };
+// Which stored scans a query may match. kUnknown stands for a value the caller's wire format does not know;
+// it is refused where the scope is checked (after the numeric options), as "unknown scope".
+enum class Scope { kWholeMap, kSameRobot, kOtherRobots, kSessions, kUnknown };
 
 struct SessionRef {
   std::string robot, session;
