@@ -144,7 +144,10 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     if (!store.findMap(req->map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");
     const closing::LoopFinder finder(state_.pipeline(), store);
     closing::QueryOrigin who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
-    if (req->has_stamp()) who.stamp = req->stamp();
+    if (req->has_stamp()) {
+      if (!std::isfinite(req->stamp())) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "stamp is not finite");
+      who.stamp = req->stamp();
+    }
     std::shared_ptr<const Fingerprint> fp;
     auto slot = state_.compute().acquire(ctx);
     if (req->has_scan()) {

@@ -54,6 +54,13 @@ bool SearchFilter::any() const {
          (self_robot >= 0 && (exclude_recent > 0 || (!std::isnan(self_stamp) && exclude_seconds > 0)));
 }
 
+namespace {
+// |a - b| without overflow: sequence numbers come from clients and may span the whole int64 range.
+std::uint64_t seqDistance(std::int64_t a, std::int64_t b) {
+  return a >= b ? std::uint64_t(a) - std::uint64_t(b) : std::uint64_t(b) - std::uint64_t(a);
+}
+}  // namespace
+
 bool SearchFilter::accepts(const IndexEntry& e) const {
   if (e.deleted) return false;
   if (!robots.empty() && !robots.count(e.robot_id)) return false;
@@ -61,7 +68,8 @@ bool SearchFilter::accepts(const IndexEntry& e) const {
   if (!sessions.empty() && !sessions.count(e.session_id)) return false;
   if (exclude_scans.count(e.scan_id)) return false;
   if (e.robot_id == self_robot) {
-    if (e.session_id == self_session && exclude_recent > 0 && std::llabs(e.seq - self_seq) < exclude_recent)
+    if (e.session_id == self_session && exclude_recent > 0 &&
+        seqDistance(e.seq, self_seq) < std::uint64_t(exclude_recent))
       return false;
     if (exclude_seconds > 0 && !std::isnan(self_stamp) && !std::isnan(e.stamp) &&
         std::abs(e.stamp - self_stamp) < exclude_seconds)

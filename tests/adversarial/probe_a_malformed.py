@@ -54,6 +54,8 @@ def run(tmp):
          ("stamp",), ()),
         ("ingest_inf_stamp", ingest(pb.IngestRequest(key=k("r", 1), scan=good, stamp=float("inf"))), IA,
          ("stamp",), ()),
+        ("query_nan_stamp", query(robot="r", stamp=float("nan")), IA, ("stamp",), ()),
+        ("query_inf_stamp", query(robot="r", stamp=float("-inf")), IA, ("stamp",), ()),
         # names
         ("ingest_empty_map_name", ingest(pb.IngestRequest(key=k("r", 1, m=""), scan=good)), IA, ("map",), ()),
         ("ingest_empty_robot_name", ingest(pb.IngestRequest(key=k("", 1), scan=good)), IA, ("robot",), ()),
@@ -102,6 +104,11 @@ def run(tmp):
         ("query_nan_min_score", query(pb.QueryOptions(min_score=float("nan"))), IA, ("min_score",), ()),
         ("ingest_query_nan_min_score", ingest_query(pb.QueryOptions(min_score=float("nan"))), IA,
          ("min_score",), ()),
+        ("query_unknown_scope", query(pb.QueryOptions(scope=99)), IA, ("unknown scope",), ()),
+        ("query_unknown_scope_missing_map", query(pb.QueryOptions(scope=99), map="nomap"), NF, ("nomap",), ()),
+        ("ingest_query_unknown_scope_missing_map", ingest(pb.IngestRequest(
+            key=k("r", 901, m="nomap"), scan=good, query=True, query_options=pb.QueryOptions(scope=99))), NF,
+         ("nomap",), ()),
         ("query_known_loops_without_refine", query(pb.QueryOptions(known_loops=True, refine=False,
                                                                    refine_set=True)), IA, ("known_loops",), ()),
         ("query_verify_201_scans", query(pb.QueryOptions(verify_scan_ids=list(range(1, 202)))), IA, ("200",), ()),

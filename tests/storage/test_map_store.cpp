@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -226,6 +227,32 @@ TEST(MapStore, FiltersKeepTheFullTopK) {
     const auto want = bruteForce(all, q.fp.descriptor, k, c.keep);
     EXPECT_EQ(got, want) << c.name;
   }
+}
+
+// Sequence numbers come from clients and may span the whole int64 range: the recent-scan exclusion measures
+// their distance without overflow (it wrapped, so the scans at the two ends counted as 1 apart).
+TEST(MapStore, RecentExclusionHoldsAtTheEndsOfTheSequenceRange) {
+  TempDir dir;
+  auto store = MapStore::open(options(dir.file("map.db")));
+  const auto fp = randomFingerprint(3);
+  store->createMap("m", static_cast<int>(fp.descriptor.size()));
+  constexpr auto kMin = std::numeric_limits<std::int64_t>::min(), kMax = std::numeric_limits<std::int64_t>::max();
+  std::map<std::int64_t, std::int64_t> seq_of;
+  for (const auto seq : {kMin, kMin + 3, std::int64_t{0}, kMax - 3, kMax})
+    seq_of[store->addScan({.map = "m", .robot = "r", .session = "s", .seq = seq, .fingerprint = &fp})] = seq;
+  auto seqsFound = [&](std::int64_t self_seq) {
+    SearchRequest req{.map = "m", .descriptor = fp.descriptor, .k = 10};
+    req.self_robot = "r";
+    req.self_session = "s";
+    req.self_seq = self_seq;
+    req.exclude_recent = 5;
+    std::set<std::int64_t> seqs;
+    for (const auto& h : store->search(req)) seqs.insert(seq_of.at(h.scan_id));
+    return seqs;
+  };
+  EXPECT_EQ(seqsFound(kMax), (std::set<std::int64_t>{kMin, kMin + 3, 0}));
+  EXPECT_EQ(seqsFound(kMin), (std::set<std::int64_t>{0, kMax - 3, kMax}));
+  EXPECT_EQ(seqsFound(2), (std::set<std::int64_t>{kMin, kMin + 3, kMax - 3, kMax}));
 }
 
 TEST(MapStore, RejectsBadWritesAndLeavesNothingBehind) {
