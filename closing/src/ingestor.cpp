@@ -1,16 +1,13 @@
 #include "sglc/closing/ingestor.hpp"
 
 #include <algorithm>
-#include <chrono>
 
+#include "sglc/elapsed.hpp"
 #include "sglc/fingerprint.hpp"
 #include "sglc/rigid.hpp"
 
 namespace sglc::closing {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 using storage::StorageError;
 

@@ -1,15 +1,13 @@
 #include "sglc/closing/loop_finder.hpp"
 
+#include "sglc/elapsed.hpp"
+
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <unordered_set>
 
 namespace sglc::closing {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 using storage::StorageError;
 

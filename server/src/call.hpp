@@ -13,14 +13,9 @@
 #include <string>
 
 #include "rpc_error.hpp"
+#include "sglc/elapsed.hpp"
 
 namespace sglc::server {
-
-using Clock = std::chrono::steady_clock;
-
-inline double msSince(Clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-}
 
 // Who and what a log line is about.
 struct CallLog {

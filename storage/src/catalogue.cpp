@@ -1,10 +1,24 @@
 #include "catalogue.hpp"
 
+#include "sglc/names.hpp"
+
 namespace sglc::storage {
+
+void checkName(const std::string& what, const std::string& name) {
+  if (const auto error = nameError(name))
+    throw StorageError(StorageError::Code::kInvalidArgument, what + " name " + *error);
+}
 
 std::int64_t MapState::robotId(const std::string& robot) const {
   const auto it = robots.find(robot);
   return it == robots.end() ? -2 : it->second;
+}
+
+std::int64_t MapState::requireRobot(const std::string& robot) const {
+  const auto it = robots.find(robot);
+  if (it == robots.end())
+    throw StorageError(StorageError::Code::kNotFound, "map '" + name + "' has no robot '" + robot + "'");
+  return it->second;
 }
 
 std::int64_t MapState::sessionId(std::int64_t robot_id, const std::string& session) const {

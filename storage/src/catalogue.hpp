@@ -27,9 +27,14 @@ struct MapState {
 
   // -2 (matches nothing) for a name the map does not have.
   std::int64_t robotId(const std::string& robot) const;
+  // The robot's id; StorageError kNotFound "map '...' has no robot '...'" for a name the map does not have.
+  std::int64_t requireRobot(const std::string& robot) const;
   std::int64_t sessionId(std::int64_t robot_id, const std::string& session) const;
   MapInfo info() const;
 };
+
+// Throws StorageError kInvalidArgument ("<what> name ...") unless `name` follows the name rule (sglc/names.hpp).
+void checkName(const std::string& what, const std::string& name);
 
 class Catalogue {
  public:

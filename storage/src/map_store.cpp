@@ -10,7 +10,6 @@
 #include "map_index.hpp"
 #include "pose_graph_tables.hpp"
 #include "scan_table.hpp"
-#include "sglc/names.hpp"
 #include "store_core.hpp"
 
 namespace sglc::storage {
@@ -120,7 +119,7 @@ class SqliteMapStore final : public MapStore {
 };
 
 MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
-  if (const auto error = nameError(name)) throw StorageError(Code::kInvalidArgument, "map name " + *error);
+  checkName("map", name);
   if (dim <= 0 || dim > 65536) throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1..65536");
   std::lock_guard write(core_.write_mutex);
   {
@@ -180,8 +179,7 @@ std::vector<RobotInfo> SqliteMapStore::listRobots(const std::string& map) const 
 std::vector<SessionInfo> SqliteMapStore::listSessions(const std::string& map, const std::string& robot) const {
   std::shared_lock lock(core_.state_mutex);
   const MapState& m = core_.catalogue.map(map);
-  if (!robot.empty() && !m.robots.count(robot))
-    throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
+  if (!robot.empty()) m.requireRobot(robot);
   auto reader = core_.readers.acquire();
   sql::Stmt st(*reader,
                "SELECT r.name, x.name, count(s.id), coalesce(min(s.seq), 0), coalesce(max(s.seq), 0)"

@@ -73,9 +73,7 @@ std::int64_t deleteSession(StoreCore& core, const std::string& map, const std::s
   {
     std::shared_lock lock(core.state_mutex);
     m = &core.catalogue.map(map);
-    auto r = m->robots.find(robot);
-    if (r == m->robots.end()) throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
-    auto s = m->sessions.find({r->second, session});
+    auto s = m->sessions.find({m->requireRobot(robot), session});
     if (s == m->sessions.end())
       throw StorageError(Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
     session_id = s->second;
@@ -93,9 +91,7 @@ std::int64_t deleteRobot(StoreCore& core, const std::string& map, const std::str
   {
     std::shared_lock lock(core.state_mutex);
     m = &core.catalogue.map(map);
-    auto r = m->robots.find(robot);
-    if (r == m->robots.end()) throw StorageError(Code::kNotFound, "map '" + map + "' has no robot '" + robot + "'");
-    robot_id = r->second;
+    robot_id = m->requireRobot(robot);
   }
   return deleteScans(core, *m, kRobot, robot_id, [&] {
     m->robots.erase(robot);

@@ -4,16 +4,11 @@
 
 #include "blob_codec.hpp"
 #include "sglc/fingerprint.hpp"
-#include "sglc/names.hpp"
 
 namespace sglc::storage::scan_table {
 namespace {
 
 using Code = StorageError::Code;
-
-void checkName(const std::string& what, const std::string& name) {
-  if (const auto error = nameError(name)) throw StorageError(Code::kInvalidArgument, what + " name " + *error);
-}
 
 void checkScan(const NewScan& scan) {
   if (!scan.fingerprint) throw StorageError(Code::kInvalidArgument, "scan has no fingerprint");

@@ -12,7 +12,7 @@ import sys
 
 ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", ".."))
 
-TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp"}
+TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp"}
 ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
 IO_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "io/include/sglc"))}
 TYPES_FILES = [f"core/{d}/{n}" for d, ext in (("include/sglc", "hpp"), ("src", "cpp"))

@@ -32,16 +32,14 @@
 #include <thread>
 
 #include "sglc/client/client.hpp"
+#include "sglc/elapsed.hpp"
 #include "sim/simulator.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
-using Clock = std::chrono::steady_clock;
 using namespace sglc;
 using nlohmann::ordered_json;
-
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;

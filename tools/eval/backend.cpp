@@ -8,14 +8,12 @@
 
 #include "sglc/client/client.hpp"
 #include "sglc/closing/loop_finder.hpp"
+#include "sglc/elapsed.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 
 namespace sglc::eval {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
 const char* kRobot = "eval";
 const char* kSession = "run";

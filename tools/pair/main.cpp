@@ -5,14 +5,13 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
 
 namespace {
 
-double msSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
+using sglc::msSince;
 
 }  // namespace
 
