@@ -20,6 +20,7 @@
 #include "call.hpp"
 #include "io_poller.hpp"
 #include "service.hpp"
+#include "sglc/config/engine_file.hpp"
 #include "sglc/log/log_line.hpp"
 
 namespace {

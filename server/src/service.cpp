@@ -15,6 +15,7 @@
 #include "rpc_error.hpp"
 #include "sglc/closing/ingestor.hpp"
 #include "sglc/closing/loop_finder.hpp"
+#include "sglc/config/engine_file.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"

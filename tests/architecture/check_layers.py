@@ -12,11 +12,11 @@ import sys
 
 ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", ".."))
 
-TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp"}
+TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp", "sglc/params.hpp"}
 ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
 IO_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "io/include/sglc"))}
 TYPES_FILES = [f"core/{d}/{n}" for d, ext in (("include/sglc", "hpp"), ("src", "cpp"))
-               for n in (f"types.{ext}", f"rigid.{ext}", f"names.{ext}")]
+               for n in (f"types.{ext}", f"rigid.{ext}", f"names.{ext}", f"params.{ext}")]
 
 # Project headers by the module that provides them.
 def provider(header):
@@ -27,7 +27,7 @@ def provider(header):
     if header in IO_HEADERS:
         return "io"
     for prefix, module in (("sglc/storage/", "storage"), ("sglc/closing/", "closing"), ("sglc/posegraph/", "posegraph"),
-                           ("sglc/log/", "log"), ("sglc/wire/", "wire"), ("sglc/v1/", "proto"),
+                           ("sglc/log/", "log"), ("sglc/config/", "config"), ("sglc/wire/", "wire"), ("sglc/v1/", "proto"),
                            ("sglc/client/", "client"), ("sim/", "sim")):
         if header.startswith(prefix):
             return module
@@ -45,10 +45,12 @@ POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h"
          "sys/time.h", "time.h", "dirent.h", "pthread.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
-ALL = {"types", "core", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
+ALL = {"types", "core", "config", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
 LAYERS = {
     "types": (TYPES_FILES, {"types"}, {"eigen"}),
-    "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "yaml", "zlib"}),
+    "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "zlib"}),
+    # Settings files: the registries of sglc/params.hpp in YAML, and the engine's configuration file.
+    "config": (["config"], {"types", "core", "config"}, {"yaml"}),
     "io": (["io"], {"types", "io"}, {"eigen"}),
     "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
     # The use cases: the engine and the map database, nothing of any transport.
@@ -59,7 +61,7 @@ LAYERS = {
     "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph"}, {"eigen", "ceres", "spdlog"}),
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
-    "server": (["server/src"], {"types", "core", "storage", "closing", "posegraph", "log", "proto", "wire"},
+    "server": (["server/src"], {"types", "core", "config", "storage", "closing", "posegraph", "log", "proto", "wire"},
                {"eigen", "grpc", "protobuf", "spdlog", "json", "yaml", "cli11"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.
     "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <map>
 
+#include "sglc/config/engine_file.hpp"
 #include "sglc/io.hpp"
 #include "sglc/labeller.hpp"
 #include "sglc/pipeline.hpp"

@@ -1,8 +1,8 @@
 // Fuzzing sglc::parseConfig (engine configuration YAML, e.g. the server's --config file): it returns a valid
 // Config or throws InputError. An accepted text must give a configuration that validates and survives
-// dumpConfig -> parseConfig unchanged (config.hpp: "YAML that parseConfig reads back to the same values").
+// dumpConfig -> parseConfig unchanged (engine_file.hpp: "YAML that parseConfig reads back to the same values").
 #include "fuzz_util.hpp"
-#include "sglc/config.hpp"
+#include "sglc/config/engine_file.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc {

@@ -30,7 +30,7 @@
 #include "backend.hpp"
 #include "metrics.hpp"
 #include "sglc/client/client.hpp"
-#include "sglc/config.hpp"
+#include "sglc/config/engine_file.hpp"
 #include "sim/ground_truth.hpp"
 #include "source.hpp"
 

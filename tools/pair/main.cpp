@@ -5,6 +5,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "sglc/config/engine_file.hpp"
 #include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include "sglc/params.hpp"
+
 namespace sglc {
 
 // Semantic roles: which raw label ids are landmark classes (graph nodes) and which are background.
@@ -30,6 +32,7 @@ struct LabelConfig {
 // nuScenes-lidarseg's 32 classes (no pole or trunk class: the labeller fills them in "auto" mode). Throws
 // InputError naming the known presets for any other name.
 LabelConfig labelPreset(const std::string& name);
+const std::vector<std::string>& labelPresetNames();
 
 struct ClusterConfig {
   // Range-adaptive ("curved") voxels: azimuth x range x elevation. Not tied to any sensor's beam layout.
@@ -191,14 +194,11 @@ struct Config {
   BevSearchConfig bev_search;
 };
 
-// Throws InputError when a value is out of its valid range (names the field).
-void validateConfig(const Config& config);
+// Every field with its key ("verify.t_g"), valid range and a line of documentation; files and command lines
+// are read through it (sglc/config/engine_file.hpp), and docs/CONFIGURATION.md is generated from it.
+const params::Table<Config>& engineParams();
 
-// Reads a YAML file whose sections mirror the struct (cluster:, graph:, ...). Keys not given keep their
-// defaults; unknown keys are an error so that typos do not pass silently.
-Config loadConfig(const std::string& path);
-Config parseConfig(const std::string& yaml_text);
-// The whole configuration as YAML that parseConfig reads back to the same values.
-std::string dumpConfig(const Config& config);
+// Throws InputError naming the first field out of its valid range or the first rule between fields broken.
+void validateConfig(const Config& config);
 
 }  // namespace sglc
