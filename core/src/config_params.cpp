@@ -184,6 +184,9 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(fine.max_corr_end_m), above(0), "fine stage: last correspondence gate (m)"));
   t.add(field<Config>(SGLC_KEY(fine.huber_m), above(0), "fine stage: Huber kernel scale (m)"));
   t.add(field<Config>(SGLC_KEY(fine.converged_m), finite(), "fine stage: stop when an update moves less (m)"));
+  t.add(field<Config>(SGLC_KEY(fine.min_correspondences), atLeast(3), "fine stage: point pairs its result needs"));
+  t.add(field<Config>(SGLC_KEY(fine.max_shift_m), above(0), "fine stage: a larger move of the pose is refused (m)"));
+  t.add(field<Config>(SGLC_KEY(fine.max_turn_deg), openClosed(0, 180), "fine stage: a larger turn is refused (deg)"));
   t.rule({"fine.max_corr_end_m", "fine.max_corr_start_m"}, "end <= start",
          [](const Config& c) { return c.fine.max_corr_end_m <= c.fine.max_corr_start_m; });
   t.add(field<Config>(SGLC_KEY(refine.enabled), {}, "refine stage: background planes (point-to-plane)"));
@@ -195,6 +198,10 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(refine.min_information), atLeast(0),
                       "directions the planes constrain less than this (1/m^2) are held by the anchor"));
   t.add(field<Config>(SGLC_KEY(refine.converged_m), finite(), "refine stage: stop when an update moves less (m)"));
+  t.add(field<Config>(SGLC_KEY(refine.max_shift_m), above(0),
+                      "planes moving the pose farther are not trusted, nor do they confirm a loop (m)"));
+  t.add(field<Config>(SGLC_KEY(refine.max_turn_deg), openClosed(0, 180),
+                      "planes turning the pose more are not trusted, nor do they confirm a loop (deg)"));
   t.add(
       field<Config>(SGLC_KEY(bev_search.enabled), {}, "known loops: search a pose by overlaying the bird's-eye views"));
   t.add(field<Config>(SGLC_KEY(bev_search.cell_m), closed(0.25, 5), "BEV search: grid cell (m)"));
@@ -202,6 +209,8 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(bev_search.yaw_step_deg), openClosed(0.1, 30), "BEV search: heading step (deg)"));
   t.add(field<Config>(SGLC_KEY(bev_search.max_range_m), openClosed(0, 100), "BEV search: cells used (m)"));
   t.add(field<Config>(SGLC_KEY(bev_search.keep), closed(1, 20), "BEV search: distinct overlays refined"));
+  t.add(
+      field<Config>(SGLC_KEY(bev_search.min_correspondences), atLeast(3), "BEV search: plane pairs an overlay needs"));
 }
 
 #undef SGLC_KEY

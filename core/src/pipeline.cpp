@@ -186,7 +186,8 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
     const Mat4d d = r.T.inverse() * planes.T;  // confirming means staying near the coarse pose
     if (planes.iterations == 0 || planes.fitness < c.verify.confirm_min_fitness ||
         planes.rmse > c.verify.confirm_max_rmse_m || planes.horizontal_constraint < c.verify.confirm_min_constraint ||
-        d.topRightCorner<3, 1>().norm() > 1.0 || rotationAngleDeg(d.topLeftCorner<3, 3>()) > 5.0) {
+        d.topRightCorner<3, 1>().norm() > c.refine.max_shift_m ||
+        rotationAngleDeg(d.topLeftCorner<3, 3>()) > c.refine.max_turn_deg) {
       r.is_loop = false;
       r.reason = "few node inliers and the background planes do not confirm the pose";
     }
@@ -207,7 +208,7 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
   if (!known_loop || (r.is_loop && planes_kept) || !c.bev_search.enabled || !c.refine.enabled) return;
   for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search)) {
     const auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
-    if (ref.iterations == 0 || ref.correspondences < 6) continue;
+    if (ref.iterations == 0 || ref.correspondences < c.bev_search.min_correspondences) continue;
     if (r.refined && (ref.fitness < r.fitness || (ref.fitness == r.fitness && ref.rmse >= r.rmse))) continue;
     r.T = ref.T;
     r.fitness = ref.fitness;
@@ -227,8 +228,8 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
     auto icp = icpInstances(instances, T, c.fine);
     // Guard: the fine stage only polishes; a large jump means it locked onto something else.
     const Mat4d d = r.T.inverse() * icp.T;
-    if (icp.correspondences >= 3 && d.topRightCorner<3, 1>().norm() < 2.0 &&
-        rotationAngleDeg(d.topLeftCorner<3, 3>()) < 10.0) {
+    if (icp.correspondences >= c.fine.min_correspondences && d.topRightCorner<3, 1>().norm() < c.fine.max_shift_m &&
+        rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.fine.max_turn_deg) {
       T = icp.T;
       r.fitness = icp.fitness;
       r.rmse = icp.rmse;
@@ -240,8 +241,8 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     const Mat4d d = T.inverse() * ref.T;
-    kept =
-        ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < 1.0 && rotationAngleDeg(d.topLeftCorner<3, 3>()) < 5.0;
+    kept = ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < c.refine.max_shift_m &&
+           rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.refine.max_turn_deg;
     if (kept) {
       T = ref.T;
       r.information = ref.information;

@@ -2,6 +2,8 @@
 // thread safety.
 #include <gtest/gtest.h>
 
+#include <functional>
+
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -342,6 +344,37 @@ TEST(SyntheticPipeline, TwoViewsOfTheSameStreet) {
   // The inlier node pairs are the same physical objects: their centres agree under the true pose.
   for (const auto& [i, j] : r.inlier_pairs)
     EXPECT_LT((test::apply(T_a_b, b.nodes[j].center) - a.nodes[i].center).norm(), 0.3) << i << "," << j;
+}
+
+// The guards of the fine and plane stages are parameters: a stage whose move exceeds its limit is dropped and
+// the coarse pose stays; with the default limits each stage moves it.
+TEST(SyntheticPipeline, StageGuardsAreParameters) {
+  const LabelledScan world = test::makeStreetWorld();
+  const Pipeline p;
+  const Fingerprint a = p.fingerprint(test::viewFrom(world, test::makeT(0.0, 0.0, 0.0, 0.0)));
+  const Fingerprint b = p.fingerprint(test::viewFrom(world, test::makeT(25.0, 4.0, 1.5, 0.0)));
+  const LoopResult coarse = p.verify(a, b);
+  ASSERT_TRUE(coarse.is_loop) << coarse.reason;
+  auto poseWith = [&](const std::function<void(Config&)>& edit) {
+    Config c;
+    edit(c);
+    return Pipeline(c).match(a, b).T;
+  };
+  const auto same = [&](const Mat4d& T) { return (T.array() == coarse.T.array()).all(); };
+  EXPECT_FALSE(same(poseWith([](Config& c) { c.refine.enabled = false; })));
+  EXPECT_TRUE(same(poseWith([](Config& c) {
+    c.refine.enabled = false;
+    c.fine.max_shift_m = 1e-9;
+  })));
+  EXPECT_TRUE(same(poseWith([](Config& c) {
+    c.refine.enabled = false;
+    c.fine.max_turn_deg = 1e-9;
+  })));
+  EXPECT_FALSE(same(poseWith([](Config& c) { c.fine.enabled = false; })));
+  EXPECT_TRUE(same(poseWith([](Config& c) {
+    c.fine.enabled = false;
+    c.refine.max_shift_m = 1e-9;
+  })));
 }
 
 // A street with 22 poles; `jitter` moves each pole by that much in a seeded direction, as a segmentation

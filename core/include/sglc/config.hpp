@@ -131,6 +131,12 @@ struct FineConfig {
   double max_corr_end_m = 0.5;
   double huber_m = 0.2;
   double converged_m = 1e-4;  // stop when the update moves less than this
+  // Guard (ours): the fine stage only polishes the coarse pose. Its result is dropped when it rests on fewer
+  // than min_correspondences point pairs or moves the pose by more than max_shift_m / max_turn_deg: then it
+  // locked onto something else.
+  int min_correspondences = 3;
+  double max_shift_m = 2.0;
+  double max_turn_deg = 10.0;
 };
 
 struct RefineConfig {
@@ -144,6 +150,10 @@ struct RefineConfig {
   // is below this are degenerate for the planes (a straight corridor); only there the anchor acts.
   double min_information = 5.0;
   double converged_m = 1e-5;
+  // Guard (ours): the planes may move the pose they start from by at most this much. Beyond it the refinement
+  // is not trusted (the pose before it stays) and a loop with few node inliers is not confirmed.
+  double max_shift_m = 1.0;
+  double max_turn_deg = 5.0;
 };
 
 // Ours (not in the paper): the pose of a pair the caller knows to be a loop when the landmarks give none or
@@ -152,11 +162,12 @@ struct RefineConfig {
 // result whose planes fit best stands.
 struct BevSearchConfig {
   bool enabled = true;
-  double cell_m = 1.0;        // coarse grid of the search
-  double max_shift_m = 10.0;  // on each axis
-  double yaw_step_deg = 2.0;  // coarse heading step (all headings are searched)
-  double max_range_m = 40.0;  // candidate cells used
-  int keep = 3;               // distinct overlays refined
+  double cell_m = 1.0;          // coarse grid of the search
+  double max_shift_m = 10.0;    // on each axis
+  double yaw_step_deg = 2.0;    // coarse heading step (all headings are searched)
+  double max_range_m = 40.0;    // candidate cells used
+  int keep = 3;                 // distinct overlays refined
+  int min_correspondences = 6;  // plane pairs a refined overlay needs to stand
 };
 
 // Ours: the built-in labeller for scans without labels (sglc/labeller.hpp). mode: "off" (labels required),
