@@ -158,6 +158,7 @@ Entry readSetting(const std::vector<Info>& infos, const std::string& key_equals_
   const auto key = key_equals_value.substr(0, eq);
   const auto it = std::find_if(infos.begin(), infos.end(), [&](const Info& i) { return i.key == key; });
   if (it == infos.end()) throw InputError("config: unknown parameter '" + key + "'");
+  if (it->kind == Kind::kText) return {key, key_equals_value.substr(eq + 1)};  // as given: paths may hold '#', ': '
   YAML::Node node;
   try {
     node = YAML::Load(key_equals_value.substr(eq + 1));

@@ -62,7 +62,7 @@ LAYERS = {
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
     "server": (["server/src"], {"types", "core", "config", "storage", "closing", "posegraph", "log", "proto", "wire"},
-               {"eigen", "grpc", "protobuf", "spdlog", "json", "yaml", "cli11"}),
+               {"eigen", "grpc", "protobuf", "spdlog", "json", "cli11"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.
     "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),
     "tools": (["tools"], ALL, {"eigen", "grpc", "protobuf", "json", "cli11", "benchmark", "spdlog", "yaml"}),

@@ -422,13 +422,13 @@ def test_config_file(tmp):
     finally:
         assert s.stop() == 0
     for text, expected in [("pose_graph:\n  odometry_sigma: 0.02\n", "unknown parameter 'pose_graph.odometry_sigma'"),
-                           ("pose_graph:\n  loss_scale: -1\n", "pose_graph.loss_scale must be a finite number >= 0"),
+                           ("pose_graph:\n  loss_scale: -1\n", "pose_graph.loss_scale must be > 0"),
                            ("pose_graph:\n  loop_sigma_deg: 0\n", "pose_graph.loop_sigma_deg must be > 0"),
                            # Checked once all keys are read: either order of the two keys gives the error.
                            ("pose_graph:\n  odometry_sigma_m: 0\n  odometry_sigma_per_m: 0\n",
-                            "odometry_sigma_m and odometry_sigma_per_m must not both be zero"),
+                            "pose_graph.odometry_sigma_m and pose_graph.odometry_sigma_per_m must be > 0 in sum"),
                            ("pose_graph:\n  odometry_sigma_per_m: 0\n  odometry_sigma_m: 0\n",
-                            "odometry_sigma_m and odometry_sigma_per_m must not both be zero"),
+                            "pose_graph.odometry_sigma_m and pose_graph.odometry_sigma_per_m must be > 0 in sum"),
                            ("posegraph:\n  loss_scale: 1\n", "unknown section 'posegraph'")]:
         bad = os.path.join(tmp, "bad.yaml")
         with open(bad, "w") as f:

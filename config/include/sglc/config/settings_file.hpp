@@ -16,7 +16,7 @@ using Entry = std::pair<std::string, params::Value>;
 // InputError for text that is not YAML, an unknown section or key, a key given twice, or a value of the wrong
 // kind; ranges are the table's to check.
 std::vector<Entry> readYaml(const std::vector<params::Info>& infos, const std::string& text);
-// One command-line setting "KEY=VALUE" (the value in YAML: 0.4, true, [40, 44]).
+// One command-line setting "KEY=VALUE": the value in YAML (0.4, true, [40, 44]), text as given.
 Entry readSetting(const std::vector<params::Info>& infos, const std::string& key_equals_value);
 // YAML that readYaml reads back to the same values (numbers in their shortest exact form).
 std::string writeYaml(const std::vector<std::pair<params::Info, params::Value>>& values);

@@ -24,6 +24,7 @@
 #include <string>
 #include <thread>
 
+#include "sglc/params.hpp"
 #include "sglc/storage/map_store.hpp"
 
 namespace sglc::posegraph {
@@ -59,6 +60,9 @@ struct GraphOptimiserOptions {
   // without information, a per-axis sigma from the refinement's RMSE, at least these.
   double loop_sigma_m = 0.05, loop_sigma_deg = 0.3;
 };
+
+// The options in the settings registry: the `pose_graph:` section of the server's configuration.
+const params::Table<GraphOptimiserOptions>& graphParams();
 
 class GraphOptimiser {
  public:
