@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
-# Sets up a fresh Debian 12 machine, checks the formatting, builds, and runs the whole test suite twice: a
-# Release build and an AddressSanitizer + UndefinedBehaviorSanitizer build. Exits non-zero on any failure.
+# Sets up a fresh Debian 12 machine, checks the formatting, builds, runs clang-tidy on the last commit's C++
+# files, and runs the whole test suite twice: a Release build and an AddressSanitizer + UndefinedBehaviorSanitizer
+# build. Exits non-zero on any failure.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
 scripts/check-format.sh
 scripts/build.sh
+# clang-tidy (function size, use-after-move, dangling handles) on the C++ files the last commit changed.
+if git rev-parse -q --verify HEAD~1 >/dev/null; then scripts/tidy.sh HEAD~1; fi
 (cd build && ctest --output-on-failure -j "$(nproc)")
 
 echo "== sanitizer build (ASan + UBSan)"

@@ -53,6 +53,32 @@ double rotationAngleDeg(const Mat3d& R) {
 
 Pipeline::Pipeline(Config config) : config_(std::move(config)), labels_((validateConfig(config_), config_.labels)) {}
 
+std::vector<std::uint32_t> Pipeline::ownLabels(const LabelledScan& input, ScanReport& rep) const {
+  const auto& c = config_;
+  const std::size_t n = input.points.size();
+  std::vector<std::uint32_t> labels;
+  const bool missing_roles = !labels_.hasVehicleIds() || !labels_.hasTrunkIds() || !labels_.hasPoleIds();
+  if (n > 0 && (input.labels.empty() || c.labeller.mode == "always")) {
+    if (c.labeller.mode == "off")
+      throw InputError("scan has no labels and the built-in labeller is off (labeller.mode: off)");
+    labels = labelScene(input.points, c.labeller);
+    rep.label_source = ScanReport::LabelSource::kComputed;
+  } else if (n > 0 && c.labeller.mode == "auto" && missing_roles) {
+    labels = input.labels;
+    const auto computed = labelScene(input.points, c.labeller);
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto l = computed[i];
+      const bool fill = (l == labeller_ids::kVehicle && !labels_.hasVehicleIds()) ||
+                        (l == labeller_ids::kTrunk && !labels_.hasTrunkIds()) ||
+                        (l == labeller_ids::kPole && !labels_.hasPoleIds());
+      // Only points the given labels do not make landmarks of (a given vehicle stays a vehicle).
+      if (fill && labels_.role(input.labels[i]) < 0) labels[i] = l;
+    }
+    rep.label_source = ScanReport::LabelSource::kCompleted;
+  }
+  return labels;
+}
+
 Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report) const {
   const auto& c = config_;
   const std::size_t n = input.points.size();
@@ -62,28 +88,8 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
   ScanReport local;
   ScanReport& rep = report ? *report : local;
   rep = {};
-  // Labels: given, computed by the labeller, or given and completed by it (roles the label set has no ids for).
-  LabelledScan labelled;  // only its labels are used
-  const bool missing_roles = !labels_.hasVehicleIds() || !labels_.hasTrunkIds() || !labels_.hasPoleIds();
-  if (n > 0 && (input.labels.empty() || c.labeller.mode == "always")) {
-    if (c.labeller.mode == "off")
-      throw InputError("scan has no labels and the built-in labeller is off (labeller.mode: off)");
-    labelled.labels = labelScene(input.points, c.labeller);
-    rep.label_source = ScanReport::LabelSource::kComputed;
-  } else if (n > 0 && c.labeller.mode == "auto" && missing_roles) {
-    labelled.labels = input.labels;
-    const auto computed = labelScene(input.points, c.labeller);
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto l = computed[i];
-      const bool fill = (l == labeller_ids::kVehicle && !labels_.hasVehicleIds()) ||
-                        (l == labeller_ids::kTrunk && !labels_.hasTrunkIds()) ||
-                        (l == labeller_ids::kPole && !labels_.hasPoleIds());
-      // Only points the given labels do not make landmarks of (a given vehicle stays a vehicle).
-      if (fill && labels_.role(input.labels[i]) < 0) labelled.labels[i] = l;
-    }
-    rep.label_source = ScanReport::LabelSource::kCompleted;
-  }
-  const auto& labels = labelled.labels.empty() ? input.labels : labelled.labels;
+  const auto own = ownLabels(input, rep);
+  const auto& labels = own.empty() ? input.labels : own;
   const auto& points = input.points;
   // One pass splits the scan by role into compact arrays, so every later stage streams over just its points.
   Points node_points, bg_points;

@@ -1,5 +1,6 @@
 // sglc-pair: loop verification and relative pose between two labelled scans, printed as one JSON object.
 #include <CLI/CLI.hpp>
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -13,6 +14,45 @@
 namespace {
 
 using sglc::msSince;
+
+// The JSON object sglc-pair prints; ms: fingerprint A, fingerprint B, verify, refine.
+nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fingerprint& fa,
+                                  const sglc::Fingerprint& fb, const sglc::ScanReport& report_a,
+                                  const sglc::ScanReport& report_b, const std::array<double, 4>& ms) {
+  nlohmann::ordered_json out;
+  out["is_loop"] = result.is_loop;
+  out["score"] = result.score;
+  out["inliers"] = result.inliers;
+  std::vector<double> T(16);
+  for (int k = 0; k < 16; ++k) T[k] = result.T(k / 4, k % 4);
+  out["T_a_b"] = T;
+  out["matches"] = result.matches;
+  out["graph_similarity"] = result.graph_similarity;
+  out["background_similarity"] = result.background_similarity;
+  out["refined"] = result.refined;
+  out["fitness"] = result.fitness;
+  out["rmse"] = result.rmse;
+  if (!result.is_loop) out["reason"] = std::string(result.reason);
+  auto source = [](const sglc::ScanReport& r) {
+    return r.label_source == sglc::ScanReport::LabelSource::kComputed    ? "computed"
+           : r.label_source == sglc::ScanReport::LabelSource::kCompleted ? "completed"
+                                                                         : "provided";
+  };
+  out["labels_a"] = source(report_a);
+  out["labels_b"] = source(report_b);
+  out["nodes_a"] = fa.nodes.size();
+  out["nodes_b"] = fb.nodes.size();
+  std::vector<std::string> warnings;
+  for (const auto& w : report_a.warnings) warnings.push_back("scan A: " + w);
+  for (const auto& w : report_b.warnings) warnings.push_back("scan B: " + w);
+  if (!warnings.empty()) out["warnings"] = warnings;
+  auto& timings = out["timings_ms"];
+  timings["fingerprint_a"] = ms[0];
+  timings["fingerprint_b"] = ms[1];
+  timings["verify"] = ms[2];
+  timings["refine"] = ms[3];
+  return out;
+}
 
 }  // namespace
 
@@ -61,39 +101,7 @@ int main(int argc, char** argv) {
     pipeline.refine(fa, fb, result, known_loop);
     const double t_refine = msSince(t0);
 
-    nlohmann::ordered_json out;
-    out["is_loop"] = result.is_loop;
-    out["score"] = result.score;
-    out["inliers"] = result.inliers;
-    std::vector<double> T(16);
-    for (int k = 0; k < 16; ++k) T[k] = result.T(k / 4, k % 4);
-    out["T_a_b"] = T;
-    out["matches"] = result.matches;
-    out["graph_similarity"] = result.graph_similarity;
-    out["background_similarity"] = result.background_similarity;
-    out["refined"] = result.refined;
-    out["fitness"] = result.fitness;
-    out["rmse"] = result.rmse;
-    if (!result.is_loop) out["reason"] = std::string(result.reason);
-    auto source = [](const sglc::ScanReport& r) {
-      return r.label_source == sglc::ScanReport::LabelSource::kComputed    ? "computed"
-             : r.label_source == sglc::ScanReport::LabelSource::kCompleted ? "completed"
-                                                                           : "provided";
-    };
-    out["labels_a"] = source(report_a);
-    out["labels_b"] = source(report_b);
-    out["nodes_a"] = fa.nodes.size();
-    out["nodes_b"] = fb.nodes.size();
-    std::vector<std::string> warnings;
-    for (const auto& w : report_a.warnings) warnings.push_back("scan A: " + w);
-    for (const auto& w : report_b.warnings) warnings.push_back("scan B: " + w);
-    if (!warnings.empty()) out["warnings"] = warnings;
-    auto& timings = out["timings_ms"];
-    timings["fingerprint_a"] = t_fa;
-    timings["fingerprint_b"] = t_fb;
-    timings["verify"] = t_verify;
-    timings["refine"] = t_refine;
-    std::cout << out.dump() << std::endl;
+    std::cout << resultJson(result, fa, fb, report_a, report_b, {t_fa, t_fb, t_verify, t_refine}).dump() << std::endl;
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "sglc-pair: error: " << e.what() << std::endl;

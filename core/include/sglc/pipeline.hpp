@@ -69,6 +69,9 @@ class Pipeline {
  private:
   // The fine and refine stages from the coarse pose; true when the plane stage's pose was kept.
   bool refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const;
+  // The labels the scan is fingerprinted with when they are not the given ones: computed by the labeller, or
+  // the given ones completed by it (roles the label set has no ids for). Empty: use the given labels.
+  std::vector<std::uint32_t> ownLabels(const LabelledScan& input, ScanReport& rep) const;
 
   Config config_;
   LabelMap labels_;
