@@ -33,7 +33,7 @@ void addServer(Table<Settings>& t) {
       "server.max_streams", [](auto& s) -> auto& { return s.streams.max_total; }, atLeast(1),
       "open streams of each kind in total"));
   t.add(duration<Settings>(
-      "server.stream_idle_timeout_s", [](auto& s) -> auto& { return s.streams.idle_timeout; }, 1000, atLeast(0.1),
+      "server.stream_idle_timeout_s", [](auto& s) -> auto& { return s.streams.idle_timeout; }, 1000, closed(0.1, 86400),
       "close an ingest stream that sends nothing for this long (s)"));
   t.add(field<Settings>(SGLC_KEY(tokens), {}, "bearer token file: 'TOKEN map1,map2' or 'TOKEN *' per line"));
   t.add(field<Settings>(SGLC_KEY(tls_cert), {}, "PEM certificate chain (TLS, with tls_key)"));

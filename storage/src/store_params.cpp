@@ -14,7 +14,7 @@ Table<StoreOptions> makeTable() {
       std::vector<std::pair<std::string, Sync>>{{"full", Sync::kFull}, {"normal", Sync::kNormal}, {"off", Sync::kOff}},
       "SQLite synchronous mode: full survives power loss, normal only process crashes"));
   t.add(field<StoreOptions>(
-      "cache_mb", [](auto& o) -> auto& { return o.cache_mb; }, atLeast(0),
+      "cache_mb", [](auto& o) -> auto& { return o.cache_mb; }, closed(0, 1e9),
       "decoded fingerprints kept in memory (MB, least recently used evicted)"));
   t.add(field<StoreOptions>(
       "busy_timeout_ms", [](auto& o) -> auto& { return o.busy_timeout_ms; }, atLeast(0),
@@ -23,7 +23,7 @@ Table<StoreOptions> makeTable() {
       "snapshot_index", [](auto& o) -> auto& { return o.snapshot_index; }, {},
       "save the FAISS indexes beside the database on close, load them on open"));
   t.add(field<StoreOptions>(
-      "max_db_mb", [](auto& o) -> auto& { return o.max_db_mb; }, atLeast(0),
+      "max_db_mb", [](auto& o) -> auto& { return o.max_db_mb; }, closed(0, 1e9),
       "quota: writes beyond it fail with RESOURCE_EXHAUSTED (MB; 0: unlimited)"));
   t.add(choice<StoreOptions>(
       "index", [](auto& o) -> auto& { return o.index.type; },

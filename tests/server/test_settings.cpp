@@ -65,6 +65,11 @@ TEST(ServerSettings, ErrorsNameTheSourceAndTheKey) {
   EXPECT_EQ(errorOf("", {{"a", "pose_graph.odometry_sigma_m=0"}, {"b", "pose_graph.odometry_sigma_per_m=0"}}),
             "config: pose_graph.odometry_sigma_m and pose_graph.odometry_sigma_per_m must be > 0 in sum");
   EXPECT_NE(errorOf(dir.file("missing.yaml"), {}).find("missing.yaml: cannot open"), std::string::npos);
+  // Values that would overflow the integer they are converted to (milliseconds, bytes, pages) are refused.
+  EXPECT_EQ(errorOf("", {{"a", "server.stream_idle_timeout_s=1e300"}}),
+            "a: config: server.stream_idle_timeout_s must be in [0.1, 86400]");
+  EXPECT_EQ(errorOf("", {{"a", "storage.cache_mb=1e300"}}), "a: config: storage.cache_mb must be in [0, 1000000000]");
+  EXPECT_EQ(errorOf("", {{"a", "storage.max_db_mb=1e300"}}), "a: config: storage.max_db_mb must be in [0, 1000000000]");
 }
 
 TEST(ServerSettings, DumpReadsBackAndTheExampleFileIsValid) {
