@@ -1,5 +1,7 @@
 #include "blob_codec.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 
 namespace sglc::storage::blob {
@@ -24,12 +26,15 @@ bool fromRowsBlob(std::span<const std::uint8_t> blob, int rows, M& m) {
   for (int k = 0; k < rows * m.cols(); ++k) {
     double v;
     std::memcpy(&v, &blob[static_cast<std::size_t>(k) * sizeof(double)], sizeof(double));
+    if (!std::isfinite(v)) return false;  // only finite values are ever written: this is damage
     m(k / m.cols(), k % m.cols()) = v;
   }
   return true;
 }
 
 constexpr std::size_t kRawPointBytes = 16;
+// The label of every point of a cloud that came without labels (the engine labelled it itself).
+constexpr std::uint32_t kNoLabel = 0xFFFFFFFFu;
 
 }  // namespace
 
@@ -51,7 +56,8 @@ std::vector<std::uint8_t> fromRawScan(const LabelledScan& scan) {
   std::vector<std::uint8_t> out(scan.points.size() * kRawPointBytes);
   for (std::size_t i = 0; i < scan.points.size(); ++i) {
     std::memcpy(&out[i * kRawPointBytes], scan.points[i].data(), 12);
-    std::memcpy(&out[i * kRawPointBytes + 12], &scan.labels[i], 4);
+    const std::uint32_t label = scan.labels.empty() ? kNoLabel : scan.labels[i];
+    std::memcpy(&out[i * kRawPointBytes + 12], &label, 4);
   }
   return out;
 }
@@ -65,6 +71,8 @@ std::optional<LabelledScan> toRawScan(std::span<const std::uint8_t> blob) {
     std::memcpy(scan.points[i].data(), &blob[i * kRawPointBytes], 12);
     std::memcpy(&scan.labels[i], &blob[i * kRawPointBytes + 12], 4);
   }
+  if (std::all_of(scan.labels.begin(), scan.labels.end(), [](std::uint32_t l) { return l == kNoLabel; }))
+    scan.labels.clear();  // stored without labels
   return scan;
 }
 

@@ -44,7 +44,12 @@ void Catalogue::load(const sql::Db& db, const IndexOptions& index_options) {
       MapState m;
       m.id = st.i64(0);
       m.name = st.text(1);
-      m.dim = static_cast<int>(st.i64(2));
+      const auto dim = st.i64(2);
+      if (dim < 1 || dim > kMaxDescriptorDim)
+        throw StorageError(StorageError::Code::kCorrupt, "map '" + m.name + "' has descriptor dimension " +
+                                                             std::to_string(dim) + " (1.." +
+                                                             std::to_string(kMaxDescriptorDim) + " expected)");
+      m.dim = static_cast<int>(dim);
       m.generation = st.i64(3);
       m.index = std::make_unique<DescriptorIndex>(m.dim, index_options);
       add(std::move(m));

@@ -5,16 +5,17 @@
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <optional>
 #include <string>
 #include <utility>
-#include <vector>
 
 #include "descriptor_index.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sqlite.hpp"
 
 namespace sglc::storage {
+
+// The largest descriptor a map may be created with (and a map file may hold).
+constexpr std::int64_t kMaxDescriptorDim = 65536;
 
 struct MapState {
   std::int64_t id = 0;

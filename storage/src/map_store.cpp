@@ -2,6 +2,7 @@
 // blobs, descriptor indexes, pose-graph tables, administration); store_core.hpp has what they share.
 #include "sglc/storage/map_store.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
 #include <shared_mutex>
@@ -120,7 +121,8 @@ class SqliteMapStore final : public MapStore {
 
 MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
   checkName("map", name);
-  if (dim <= 0 || dim > 65536) throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1..65536");
+  if (dim <= 0 || dim > kMaxDescriptorDim)
+    throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1.." + std::to_string(kMaxDescriptorDim));
   std::lock_guard write(core_.write_mutex);
   {
     std::shared_lock lock(core_.state_mutex);

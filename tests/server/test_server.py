@@ -238,7 +238,8 @@ def test_unlabelled_scans(tmp):
         if HAVE_DATA:
             a, b = load_scan("000052"), load_scan("004501")
             a.labels, b.labels = b"", b""
-            r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=a))
+            # store_raw with an unlabelled scan once crashed the server (labels read past an empty list).
+            r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=a, store_raw=True))
             assert r_a.label_source == pb.LABELS_COMPUTED, r_a.label_source
             r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=b, query=True))
             assert r_b.label_source == pb.LABELS_COMPUTED

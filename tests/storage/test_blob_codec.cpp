@@ -1,6 +1,9 @@
 // The BLOB layouts of poses, information matrices and raw clouds: exact round trips, wrong sizes refused.
 #include <gtest/gtest.h>
 
+#include <cstring>
+#include <limits>
+
 #include "blob_codec.hpp"
 
 namespace sglc::storage {
@@ -43,6 +46,51 @@ TEST(BlobCodec, RawCloudsKeepPointsAndLabelsAndRefuseAPartialPoint) {
   const auto empty = blob::toRawScan({});
   ASSERT_TRUE(empty);
   EXPECT_TRUE(empty->points.empty());
+}
+
+// The layout is the map file's format: fixed bytes, not only a round trip (a change on both sides would pass
+// that and misread every existing map).
+TEST(BlobCodec, LayoutIsRowMajorDoublesAndPointThenLabel) {
+  Mat4d T = Mat4d::Identity();
+  T(0, 1) = 0.25;
+  T(1, 0) = -4.0;
+  const auto pose = blob::fromPose(T);
+  double v;
+  std::memcpy(&v, &pose[1 * sizeof(double)], sizeof v);  // row 0, column 1
+  EXPECT_EQ(v, 0.25);
+  std::memcpy(&v, &pose[4 * sizeof(double)], sizeof v);  // row 1, column 0
+  EXPECT_EQ(v, -4.0);
+  LabelledScan scan;
+  scan.points = {Vec3f(1.0f, 2.0f, 3.0f)};
+  scan.labels = {71u};
+  const auto raw = blob::fromRawScan(scan);
+  float y;
+  std::uint32_t label;
+  std::memcpy(&y, &raw[4], 4);
+  std::memcpy(&label, &raw[12], 4);
+  EXPECT_EQ(y, 2.0f);
+  EXPECT_EQ(label, 71u);
+}
+
+// A cloud sent without labels (the engine labels it) is stored and read back without labels.
+TEST(BlobCodec, UnlabelledCloudsRoundTripWithoutLabels) {
+  LabelledScan scan;
+  scan.points = {Vec3f(1.0f, 2.0f, 3.0f), Vec3f(-4.0f, 5.0f, 6.0f)};
+  const auto blob = blob::fromRawScan(scan);
+  ASSERT_EQ(blob.size(), 32u);
+  const auto back = blob::toRawScan(blob);
+  ASSERT_TRUE(back);
+  EXPECT_EQ(back->points, scan.points);
+  EXPECT_TRUE(back->labels.empty());
+}
+
+TEST(BlobCodec, NonFiniteValuesAreDamage) {
+  Mat4d T = Mat4d::Identity();
+  T(2, 3) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(blob::toPose(blob::fromPose(T)));
+  Mat6d I = Mat6d::Identity();
+  I(5, 5) = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(blob::toInformation(blob::fromInformation(I)));
 }
 
 }  // namespace

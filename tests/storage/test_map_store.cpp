@@ -547,6 +547,26 @@ Mat4d rigid(double yaw, double x, double y) {
   return T;
 }
 
+// Damage inside one of our files is named, not passed on: a descriptor size the index cannot have, a loop
+// whose transform holds a NaN (only finite values are ever written).
+TEST(MapStore, DamagedRowsAreCorruptNotServed) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  {
+    auto store = MapStore::open(options(path));
+    const auto all = fill(*store, 1, 1, 2);
+    store->addLoop("m", {0, all[1].id, all[0].id, rigid(0.1, 1, 2), 0.8, 0.9, 0.05, 12});
+  }
+  // 12 doubles; the eighth (row 1, column 3) becomes a NaN: 0x7FF8000000000000, little-endian.
+  execSql(path, "UPDATE loops SET t = substr(t, 1, 56) || x'000000000000F87F' || substr(t, 65)");
+  {
+    auto store = MapStore::open(options(path));
+    EXPECT_EQ(errorCode([&] { store->loops("m"); }), StorageError::Code::kCorrupt);
+  }
+  execSql(path, "UPDATE maps SET descriptor_dim = 0");
+  EXPECT_EQ(errorCode([&] { MapStore::open(options(path)); }), StorageError::Code::kCorrupt);
+}
+
 TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
   TempDir dir;
   const auto path = dir.file("map.db");
