@@ -1,6 +1,7 @@
 #include "sglc/closing/ingestor.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include "sglc/elapsed.hpp"
 #include "sglc/fingerprint.hpp"
@@ -30,6 +31,7 @@ void Ingestor::requireSameScan(std::int64_t id, const Fingerprint& fp, const Ing
 
 PendingScan Ingestor::compute(const LabelledScan& scan, IngestInput input, const Execution& exec,
                               const ReportListener& on_report) const {
+  if (input.stamp && !std::isfinite(*input.stamp)) throw InputError("stamp is not finite");
   PendingScan p;
   p.input = std::move(input);
   const auto& key = p.input.key;

@@ -13,7 +13,6 @@ using storage::StorageError;
 
 constexpr std::uint32_t kMaxTopK = 100;
 constexpr std::uint32_t kMaxCandidates = 200;
-constexpr int kMaxListed = 200;
 
 // The options' checks, in the order a caller with several mistakes learns of them.
 Ranking checkedRanking(const QueryOptions& opt, std::uint32_t* candidates) {
@@ -85,8 +84,8 @@ std::pair<std::shared_ptr<const Fingerprint>, QueryOrigin> LoopFinder::storedQue
 }
 
 std::vector<storage::SearchHit> LoopFinder::listed(const Fingerprint& query, const std::string& map,
-                                                   const std::vector<std::int64_t>& ids) const {
-  if (ids.size() > kMaxListed) throw InputError("verify_scan_ids: at most 200");
+                                                   const std::vector<std::int64_t>& ids, std::size_t max) const {
+  if (ids.size() > max) throw InputError("verify_scan_ids: at most " + std::to_string(max));
   std::vector<storage::SearchHit> hits;
   std::unordered_set<std::int64_t> seen;
   for (const auto id : ids) {
@@ -123,6 +122,8 @@ std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOri
                                         const QueryOptions& options, const Execution& exec, QueryTiming* timing) const {
   std::uint32_t n_candidates = 0;
   const auto ranking = checkedRanking(options, &n_candidates);
+  // A NaN stamp would quietly turn exclude_seconds off.
+  if (origin.stamp && !std::isfinite(*origin.stamp)) throw InputError("stamp is not finite");
   const auto t0 = Clock::now();
   const auto hits = candidates(query, origin, options, n_candidates);
   timing->search_ms = msSince(t0);
@@ -150,7 +151,7 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
     auto fp = store_.fingerprint(hits[i].scan_id);
     if (!fp) return;  // deleted meanwhile
     auto r = pipeline_.verify(query, *fp);
-    if (!r.is_loop && !ranking.include_rejected) return;
+    if (!r.is_loop && !(ranking.include_rejected || ranking.known_loops)) return;
     Verified v;
     v.loop.scan_id = hits[i].scan_id;
     v.loop.descriptor_distance = hits[i].distance;

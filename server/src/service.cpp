@@ -92,11 +92,10 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   const auto scan = wire::decodeScan(points, labels, state.limits().max_points);
   checkAlive(ctx);
 
-  const closing::LoopFinder finder(state.pipeline(), store);
   auto* graph = state.graph();
   closing::Ingestor::LoopsRecorded recorded;
   if (graph) recorded = [graph](const std::string& map) { graph->loopsAdded(map); };
-  const closing::Ingestor ingestor(state.pipeline(), store, finder, std::move(recorded));
+  const closing::Ingestor ingestor(state.pipeline(), store, std::move(recorded));
   // Engine work holds a compute slot; the database write does not.
   auto slot = state.compute().acquire(ctx);
   auto pending = ingestor.compute(scan, std::move(input), executionOf(state, ctx), [&](const ScanReport& report) {

@@ -1,6 +1,7 @@
 // The ingest use case: store, retries, loops before storing, loops recorded for the pose graph.
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <vector>
 
 #include "closing_test_util.hpp"
@@ -36,8 +37,7 @@ class IngestorTest : public ::testing::Test, public test::TwoStreets {
 };
 
 TEST_F(IngestorTest, StoresTheScanAndAnswersItsLoopsFoundBeforeIt) {
-  const LoopFinder finder(pipeline, *store);
-  const Ingestor ingestor(pipeline, *store, finder);
+  const Ingestor ingestor(pipeline, *store);
   const auto done = ingest(ingestor, input(0));
   EXPECT_GT(done.scan_id, 0);
   EXPECT_FALSE(done.already_stored);
@@ -54,8 +54,7 @@ TEST_F(IngestorTest, StoresTheScanAndAnswersItsLoopsFoundBeforeIt) {
 }
 
 TEST_F(IngestorTest, AnIdenticalRetryAnswersAsTheFirstCallAndADifferentScanIsRefused) {
-  const LoopFinder finder(pipeline, *store);
-  const Ingestor ingestor(pipeline, *store, finder);
+  const Ingestor ingestor(pipeline, *store);
   const auto first = ingest(ingestor, input(0));
   const auto again = ingest(ingestor, input(0));
   EXPECT_TRUE(again.already_stored);
@@ -78,21 +77,22 @@ TEST_F(IngestorTest, AnIdenticalRetryAnswersAsTheFirstCallAndADifferentScanIsRef
 // Two calls with the same scan race: both computed before either stored. The second to commit answers as a
 // retry, without the first's copy among its loops.
 TEST_F(IngestorTest, ARacingIdenticalCallAnswersAsARetry) {
-  const LoopFinder finder(pipeline, *store);
-  const Ingestor ingestor(pipeline, *store, finder);
+  const Ingestor ingestor(pipeline, *store);
   auto a = ingestor.compute(scan, input(0), {});
   auto b = ingestor.compute(scan, input(0), {});
   const auto first = ingestor.commit(std::move(a), scan);
+  // Had b searched after a was stored, a's copy would be among its loops: put it there, commit must drop it.
+  b.outcome.loops.push_back(FoundLoop{first.scan_id});
   const auto second = ingestor.commit(std::move(b), scan);
   EXPECT_FALSE(first.already_stored);
   EXPECT_TRUE(second.already_stored);
   EXPECT_EQ(second.scan_id, first.scan_id);
+  ASSERT_EQ(second.loops.size(), first.loops.size());
   for (const auto& l : second.loops) EXPECT_NE(l.scan_id, first.scan_id);
 }
 
 TEST_F(IngestorTest, VerifiedLoopsOfAScanWithAPoseAreRecordedForThePoseGraph) {
-  const LoopFinder finder(pipeline, *store);
-  const Ingestor ingestor(pipeline, *store, finder, recorder());
+  const Ingestor ingestor(pipeline, *store, recorder());
   auto in = input(0);
   in.query_options.include_rejected = true;
   const auto done = ingest(ingestor, in);
@@ -120,9 +120,32 @@ TEST_F(IngestorTest, VerifiedLoopsOfAScanWithAPoseAreRecordedForThePoseGraph) {
   EXPECT_EQ(store->loops("m").size(), 2u);
 }
 
+// A scan sent without labels (the engine labels it) is kept as it came: its raw cloud has no labels.
+TEST_F(IngestorTest, AnUnlabelledRawCloudIsKeptWithoutLabels) {
+  const Ingestor ingestor(pipeline, *store);
+  LabelledScan unlabelled;
+  unlabelled.points = scan.points;
+  auto in = input(0);
+  in.store_raw = true;
+  in.query = false;
+  const auto done = ingestor.commit(ingestor.compute(unlabelled, in, {}), unlabelled);
+  EXPECT_EQ(done.report.label_source, ScanReport::LabelSource::kComputed);
+  const auto raw = store->rawScan(done.scan_id);
+  ASSERT_TRUE(raw);
+  EXPECT_EQ(raw->points, unlabelled.points);
+  EXPECT_TRUE(raw->labels.empty());
+}
+
+TEST_F(IngestorTest, ANonFiniteStampIsRefused) {
+  const Ingestor ingestor(pipeline, *store);
+  auto in = input(0);
+  in.stamp = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(ingestor.compute(scan, in, {}), InputError);
+  EXPECT_FALSE(store->findScan("m", "r3", "t", 0));
+}
+
 TEST_F(IngestorTest, RawCloudsAreKeptOnlyWhenAsked) {
-  const LoopFinder finder(pipeline, *store);
-  const Ingestor ingestor(pipeline, *store, finder);
+  const Ingestor ingestor(pipeline, *store);
   auto in = input(0);
   in.store_raw = true;
   in.query = false;

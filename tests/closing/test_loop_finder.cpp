@@ -114,8 +114,15 @@ TEST_F(LoopFinderTest, ListedScansAreVerifiedWithoutASearch) {
   ASSERT_EQ(found.size(), 2u);
   EXPECT_EQ(found[0].scan_id, same_place_id);  // accepted first, whatever the listed order
   EXPECT_EQ(found[1].scan_id, other_place_id);
-  EXPECT_EQ(found[0].descriptor_distance,
-            descriptorDistance(query.descriptor, store->fingerprint(same_place_id)->descriptor));
+  // The listed distance is the one the map's search reports for the same scan (it sums in float).
+  QueryOptions searched;
+  searched.include_rejected = true;
+  searched.candidates = 20;
+  searched.top_k = 20;
+  const auto all = finder.find(query, origin("r3"), searched, {}, &t);
+  const auto it = std::find_if(all.begin(), all.end(), [&](const FoundLoop& f) { return f.scan_id == same_place_id; });
+  ASSERT_NE(it, all.end());
+  EXPECT_NEAR(found[0].descriptor_distance, it->descriptor_distance, 1e-4 * it->descriptor_distance + 1e-6);
   // known_loops estimates a pose for the rejected one too.
   o.known_loops = true;
   found = finder.find(query, origin("r3"), o, {}, &t);
@@ -132,7 +139,11 @@ TEST_F(LoopFinderTest, AStoredScanQueriesAsItsOwnOrigin) {
   EXPECT_EQ(who.seq, 0);
   EXPECT_EQ(who.self_scan, same_place_id);
   QueryTiming t;
-  for (const auto& f : finder.find(*fp, who, {}, {}, &t)) EXPECT_NE(f.scan_id, same_place_id);
+  QueryOptions all;
+  all.include_rejected = true;
+  const auto found = finder.find(*fp, who, all, {}, &t);
+  ASSERT_EQ(found.size(), 3u);  // every other stored scan, not itself
+  for (const auto& f : found) EXPECT_NE(f.scan_id, same_place_id);
   try {
     finder.storedQuery("other", same_place_id);
     FAIL() << "a scan of another map was found";
@@ -193,6 +204,11 @@ TEST_F(LoopFinderTest, BadOptionsSayWhatIsWrong) {
   expectInput(o, origin("r3"), "verify_scan_ids repeats scan " + std::to_string(same_place_id));
   o.verify_scan_ids.assign(201, 1);
   expectInput(o, origin("r3"), "verify_scan_ids: at most 200");
+  o = {};
+  auto nan_stamp = origin("r3");
+  nan_stamp.stamp = std::numeric_limits<double>::quiet_NaN();  // would quietly turn exclude_seconds off
+  expectInput(o, nan_stamp, "stamp is not finite");
+  o.verify_scan_ids = {987654};
   o.verify_scan_ids = {987654};
   try {
     finder.find(query, origin("r3"), o, {}, &t);
@@ -201,6 +217,21 @@ TEST_F(LoopFinderTest, BadOptionsSayWhatIsWrong) {
     EXPECT_EQ(e.code(), StorageError::Code::kNotFound);
     EXPECT_STREQ(e.what(), "map 'm' has no scan 987654");
   }
+}
+
+// verify() called directly: known_loops keeps (and poses) a rejected candidate even without include_rejected.
+TEST_F(LoopFinderTest, VerifyWithKnownLoopsKeepsRejectedCandidates) {
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  const auto hits = finder.listed(query, "m", {other_place_id});
+  Ranking ranking;
+  ranking.known_loops = true;
+  const auto found = finder.verify(query, hits, ranking, {}, &t);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_FALSE(found[0].result.is_loop);
+  EXPECT_TRUE(found[0].result.refined);
+  ranking.known_loops = false;
+  EXPECT_TRUE(finder.verify(query, hits, ranking, {}, &t).empty());
 }
 
 // However the caller runs the items (here: backwards, as a parallel pool may), the answer is the same.

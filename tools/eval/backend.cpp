@@ -72,11 +72,9 @@ class InProcess final : public Backend {
     const auto t0 = Clock::now();
     const auto fp = store_->fingerprint(idOf(query));
     // The candidates as the service's verify_scan_ids gives them, without its limit of 200 per call.
-    std::vector<storage::SearchHit> hits;
-    for (int c : candidates) {
-      const auto id = idOf(c);
-      hits.push_back({id, closing::descriptorDistance(fp->descriptor, store_->fingerprint(id)->descriptor)});
-    }
+    std::vector<std::int64_t> ids;
+    for (int c : candidates) ids.push_back(idOf(c));
+    const auto hits = finder_.listed(*fp, kMap, ids, ids.size());
     closing::Ranking ranking;
     ranking.top_k = hits.size();
     ranking.include_rejected = true;

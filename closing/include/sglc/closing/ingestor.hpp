@@ -60,18 +60,18 @@ class Ingestor {
   // Told the map after verified loops were recorded for it.
   using LoopsRecorded = std::function<void(const std::string& map)>;
 
-  // All must outlive the ingestor. Verified loops of scans with an odometry pose are recorded (MapStore::
+  // Both must outlive the ingestor. Verified loops of scans with an odometry pose are recorded (MapStore::
   // addLoop) only when `loops_recorded` is given: without a pose graph nobody reads them.
-  Ingestor(const Pipeline& pipeline, storage::MapStore& store, const LoopFinder& finder,
-           LoopsRecorded loops_recorded = {})
-      : pipeline_(pipeline), store_(store), finder_(finder), loops_recorded_(std::move(loops_recorded)) {}
+  Ingestor(const Pipeline& pipeline, storage::MapStore& store, LoopsRecorded loops_recorded = {})
+      : pipeline_(pipeline), store_(store), finder_(pipeline, store), loops_recorded_(std::move(loops_recorded)) {}
 
   // Told where the scan's labels came from and what may keep it from closing loops, as soon as it is
   // fingerprinted (before the checks that may still fail the call).
   using ReportListener = std::function<void(const ScanReport&)>;
 
-  // Engine work: the fingerprint, the retry check (StorageError kAlreadyExists when the key holds a different
-  // scan) and, with input.query, the loops (excluding the stored copy of a retried scan). The map must exist.
+  // Engine work (InputError for a stamp that is not finite): the fingerprint, the retry check (StorageError
+  // kAlreadyExists when the key holds a different scan) and, with input.query, the loops (excluding the stored copy of
+  // a retried scan). The map must exist.
   PendingScan compute(const LabelledScan& scan, IngestInput input, const Execution& exec,
                       const ReportListener& on_report = {}) const;
 
@@ -85,7 +85,7 @@ class Ingestor {
 
   const Pipeline& pipeline_;
   storage::MapStore& store_;
-  const LoopFinder& finder_;
+  const LoopFinder finder_;  // over the same engine and map
   LoopsRecorded loops_recorded_;
 };
 

@@ -12,8 +12,8 @@
 
 namespace sglc::closing {
 
-// The L2 distance between two descriptors of the same length (computed in double, returned as float, as
-// the map's search reports it).
+// The L2 distance between two descriptors of the same length, computed in double and returned as float (the
+// map's search sums in float: its figure agrees to float rounding).
 float descriptorDistance(const std::vector<float>& a, const std::vector<float>& b);
 
 // What happens to verified candidates (the part of QueryOptions the ranking needs, without limits).
@@ -46,11 +46,14 @@ class LoopFinder {
   std::vector<FoundLoop> verify(const Fingerprint& query, const std::vector<storage::SearchHit>& hits,
                                 const Ranking& ranking, const Execution& exec, QueryTiming* timing) const;
 
+  // Listed scans as candidates, with their descriptor distances: InputError for more than `max` or a repeated
+  // id or another descriptor layout, StorageError kNotFound for a scan `map` does not have.
+  std::vector<storage::SearchHit> listed(const Fingerprint& query, const std::string& map,
+                                         const std::vector<std::int64_t>& ids, std::size_t max = 200) const;
+
  private:
   std::vector<storage::SearchHit> candidates(const Fingerprint& query, const QueryOrigin& origin,
                                              const QueryOptions& options, std::uint32_t k) const;
-  std::vector<storage::SearchHit> listed(const Fingerprint& query, const std::string& map,
-                                         const std::vector<std::int64_t>& ids) const;
 
   const Pipeline& pipeline_;
   const storage::MapStore& store_;
