@@ -8,12 +8,11 @@
 #include <unordered_map>
 
 #include "map_graph.hpp"
+#include "sglc/elapsed.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/rigid.hpp"
 
 namespace sglc::posegraph {
-
-using Clock = std::chrono::steady_clock;
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
     : store_(store), options_(options) {
@@ -162,7 +161,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
   event.loops = static_cast<std::int64_t>(g.loopCount());
   event.nodes = static_cast<std::int64_t>(g.nodeCount());
   event.rejected_loops = solution.rejected_loops;
-  event.optimise_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+  event.optimise_ms = msSince(t0);
   event.converged = solution.converged;
   g.countSolve(changed);  // new rows: a new problem
   continueIfUnconverged(map, g);

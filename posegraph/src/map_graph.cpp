@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 
 #include "relative_pose_error.hpp"
@@ -15,7 +16,7 @@
 namespace sglc::posegraph {
 namespace {
 
-constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
+constexpr double kRadPerDeg = std::numbers::pi / 180.0;
 constexpr double kWideLoss = 10.0;  // loss scale of the first solve, in nominal loss scales
 // Whitened squared error of a discounted loop: the 99.9 % point of a chi-square with six degrees of freedom,
 // in loss scales (the Cauchy weight there is below 0.05).
@@ -150,7 +151,7 @@ bool MapGraph::absorb(const std::string& map, const std::vector<storage::LoopRec
     if (!pairs_.insert({l.query_scan, l.candidate_scan}).second)
       loops_.erase(std::find_if(loops_.begin(), loops_.end(),
                                 [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; }));
-    loops_.push_back({l.id, l.query_scan, l.candidate_scan, orthonormalised(l.T), l.rmse, l.fitness, l.information});
+    loops_.push_back({l.id, l.query_scan, l.candidate_scan, orthonormalised(l.T), l.rmse, l.information});
     changed = true;
   }
   return changed;
@@ -181,12 +182,11 @@ void MapGraph::layout() {
 // by the session frame.
 void MapGraph::initialiseSession(std::int64_t sid, const Mat4d& T_frame) {
   const auto& idx = sessions_[sid];
-  for (auto i : idx) {
-    auto& n = nodes_[i];
+  for (std::size_t k = 0; k < idx.size(); ++k) {
+    auto& n = nodes_[idx[k]];
     if (n.initialised) continue;
-    const auto pos = std::find(idx.begin(), idx.end(), i) - idx.begin();
-    if (pos > 0 && nodes_[idx[static_cast<std::size_t>(pos - 1)]].initialised) {
-      const auto& prev = nodes_[idx[static_cast<std::size_t>(pos - 1)]];
+    if (k > 0 && nodes_[idx[k - 1]].initialised) {
+      const auto& prev = nodes_[idx[k - 1]];
       n.pose = Pose::of(prev.pose.matrix() * prev.odometry.inverse() * n.odometry);
     } else {
       n.pose = Pose::of(T_frame * n.odometry);
@@ -282,13 +282,12 @@ MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::in
     if (fixed_roots.insert(root(sid)).second)
       p.problem.SetParameterBlockConstant(p.x[sessions_[root(sid)].front()].data());
 
-  const auto solution = runSolver(p, options, wide, nodes_.empty());
+  auto out = runSolver(p, options, wide, nodes_.empty());
   p.requireFinite("the solution is not finite");
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
     nodes_[i].pose.q = Eigen::Quaterniond(p.x[i][3], p.x[i][0], p.x[i][1], p.x[i][2]).normalized();
     nodes_[i].pose.t = Eigen::Vector3d(p.x[i][4], p.x[i][5], p.x[i][6]);
   }
-  auto out = solution;
   for (std::size_t k = 0; k < loops_.size(); ++k)
     out.rejected_loops += p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
   converged_ = out.converged;

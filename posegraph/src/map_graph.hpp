@@ -39,7 +39,7 @@ class MapGraph {
   struct Loop {
     std::int64_t id, a, b;  // a = query scan, b = candidate scan; T maps b into a
     Mat4d T;
-    double rmse, fitness;
+    double rmse;
     std::optional<Mat6d> information;
   };
   struct Solution {

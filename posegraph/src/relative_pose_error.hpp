@@ -1,17 +1,19 @@
 // The pose graph's edge: a relative-pose measurement between two nodes, whitened by its information.
 #pragma once
 
+#include <algorithm>
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+
+#include "sglc/types.hpp"
 
 namespace ceres {
 class CostFunction;
 }
 
 namespace sglc::posegraph {
-
-using Mat6 = Eigen::Matrix<double, 6, 6>;
 
 // Residual of a relative-pose measurement T_ab (maps b's points into a's frame) between poses a and b (both
 // scan -> map): translation and rotation of inv(T_ab) * inv(T_a) * T_b, i.e. the right perturbation
@@ -20,7 +22,7 @@ using Mat6 = Eigen::Matrix<double, 6, 6>;
 struct RelativePoseError {
   Eigen::Quaterniond q_ab;
   Eigen::Vector3d t_ab;
-  Mat6 sqrt_info;
+  Mat6d sqrt_info;
   // A pose is 7 numbers: quaternion x, y, z, w, then translation.
   template <typename T>
   bool operator()(const T* a, const T* b, T* r) const {
@@ -39,27 +41,27 @@ struct RelativePoseError {
   }
 };
 
-inline RelativePoseError relativePoseError(const Eigen::Matrix4d& T_ab, const Mat6& sqrt_info) {
+inline RelativePoseError relativePoseError(const Eigen::Matrix4d& T_ab, const Mat6d& sqrt_info) {
   return RelativePoseError{Eigen::Quaterniond(T_ab.block<3, 3>(0, 0)).normalized(), T_ab.block<3, 1>(0, 3), sqrt_info};
 }
 
-inline Mat6 diagonalSqrtInformation(double sigma_t, double sigma_r) {
-  Mat6 S = Mat6::Zero();
+inline Mat6d diagonalSqrtInformation(double sigma_t, double sigma_r) {
+  Mat6d S = Mat6d::Zero();
   S.diagonal() << 1 / sigma_t, 1 / sigma_t, 1 / sigma_t, 1 / sigma_r, 1 / sigma_r, 1 / sigma_r;
   return S;
 }
 
 // A loop's registration information, with a floor covariance added (no registration is better than its model:
 // planes are not perfectly flat, labels not perfectly right), as an upper-triangular square root.
-inline Mat6 loopSqrtInformation(const Mat6& information, double floor_t, double floor_r) {
-  const Eigen::SelfAdjointEigenSolver<Mat6> eig(0.5 * (information + information.transpose()));
+inline Mat6d loopSqrtInformation(const Mat6d& information, double floor_t, double floor_r) {
+  const Eigen::SelfAdjointEigenSolver<Mat6d> eig(0.5 * (information + information.transpose()));
   Eigen::Matrix<double, 6, 1> var;
   for (int k = 0; k < 6; ++k) var[k] = 1.0 / std::max(eig.eigenvalues()[k], 1e-12);  // free directions: huge
-  Mat6 cov = eig.eigenvectors() * var.asDiagonal() * eig.eigenvectors().transpose();
+  Mat6d cov = eig.eigenvectors() * var.asDiagonal() * eig.eigenvectors().transpose();
   cov.diagonal().head<3>().array() += floor_t * floor_t;
   cov.diagonal().tail<3>().array() += floor_r * floor_r;
-  const Mat6 info = cov.inverse();
-  return Eigen::LLT<Mat6>(0.5 * (info + info.transpose())).matrixU();
+  const Mat6d info = cov.inverse();
+  return Eigen::LLT<Mat6d>(0.5 * (info + info.transpose())).matrixU();
 }
 
 // The edge as an automatically differentiated Ceres cost (owned by the problem it is added to). Compiled in a

@@ -26,11 +26,7 @@ std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& 
     throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
   if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
   std::lock_guard write(core.write_mutex);
-  std::int64_t map_id;
-  {
-    std::shared_lock lock(core.state_mutex);
-    map_id = core.catalogue.map(map).id;
-  }
+  const auto map_id = core.mapId(map);
   const auto& db = core.writer();
   sql::Transaction tx(db);
   for (const auto scan : {loop.query_scan, loop.candidate_scan}) {
@@ -119,11 +115,7 @@ std::int64_t saveOptimised(StoreCore& core, const std::string& map, const std::v
   for (const auto& f : frames)
     if (!f.T_map_session.allFinite()) throw StorageError(Code::kInvalidArgument, "session frame is not finite");
   std::lock_guard write(core.write_mutex);
-  std::int64_t map_id;
-  {
-    std::shared_lock lock(core.state_mutex);
-    map_id = core.catalogue.map(map).id;
-  }
+  const auto map_id = core.mapId(map);
   const auto& db = core.writer();
   sql::Transaction tx(db);
   {

@@ -183,13 +183,12 @@ std::optional<std::int64_t> find(const StoreCore& core, const std::string& map, 
                                  const std::string& session, std::int64_t seq) {
   std::shared_lock lock(core.state_mutex);
   const MapState& m = core.catalogue.map(map);
-  auto r = m.robots.find(robot);
-  if (r == m.robots.end()) return std::nullopt;
-  auto s = m.sessions.find({r->second, session});
-  if (s == m.sessions.end()) return std::nullopt;
+  const auto robot_id = m.robotId(robot);
+  const auto session_id = robot_id < 0 ? -1 : m.sessionId(robot_id, session);
+  if (session_id < 0) return std::nullopt;
   auto reader = core.readers.acquire();
   sql::Stmt st(*reader, "SELECT id FROM scans WHERE session_id = ? AND seq = ?");
-  st.bind(1, s->second).bind(2, seq);
+  st.bind(1, session_id).bind(2, seq);
   if (!st.step()) return std::nullopt;
   return st.i64(0);
 }
