@@ -2,8 +2,10 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "sglc/types.hpp"
@@ -157,6 +159,8 @@ Entry readSetting(const std::vector<Info>& infos, const std::string& key_equals_
   if (eq == std::string::npos) throw InputError("config: '" + key_equals_value + "' is not KEY=VALUE");
   const auto key = key_equals_value.substr(0, eq);
   const auto it = std::find_if(infos.begin(), infos.end(), [&](const Info& i) { return i.key == key; });
+  if (it == infos.end() && isSection(infos, key))
+    throw InputError("config: '" + key + "' is a section, not a key (its keys: " + sectionsBelow(infos, key) + ")");
   if (it == infos.end()) throw InputError("config: unknown parameter '" + key + "'");
   if (it->kind == Kind::kText) return {key, key_equals_value.substr(eq + 1)};  // as given: paths may hold '#', ': '
   YAML::Node node;
@@ -194,12 +198,12 @@ std::string writeYaml(const std::vector<std::pair<Info, Value>>& values) {
 std::string writeMarkdown(const std::vector<std::pair<Info, Value>>& defaults,
                           const std::vector<std::pair<std::string, std::string>>& rules) {
   std::ostringstream md;
-  std::string section = "\x01";
+  std::optional<std::string> section;  // the one whose table is open
   for (const auto& [info, value] : defaults) {
     const auto dot = info.key.rfind('.');
     const auto sec = dot == std::string::npos ? std::string() : info.key.substr(0, dot);
     if (sec != section) {
-      md << (section == "\x01" ? "" : "\n") << (sec.empty() ? "### Top level" : "### `" + sec + "`") << "\n\n"
+      md << (section ? "\n" : "") << (sec.empty() ? "### Top level" : "### `" + sec + "`") << "\n\n"
          << "| Key | Default | Valid values | Meaning |\n|---|---|---|---|\n";
       section = sec;
     }
@@ -214,12 +218,19 @@ std::string writeMarkdown(const std::vector<std::pair<Info, Value>>& defaults,
   return md.str();
 }
 
-std::string readTextFile(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open config file");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+std::string readTextFile(const std::string& path, const std::string& what) {
+  constexpr std::size_t kMaxBytes = 16 << 20;
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path + ": cannot open " + what);
+  // Read in blocks up to the bound, so /dev/zero or a runaway pipe ends with an error instead of all memory.
+  std::string text;
+  char block[65536];
+  while (in.read(block, sizeof block) || in.gcount() > 0) {
+    text.append(block, static_cast<std::size_t>(in.gcount()));
+    if (text.size() > kMaxBytes) throw InputError(path + ": " + what + " larger than 16 MiB");
+  }
+  if (in.bad()) throw InputError(path + ": cannot read " + what);
+  return text;
 }
 
 }  // namespace sglc::config

@@ -9,11 +9,8 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <iostream>
 #include <map>
-#include <optional>
-#include <sstream>
 
 #include "call.hpp"
 #include "io_poller.hpp"
@@ -26,14 +23,6 @@
 namespace {
 
 using sglc::server::Settings;
-
-std::string readFile(const std::string& path, const char* what) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error(std::string(what) + " " + path + ": cannot read");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
 
 // What the command line asks for beyond the settings themselves.
 struct Request {
@@ -104,7 +93,8 @@ void configure(grpc::ServerBuilder& builder, const Settings& s, grpc::ResourceQu
 std::shared_ptr<grpc::ServerCredentials> credentials(const Settings& s) {
   if (s.tls_cert.empty()) return grpc::InsecureServerCredentials();
   grpc::SslServerCredentialsOptions ssl;
-  ssl.pem_key_cert_pairs.push_back({readFile(s.tls_key, "TLS key"), readFile(s.tls_cert, "TLS certificate")});
+  ssl.pem_key_cert_pairs.push_back(
+      {sglc::config::readTextFile(s.tls_key, "TLS key"), sglc::config::readTextFile(s.tls_cert, "TLS certificate")});
   return grpc::SslServerCredentials(ssl);
 }
 

@@ -94,6 +94,7 @@ TEST(SettingsFile, CommandLineSetting) {
   };
   EXPECT_EQ(error("rate"), "config: 'rate' is not KEY=VALUE");
   EXPECT_EQ(error("rat=1"), "config: unknown parameter 'rat'");
+  EXPECT_EQ(error("net=1"), "config: 'net' is a section, not a key (its keys: listen, calls, ids)");
   EXPECT_EQ(error("rate=-1"), "config: rate must be > 0");
   EXPECT_NE(error("net.calls=many").find("bad value for 'net.calls'"), std::string::npos);
   EXPECT_EQ(s.rate, 2.0);
@@ -120,6 +121,22 @@ TEST(SettingsFile, MarkdownListsEveryKeyWithDefaultRangeAndRules) {
   EXPECT_NE(md.find("| `listen` | `127.0.0.1:1` | text | address \\| port |"), std::string::npos) << md;
   EXPECT_NE(md.find("| `rate` | `0.5` | > 0 | rate |"), std::string::npos) << md;
   EXPECT_NE(md.find("- `rate` and `net.calls` must be rate x calls <= 32"), std::string::npos) << md;
+}
+
+TEST(SettingsFile, TextFilesAreBounded) {
+  // A device that never ends is refused after 16 MiB instead of filling memory or hanging.
+  try {
+    readTextFile("/dev/zero");
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/dev/zero: config file larger than 16 MiB");
+  }
+  try {
+    readTextFile("/nonexistent/x.pem", "TLS key");
+    ADD_FAILURE() << "expected InputError";
+  } catch (const InputError& e) {
+    EXPECT_EQ(std::string(e.what()), "/nonexistent/x.pem: cannot open TLS key");
+  }
 }
 
 }  // namespace

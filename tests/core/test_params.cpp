@@ -87,6 +87,8 @@ TEST(Params, AssignChecksBeforeWriting) {
   t.assign(s, "sync", std::string("off"));
   EXPECT_EQ(s.sync, Inner::Sync::kOff);
   EXPECT_EQ(std::get<std::string>(t.find("sync")->get(s)), "off");
+  // A duration cannot be set beyond what its milliseconds hold, whatever range it was declared with.
+  EXPECT_NE(errorOf([&] { t.assign(s, "wait_s", 1e300); }).find("wait_s must be in [0.1, "), std::string::npos);
   t.assign(s, "wait_s", 0.25);
   EXPECT_EQ(s.wait.count(), 250);
   EXPECT_EQ(std::get<double>(t.find("wait_s")->get(s)), 0.25);

@@ -110,11 +110,13 @@ std::vector<std::string> syntaxAndValues() {
 // Section and key names: every key of the engine's registry, split at its dots, and the node-class fields.
 std::vector<std::string> dictionary() {
   std::vector<std::string> d = syntaxAndValues();
+  std::set<std::string> names;
   for (const auto& p : engineParams().params()) {
     const auto& key = p.info.key;
-    d.push_back(key.substr(0, key.find('.')));
-    d.push_back(key.substr(key.find('.') + 1));
+    names.insert(key.substr(0, key.find('.')));
+    names.insert(key.substr(key.find('.') + 1));
   }
+  d.insert(d.end(), names.begin(), names.end());
   d.emplace_back("name");
   d.emplace_back("ids");
   d.emplace_back(std::string("\0", 1));

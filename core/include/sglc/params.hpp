@@ -6,6 +6,7 @@
 // Files and command lines are read elsewhere (sglc/config/): this header is plain C++.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -210,9 +211,11 @@ Param<Root> choice(std::string key, At at, std::vector<std::pair<std::string, E>
 }
 
 // A duration stored as milliseconds, read and written in `unit_ms` units (1000: seconds); fractions of a
-// millisecond are dropped.
+// millisecond are dropped. The range never reaches past 1e12 ms (~30 years), so the conversion cannot overflow.
 template <class Root, class At>
 Param<Root> duration(std::string key, At at, double unit_ms, Range range, std::string doc) {
+  range.hi = std::min(range.hi, 1e12 / unit_ms);
+  range.lo = std::max(range.lo, -1e12 / unit_ms);
   return {Info{std::move(key), Kind::kReal, range, {}, std::move(doc)},
           [at, unit_ms](const Root& r) { return Value(static_cast<double>(at(r).count()) / unit_ms); },
           [at, unit_ms](Root& r, const Value& v) {

@@ -68,7 +68,7 @@ std::string markdownOf(const params::Table<Root>& table, const Root& defaults) {
   return writeMarkdown(valuesOf(table, defaults), rules);
 }
 
-// The contents of a file (InputError naming it when it cannot be read).
-std::string readTextFile(const std::string& path);
+// The contents of a text file of at most 16 MiB; InputError naming the file and `what` it is otherwise.
+std::string readTextFile(const std::string& path, const std::string& what = "config file");
 
 }  // namespace sglc::config
