@@ -9,6 +9,8 @@ PACKAGES=(
   libeigen3-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev zlib1g-dev
   # map database: SQLite + FAISS (OpenBLAS makes FAISS's BLAS calls far faster than the reference BLAS)
   libsqlite3-dev libfaiss-dev libopenblas0-pthread
+  # PCD and PLY scans (sglc_io links PCL's io and common modules only)
+  libpcl-dev
   # service
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
   # pose-graph optimisation

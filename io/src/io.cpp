@@ -1,5 +1,7 @@
 #include "sglc/io.hpp"
 
+#include "file_bytes.hpp"
+
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -7,29 +9,8 @@
 #include <sstream>
 
 namespace sglc {
-namespace {
-
-std::vector<char> readAll(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw InputError(path + ": is a directory, not a file");
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
-  const std::streamsize size = in.tellg();
-  if (size < 0) throw InputError(path + ": cannot determine the file size");
-  in.seekg(0);
-  std::vector<char> data(static_cast<std::size_t>(size));
-  if (size > 0 && !in.read(data.data(), size)) throw InputError(path + ": read failed");
-  return data;
-}
-
-void writeAll(const std::string& path, const void* data, std::size_t bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) throw InputError(path + ": cannot create (" + std::strerror(errno) + ")");
-  out.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
-  if (!out) throw InputError(path + ": write failed");
-}
-
-}  // namespace
+using detail::readAll;
+using detail::writeAll;
 
 Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
   const auto data = readAll(path);
@@ -74,21 +55,6 @@ std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t point
   return labels;
 }
 
-LabelledScan readScan(const std::string& bin_path, const std::string& label_path) {
-  LabelledScan scan;
-  scan.points = readKittiBin(bin_path);
-  if (label_path.empty()) return scan;  // unlabelled: the engine's labeller labels it
-  if (scan.points.empty()) {
-    scan.labels = readLabels(label_path);
-  } else {
-    scan.labels = readLabels(label_path, scan.points.size());
-  }
-  if (scan.points.size() != scan.labels.size())
-    throw InputError(label_path + ": " + std::to_string(scan.labels.size()) + " labels for " +
-                     std::to_string(scan.points.size()) + " points in " + bin_path);
-  return scan;
-}
-
 namespace {
 Mat4d parseRow12(std::istringstream& ss, const std::string& where) {
   Mat4d T = Mat4d::Identity();
@@ -116,6 +82,56 @@ std::vector<Mat4d> readPoses(const std::string& path) {
     std::istringstream ss(line);
     poses.push_back(parseRow12(ss, path + ":" + std::to_string(line_no)));
   }
+  return poses;
+}
+
+namespace {
+template <typename F>
+void forEachDataLine(const std::string& path, F&& f) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    const auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos || line[first] == '#') continue;
+    if (!f(line, path + ":" + std::to_string(line_no))) return;
+  }
+}
+}  // namespace
+
+int posesColumns(const std::string& path) {
+  int columns = 0;
+  forEachDataLine(path, [&](const std::string& line, const std::string&) {
+    std::istringstream ss(line);
+    std::string token;
+    while (ss >> token) ++columns;
+    return false;
+  });
+  return columns;
+}
+
+std::vector<StampedPose> readTumPoses(const std::string& path) {
+  std::vector<StampedPose> poses;
+  forEachDataLine(path, [&](const std::string& line, const std::string& where) {
+    std::istringstream ss(line);
+    double v[8];
+    for (double& x : v)
+      if (!(ss >> x) || !std::isfinite(x))
+        throw InputError(where + ": expected 8 finite numbers (t tx ty tz qx qy qz qw)");
+    std::string extra;
+    if (ss >> extra) throw InputError(where + ": more than 8 numbers (TUM: t tx ty tz qx qy qz qw)");
+    Eigen::Quaterniond q(v[7], v[4], v[5], v[6]);
+    if (std::abs(q.norm() - 1.0) > 1e-3)
+      throw InputError(where + ": quaternion norm " + std::to_string(q.norm()) + " is not 1");
+    StampedPose p;
+    p.stamp = v[0];
+    p.pose.topLeftCorner<3, 3>() = q.normalized().toRotationMatrix();
+    p.pose.topRightCorner<3, 1>() = Eigen::Vector3d(v[1], v[2], v[3]);
+    poses.push_back(p);
+    return true;
+  });
   return poses;
 }
 
@@ -161,6 +177,20 @@ void writePoses(const std::string& path, const std::vector<Mat4d>& poses) {
       std::snprintf(buf, sizeof(buf), "%.9e", T(k / 4, k % 4));
       out << buf << (k == 11 ? '\n' : ' ');
     }
+  }
+  if (!out) throw InputError(path + ": write failed");
+}
+
+void writeTumPoses(const std::string& path, const std::vector<StampedPose>& poses) {
+  std::ofstream out(path, std::ios::trunc);
+  if (!out) throw InputError(path + ": cannot create (" + std::strerror(errno) + ")");
+  char buf[256];
+  for (const auto& p : poses) {
+    const Eigen::Quaterniond q(Eigen::Matrix3d(p.pose.topLeftCorner<3, 3>()));
+    const Eigen::Vector3d t = p.pose.topRightCorner<3, 1>();
+    std::snprintf(buf, sizeof(buf), "%.9f %.9e %.9e %.9e %.9e %.9e %.9e %.9e\n", p.stamp, t.x(), t.y(), t.z(), q.x(),
+                  q.y(), q.z(), q.w());
+    out << buf;
   }
   if (!out) throw InputError(path + ": write failed");
 }

@@ -51,7 +51,8 @@ LAYERS = {
     "core": (["core/src", "core/include"], {"types", "core"}, {"eigen", "zlib"}),
     # Settings files: the registries of sglc/params.hpp in YAML, and the engine's configuration file.
     "config": (["config"], {"types", "core", "config"}, {"yaml"}),
-    "io": (["io"], {"types", "io"}, {"eigen"}),
+    # Point-cloud files: PCD and PLY through PCL's I/O module (in io/src/pcl_cloud.cpp only).
+    "io": (["io"], {"types", "io"}, {"eigen", "pcl"}),
     "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
     # The use cases: the engine and the map database, nothing of any transport.
     "closing": (["closing"], {"types", "core", "storage", "closing"}, {"eigen"}),

@@ -81,7 +81,9 @@ TEST(CliErrors, BadQueryInput) {
   t::TempDir tmp;
   expectOneLineError({"query", "--map", "m"}, "--scan-id");
   expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--scan", "a.bin", "--labels", "a.label"}, "either");
-  expectOneLineError({"query", "--map", "m", "--scan", "a.bin"}, "--labels");
+  expectOneLineError({"query", "--map", "m", "--labels", "a.label"}, "--labels goes with --scan");
+  expectOneLineError({"query", "--map", "m", "--scan", "a.xyz"}, "unsupported format: '.xyz'");
+  expectOneLineError({"query", "--map", "m", "--scan", "a.bin"}, "a.bin: cannot open");
   expectOneLineError({"query", "--map", "m", "--scan", tmp / "none.bin", "--labels", tmp / "none.label"}, "none.bin");
   expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--exclude-recent", "-1"}, "--exclude-recent");
   expectOneLineError({"query", "--map", "m", "--scan-id", "3", "--known-loops", "--no-refine"}, "--known-loops");

@@ -101,7 +101,7 @@ void checkPose(const Mat4d& T, const std::string& what, fuzz::Verdict& v) {
 
 TEST(Fuzz, KittiReaders) {
   const test::TempDir dir;
-  const std::string a = dir.file("a"), b = dir.file("b"), rewritten = dir.file("rewritten");
+  const std::string a = dir.file("a.bin"), b = dir.file("b.label"), rewritten = dir.file("rewritten");
   const std::vector<std::string> corpora[kReaders] = {binSeeds(), labelSeeds(), {}, poseSeeds(), calibSeeds()};
   std::vector<std::string> binary_corpus = binSeeds();
   for (const auto& s : labelSeeds()) binary_corpus.push_back(s);

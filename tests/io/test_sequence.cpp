@@ -3,6 +3,7 @@
 
 #include <fstream>
 
+#include "sglc/io.hpp"
 #include "sglc/sequence.hpp"
 #include "test_util.hpp"
 
@@ -115,7 +116,7 @@ TEST(Sequence, BadDirectoriesAreRejectedWithTheReason) {
   std::filesystem::create_directories(tmp.path() / "novelo");
   EXPECT_NE(message(tmp.file("novelo")).find("velodyne"), std::string::npos);
   std::filesystem::create_directories(tmp.path() / "empty/velodyne");
-  EXPECT_NE(message(tmp.file("empty")).find("no NNNNNN.bin"), std::string::npos);
+  EXPECT_NE(message(tmp.file("empty")).find("no NNNNNN scans"), std::string::npos);
   // Some scans labelled, one not: the missing file is named. None labelled: an unlabelled sequence.
   const auto partly = makeSequence(tmp, "partly", {4, 5});
   std::filesystem::remove(partly + "/labels/000004.label");
@@ -131,4 +132,70 @@ TEST(Sequence, RealSequenceDirectory) {
   const auto s = sglc::openSequence(sglc::test::scansDir() + "/sequences/00");
   EXPECT_EQ(s.name, "00");
   EXPECT_EQ(numbers(s), (std::vector<std::int64_t>{52, 88, 850, 4501}));
+}
+
+TEST(Sequence, AnyOneScanFormatAndLabelsAsNpy) {
+  TempDir tmp;
+  const auto dir = tmp.path() / "pcd";
+  std::filesystem::create_directories(dir / "velodyne");
+  std::filesystem::create_directories(dir / "labels");
+  for (const char* stem : {"000000", "000001"}) {
+    writeFile((dir / "velodyne" / (std::string(stem) + ".pcd")).string(), "");
+    writeFile((dir / "labels" / (std::string(stem) + ".npy")).string(), "");
+  }
+  writeFile((dir / "velodyne" / "README.txt").string(), "ignored");
+  const sglc::Sequence s = sglc::openSequence(dir.string());
+  ASSERT_EQ(s.frames.size(), 2u);
+  EXPECT_EQ(s.frames[1].scan_path, (dir / "velodyne" / "000001.pcd").string());
+  EXPECT_EQ(s.frames[1].label_path, (dir / "labels" / "000001.npy").string());
+
+  // PCD files without labels/: the files' own label fields (or the labeller) give the labels.
+  std::filesystem::remove_all(dir / "labels");
+  EXPECT_TRUE(sglc::openSequence(dir.string()).frames[0].label_path.empty());
+
+  writeFile((dir / "velodyne" / "000002.bin").string(), "");
+  try {
+    sglc::openSequence(dir.string());
+    ADD_FAILURE() << "mixed formats accepted";
+  } catch (const sglc::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("one format"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Sequence, TumPosesGiveStampsAndPoses) {
+  TempDir tmp;
+  const std::string dir = makeSequence(tmp, "tum", {0, 1, 2}, false);
+  // t tx ty tz qx qy qz qw; frame 1 is turned 90 degrees about z.
+  writeFile(dir + "/poses.txt",
+            "# timestamp tx ty tz qx qy qz qw\n"
+            "100.5 0 0 0 0 0 0 1\n100.6 1 2 3 0 0 0.7071067811865476 0.7071067811865476\n100.7 2 0 0 0 0 0 1\n");
+  const sglc::Sequence s = sglc::openSequence(dir);
+  ASSERT_TRUE(s.has_poses && s.has_stamps);
+  EXPECT_DOUBLE_EQ(*s.frames[1].stamp, 100.6);
+  EXPECT_NEAR((*s.frames[1].pose)(0, 3), 1.0, 1e-12);
+  EXPECT_NEAR((*s.frames[1].pose)(1, 0), 1.0, 1e-9);  // x axis turned onto y
+  // times.txt wins over the TUM stamps.
+  writeFile(dir + "/times.txt", "0\n0.1\n0.2\n");
+  EXPECT_DOUBLE_EQ(*sglc::openSequence(dir).frames[1].stamp, 0.1);
+  writeFile(dir + "/poses.txt", "1 2 3 4 5\n");
+  try {
+    sglc::openSequence(dir);
+    ADD_FAILURE() << "5-column poses accepted";
+  } catch (const sglc::InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("expected 12 (KITTI 3x4) or 8 (TUM"), std::string::npos) << e.what();
+  }
+  writeFile(dir + "/poses.txt", "0 0 0 0 0 0 0 2\n0 0 0 0 0 0 0 1\n0 0 0 0 0 0 0 1\n");
+  EXPECT_THROW(sglc::openSequence(dir), sglc::InputError);  // quaternion norm 2
+}
+
+TEST(Sequence, TumPosesWriteAndReadBack) {
+  TempDir tmp;
+  sglc::Mat4d T = sglc::Mat4d::Identity();
+  T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(0.3, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  T.topRightCorner<3, 1>() = Eigen::Vector3d(10.25, -3, 0.5);
+  sglc::writeTumPoses(tmp.file("t.txt"), {{1234567890.123456, T}});
+  const auto back = sglc::readTumPoses(tmp.file("t.txt"));
+  ASSERT_EQ(back.size(), 1u);
+  EXPECT_NEAR(back[0].stamp, 1234567890.123456, 1e-6);
+  EXPECT_TRUE(back[0].pose.isApprox(T, 1e-8));
 }

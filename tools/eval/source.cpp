@@ -60,7 +60,7 @@ class DirSource final : public FrameSource {
     const Mat4d Tr_inv = Tr.inverse();
     for (const auto& f : seq.frames) {
       const int number = static_cast<int>(f.number);
-      files_[number] = {f.bin_path, f.label_path};
+      files_[number] = {f.scan_path, f.label_path};
       if (f.pose) poses_[number] = Tr_inv * *f.pose * Tr;
       if (selection.contains(f.number)) frames_.push_back(number);
     }

@@ -58,14 +58,16 @@ nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fi
 
 int main(int argc, char** argv) {
   CLI::App app{"Checks whether two labelled LiDAR scans close a loop and estimates T_a_b (maps B into A)."};
-  std::string scan_a, labels_a, scan_b, labels_b, config_path;
+  std::string scan_a, labels_a, scan_b, labels_b, config_path, label_field = "label";
   bool dump = false, known_loop = false;
   app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
-  app.add_option("--scan-a", scan_a, "KITTI .bin of scan A (the query)");
+  app.add_option("--scan-a", scan_a, "Scan A (the query): .bin (KITTI), .pcd, .ply or .npy");
   app.add_option("--labels-a", labels_a,
-                 ".label of scan A (1, 2 or 4 bytes per point; absent: the labeller labels it)");
-  app.add_option("--scan-b", scan_b, "KITTI .bin of scan B (the candidate)");
-  app.add_option("--labels-b", labels_b, ".label of scan B (absent: the labeller labels it)");
+                 "Labels of scan A: .label (1, 2 or 4 bytes per point) or .npy; absent: a PCD/PLY file's own "
+                 "label field, else the labeller");
+  app.add_option("--scan-b", scan_b, "Scan B (the candidate), in any of the same formats");
+  app.add_option("--labels-b", labels_b, "Labels of scan B (as --labels-a)");
+  app.add_option("--label-field", label_field, "Label field of PCD/PLY scans")->capture_default_str();
   app.add_flag("--known-loop", known_loop,
                "The scans are known to show the same place: estimate T_a_b even when verification rejects the pair "
                "(is_loop keeps the decision, refined says whether a pose was found)");
@@ -85,8 +87,8 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (scan_a.empty() || scan_b.empty()) throw sglc::InputError("--scan-a and --scan-b are required");
-    const auto a = sglc::readScan(scan_a, labels_a);
-    const auto b = sglc::readScan(scan_b, labels_b);
+    const auto a = sglc::readScan(scan_a, labels_a, label_field);
+    const auto b = sglc::readScan(scan_b, labels_b, label_field);
     auto t0 = std::chrono::steady_clock::now();
     sglc::ScanReport report_a, report_b;
     const auto fa = pipeline.fingerprint(a, &report_a);

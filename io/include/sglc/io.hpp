@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "sglc/scan_file.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc {
@@ -14,17 +15,23 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities = n
 // A .label file: uint32 per point (SemanticKITTI); given the scan's point count, also 1 or 2 bytes per point
 // (nuScenes-lidarseg's uint8), chosen by the file's size. Little-endian.
 std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points = 0);
-// Both, checked against each other and for finite coordinates. An empty label_path reads the points only
-// (labels empty: the engine's labeller labels the scan).
-LabelledScan readScan(const std::string& bin_path, const std::string& label_path);
-
 // KITTI poses file: one row-major 3x4 matrix per line (12 numbers).
 std::vector<Mat4d> readPoses(const std::string& path);
+// A TUM trajectory file (evo, TUM RGB-D): "timestamp tx ty tz qx qy qz qw" per line, '#' comments. The
+// quaternion is normalised (refused when its norm is far from 1).
+struct StampedPose {
+  double stamp = 0;
+  Mat4d pose = Mat4d::Identity();
+};
+std::vector<StampedPose> readTumPoses(const std::string& path);
+// How many numbers the first data line of a poses file holds: 12 for KITTI, 8 for TUM (0 when empty).
+int posesColumns(const std::string& path);
 // The "Tr:" line of a KITTI calib.txt (velodyne -> cam0), as a 4x4 matrix.
 Mat4d readCalibTr(const std::string& path);
 
 void writeKittiBin(const std::string& path, const Points& points, const std::vector<float>& intensities);
 void writeLabels(const std::string& path, const std::vector<std::uint32_t>& labels);
 void writePoses(const std::string& path, const std::vector<Mat4d>& poses);
+void writeTumPoses(const std::string& path, const std::vector<StampedPose>& poses);
 
 }  // namespace sglc

@@ -1,9 +1,12 @@
 // A SemanticKITTI-layout sequence directory, as `sglc ingest` reads it:
 //
-//   DIR/velodyne/NNNNNN.bin    KITTI scans (float32 x, y, z, reflectance)
-//   DIR/labels/NNNNNN.label    labels (uint32, or 1-2 bytes, per point); all present or all absent (unlabelled)
-//   DIR/poses.txt              optional: odometry poses (KITTI format, 3x4 row-major per line), in frame order
-//   DIR/times.txt              optional: one timestamp in seconds per line, in frame order
+//   DIR/velodyne/NNNNNN.EXT    scans, all in one format: .bin (KITTI), .pcd, .ply or .npy (sglc/scan_file.hpp)
+//   DIR/labels/NNNNNN.label    labels (.label: uint8/16/32 per point, or .npy); all present or all absent. A
+//                              PCD/PLY scan with a label field carries its own labels (no labels/ needed)
+//   DIR/poses.txt              optional: odometry poses in frame order, KITTI (3x4 row-major, 12 numbers per
+//                              line) or TUM (t tx ty tz qx qy qz qw, 8 numbers), told apart by the first line
+//   DIR/times.txt              optional: one timestamp in seconds per line, in frame order (a TUM poses.txt
+//                              gives the stamps when there is no times.txt)
 //
 // "In frame order" means line i belongs to frame number i (the KITTI convention, which needs at least
 // highest-frame-number + 1 lines). A file with exactly one line per .bin present is also accepted and then
@@ -26,7 +29,7 @@ namespace sglc {
 struct SequenceFrame {
   std::string name;         // file stem, e.g. "000720"
   std::int64_t number = 0;  // 720
-  std::string bin_path;
+  std::string scan_path;    // any format of sglc/scan_file.hpp
   std::string label_path;
   std::optional<Mat4d> pose;
   std::optional<double> stamp;
