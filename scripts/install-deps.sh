@@ -20,6 +20,8 @@ PACKAGES=(
   # the format check of scripts/test.sh, and scripts/tidy.sh
   clang-format clang-tidy
   python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib
+  # the deployment-file test (tests/deploy) parses compose.yaml
+  python3-yaml
   # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)
   python3-scipy
 )

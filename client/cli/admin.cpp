@@ -222,8 +222,22 @@ void addMapEdits(CLI::App& app, Common& common, Commands& out) {
   auto backup_path = std::make_shared<std::string>();
   c = app.add_subcommand("backup", "Online backup of the database to a new file on the server");
   addCommon(c, common);
-  c->add_option("PATH", *backup_path, "Destination on the server's filesystem (must not exist)")->required();
+  c->add_option("NAME", *backup_path,
+                "File name (no directories) the server writes into its backup directory (server.backup_dir; "
+                "default backups/ beside the database); must not exist")
+      ->required();
   out.push_back({c, [&common, backup_path] { return runBackup(common, *backup_path); }});
+
+  c = app.add_subcommand("health", "grpc.health.v1 check: exit 0 when the server is SERVING, 1 otherwise (probes)");
+  addCommon(c, common);
+  out.push_back({c, [&common] {
+                   const bool ok = connectClient(common).serving();
+                   if (common.json)
+                     std::cout << json{{"server", common.server}, {"serving", ok}}.dump() << std::endl;
+                   else
+                     std::cout << common.server << (ok ? " SERVING" : " NOT_SERVING") << "\n";
+                   return ok ? 0 : 1;
+                 }});
 
   auto create_name = std::make_shared<std::string>();
   c = app.add_subcommand("create-map", "Create an empty map");

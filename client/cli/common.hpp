@@ -38,8 +38,8 @@ sc::Client connectClient(const Common& c, std::size_t chunk_bytes = sc::kDefault
 
 // Query options of `ingest --query` and `query`.
 struct QueryFlags {
-  unsigned top_k = 0;  // 0: the server's default (5)
-  std::int64_t exclude_recent = 50;
+  unsigned top_k = 0;                // 0: the server's default (5)
+  std::int64_t exclude_recent = 50;  // the server's default (sglc.proto), sent explicitly
   double exclude_seconds = 0;
   std::string scope = "all";
   std::string sessions;  // comma separated robot/session names

@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "common.hpp"
+#include "sglc/version.hpp"
 
 namespace {
 
@@ -49,6 +50,7 @@ int run(const Commands& commands, const Common& common) {
 
 int main(int argc, char** argv) {
   CLI::App app{"sglc: client of the SGLC LiDAR loop-closure service"};
+  app.set_version_flag("--version", std::string("sglc ") + sglc::kVersion);
   app.require_subcommand(1);
   Common common;
   if (const char* s = std::getenv("SGLC_SERVER"); s && *s) common.server = s;
@@ -66,6 +68,8 @@ int main(int argc, char** argv) {
   }
   try {
     app.parse(argc, argv);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {

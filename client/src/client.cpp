@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <utility>
 
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "sglc/rigid.hpp"
 
 namespace sglc::client {
@@ -80,6 +81,7 @@ struct ClientCore {
   std::unique_ptr<v1::LoopClosure::Stub> loop;
   std::unique_ptr<v1::MapAdmin::Stub> admin;
   std::unique_ptr<v1::PoseGraph::Stub> graph;
+  std::unique_ptr<grpc::health::v1::Health::Stub> health;
 
   void prepare(grpc::ClientContext* context, const CallOptions& call, bool stream) const {
     const auto deadline = call.deadline.value_or(stream ? std::chrono::milliseconds(0) : options.default_deadline);
@@ -144,6 +146,7 @@ Client::Client(std::shared_ptr<grpc::Channel> channel, ConnectOptions options) {
   core->loop = v1::LoopClosure::NewStub(core->channel);
   core->admin = v1::MapAdmin::NewStub(core->channel);
   core->graph = v1::PoseGraph::NewStub(core->channel);
+  core->health = grpc::health::v1::Health::NewStub(core->channel);
   core_ = std::move(core);
 }
 
@@ -270,6 +273,28 @@ std::vector<v1::ScanPose> Client::getPoses(const std::string& map, const std::st
   do {
     auto page = core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetPoses, "PoseGraph.GetPoses", request, call);
     for (auto& p : *page.mutable_poses()) out.push_back(std::move(p));
+    request.set_page_token(page.next_page_token());
+  } while (request.page_token() != 0);
+  return out;
+}
+
+bool Client::serving(const CallOptions& call) const {
+  grpc::health::v1::HealthCheckRequest request;  // "": the server as a whole
+  const auto r =
+      core_->unary(core_->health.get(), &grpc::health::v1::Health::Stub::Check, "Health.Check", request, call);
+  return r.status() == grpc::health::v1::HealthCheckResponse::SERVING;
+}
+
+std::vector<v1::LoopEdge> Client::getLoops(const std::string& map, const std::string& robot,
+                                           const CallOptions& call) const {
+  std::vector<v1::LoopEdge> out;
+  v1::GetLoopsRequest request;
+  request.set_map(map);
+  request.set_robot(robot);
+  request.set_page_size(5000);
+  do {
+    auto page = core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetLoops, "PoseGraph.GetLoops", request, call);
+    for (auto& l : *page.mutable_loops()) out.push_back(std::move(l));
     request.set_page_token(page.next_page_token());
   } while (request.page_token() != 0);
   return out;

@@ -19,6 +19,7 @@
 #include "sglc/config/settings_file.hpp"
 #include "sglc/elapsed.hpp"
 #include "sglc/log/log_line.hpp"
+#include "sglc/version.hpp"
 
 namespace {
 
@@ -188,10 +189,13 @@ int main(int argc, char** argv) {
   // free). Ordinary keyframes (~2 MB) stay on the heap: mmapping those too cost 3-5 ms per ingest in page faults.
   mallopt(M_MMAP_THRESHOLD, 16 << 20);
   CLI::App app{"SGLC loop-closure service: gRPC (sglc.v1) on a persistent SQLite map database."};
+  app.set_version_flag("--version", std::string("sglc-server ") + sglc::kVersion);
   Request request;
   addFlags(app, request);
   try {
     app.parse(argc, argv);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {

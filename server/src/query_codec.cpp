@@ -27,7 +27,7 @@ closing::QueryOptions fromWire(const v1::QueryOptions& o) {
   closing::QueryOptions q;
   q.top_k = o.top_k();
   q.candidates = o.candidates();
-  q.exclude_recent = o.exclude_recent();
+  q.exclude_recent = o.has_exclude_recent() ? o.exclude_recent() : kDefaultExcludeRecent;
   q.exclude_seconds = o.exclude_seconds();
   q.refine = o.refine_set() ? o.refine() : true;
   q.known_loops = o.known_loops();

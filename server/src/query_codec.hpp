@@ -1,12 +1,16 @@
 // The loop query's messages <-> the use case's plain types (sglc/closing/loop_query.hpp).
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 #include "sglc/closing/loop_query.hpp"
 #include "sglc/v1/sglc.pb.h"
 
 namespace sglc::server {
+
+// QueryOptions.exclude_recent when a client leaves it unset (documented in sglc.proto).
+inline constexpr std::int64_t kDefaultExcludeRecent = 50;
 
 // A scope this server does not know becomes Scope::kUnknown (the finder refuses it).
 closing::QueryOptions fromWire(const v1::QueryOptions& options);

@@ -17,6 +17,7 @@
 #include "sglc/closing/loop_finder.hpp"
 #include "sglc/config/engine_file.hpp"
 #include "sglc/log/log_line.hpp"
+#include "sglc/version.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
 
@@ -324,7 +325,7 @@ grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::
     state_.tokens().authenticate(*ctx);  // any valid token may ask
     const auto& config = state_.pipeline().config();
     const auto& labels = config.labels;
-    resp->set_version(SGLC_VERSION);
+    resp->set_version(kVersion);
     resp->set_label_preset(labels.preset);
     for (const auto& c : labels.node_classes) {
       auto* o = resp->add_node_classes();
@@ -370,99 +371,6 @@ grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupR
     state_.store().backup(dest);
     resp->set_path(dest);
     resp->set_bytes(static_cast<std::int64_t>(fs::file_size(dest, ec)));
-  });
-}
-
-}  // namespace sglc::server
-
-// ------------------------------------------------------------------------------------------------ PoseGraph
-
-namespace sglc::server {
-namespace {}  // namespace
-
-void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
-  wire::checkName("map", map);
-  TokenTable::require(state.tokens().authenticate(*ctx), map);
-  if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
-}
-
-grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
-                                        v1::GetPosesResponse* resp) {
-  return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
-    requireMap(state_, ctx, req->map());
-    if (!req->session().empty() && req->robot().empty())
-      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
-    if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
-    const std::int64_t page = req->page_size() ? req->page_size() : 1000;
-    if (page > 10000) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_size must be at most 10000");
-    auto& store = state_.store();
-    if (!req->robot().empty()) {
-      bool found = false;
-      for (const auto& s : store.listSessions(req->map(), req->robot()))
-        found = found || req->session().empty() || s.name == req->session();
-      if (!found)
-        throw RpcError(grpc::StatusCode::NOT_FOUND,
-                       "map '" + req->map() + "' has no robot '" + req->robot() + "'" +
-                           (req->session().empty() ? "" : " with session '" + req->session() + "'"));
-    }
-    const auto version = store.graphVersion(req->map());
-    std::map<std::int64_t, storage::SessionFrame> frames;
-    for (auto& f : store.sessionFrames(req->map())) frames[f.session_id] = f;
-    std::int64_t last = 0;
-    std::vector<storage::GraphNodeRecord> nodes;
-    for (auto& n : store.graphNodes(req->map(), req->page_token())) {
-      if (!n.odometry_pose) continue;
-      if (!req->robot().empty() && n.robot != req->robot()) continue;
-      if (!req->session().empty() && n.session != req->session()) continue;
-      if (static_cast<std::int64_t>(nodes.size()) == page) {
-        resp->set_next_page_token(last);
-        break;
-      }
-      last = n.scan_id;
-      nodes.push_back(std::move(n));
-    }
-    std::map<std::int64_t, Mat4d> optimised;
-    if (!nodes.empty())
-      for (const auto& p : store.optimisedPoses(req->map(), req->robot(), req->session(), req->page_token(), page))
-        optimised[p.scan_id] = p.pose;
-    for (const auto& n : nodes) {
-      auto* o = resp->add_poses();
-      o->set_scan_id(n.scan_id);
-      o->set_robot(n.robot);
-      o->set_session(n.session);
-      o->set_seq(n.seq);
-      const auto f = frames.find(n.session_id);
-      const bool connected = f != frames.end() && f->second.connected;
-      o->set_connected(connected);
-      if (const auto p = optimised.find(n.scan_id); p != optimised.end()) {
-        o->set_optimised(true);
-        wire::toTransform(p->second, o->mutable_t_map_scan());
-      } else {
-        // Not optimised yet: its odometry through the session's last known frame.
-        wire::toTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
-                          o->mutable_t_map_scan());
-      }
-    }
-    resp->set_graph_version(version);
-  });
-}
-
-grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
-                                                v1::GetSessionFramesResponse* resp) {
-  return run(ctx, {"GetSessionFrames", req->map(), ""}, [&](CallLog&) {
-    requireMap(state_, ctx, req->map());
-    auto& store = state_.store();
-    resp->set_graph_version(store.graphVersion(req->map()));
-    std::map<std::pair<std::string, std::string>, storage::SessionFrame> frames;
-    for (auto& f : store.sessionFrames(req->map())) frames[{f.robot, f.session}] = f;
-    for (const auto& s : store.listSessions(req->map())) {
-      auto* o = resp->add_sessions();
-      o->set_robot(s.robot);
-      o->set_session(s.name);
-      const auto f = frames.find({s.robot, s.name});
-      o->set_connected(f != frames.end() && f->second.connected);
-      wire::toTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
-    }
   });
 }
 

@@ -125,6 +125,7 @@ class PoseGraphService final : public PoseGraphBase {
   grpc::Status GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req, v1::GetPosesResponse* resp) override;
   grpc::Status GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
                                 v1::GetSessionFramesResponse* resp) override;
+  grpc::Status GetLoops(grpc::ServerContext* ctx, const v1::GetLoopsRequest* req, v1::GetLoopsResponse* resp) override;
   grpc::ServerWriteReactor<grpc::ByteBuffer>* WatchMap(grpc::CallbackServerContext* ctx,
                                                        const grpc::ByteBuffer* req) override;
 

@@ -17,6 +17,7 @@ def methods():
             ("MapAdmin", "DeleteRobot", pb.DeleteRobotRequest), ("MapAdmin", "GetStats", pb.GetStatsRequest),
             ("MapAdmin", "Backup", pb.BackupRequest), ("PoseGraph", "GetPoses", pb.GetPosesRequest),
             ("PoseGraph", "GetSessionFrames", pb.GetSessionFramesRequest),
+            ("PoseGraph", "GetLoops", pb.GetLoopsRequest),
             ("PoseGraph", "WatchMap", pb.WatchMapRequest)]
 
 

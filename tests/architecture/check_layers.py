@@ -12,7 +12,8 @@ import sys
 
 ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", ".."))
 
-TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp", "sglc/params.hpp"}
+TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp", "sglc/params.hpp",
+                 "sglc/version.hpp"}  # version.hpp: generated from core/include/sglc/version.hpp.in
 ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
 IO_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "io/include/sglc"))}
 TYPES_FILES = [f"core/{d}/{n}" for d, ext in (("include/sglc", "hpp"), ("src", "cpp"))
@@ -61,7 +62,8 @@ LAYERS = {
     # Each map's pose graph: the map database's graph tables and Ceres.
     "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph"}, {"eigen", "ceres", "spdlog"}),
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
-    "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf"}),
+    # json: the loop exports (export_formats.cpp) that the command line and other C++ clients share.
+    "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json"}),
     "server": (["server/src"], {"types", "core", "config", "storage", "closing", "posegraph", "log", "proto", "wire"},
                {"eigen", "grpc", "protobuf", "spdlog", "json", "cli11"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.

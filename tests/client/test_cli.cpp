@@ -48,7 +48,9 @@ TEST(CliErrors, CommandLineMistakes) {
   expectOneLineError({"ingest", "--map", "m", "--robot", "r"}, "DIR");
   expectOneLineError({"robots"}, "--map");
   expectOneLineError({"delete", "--map", "m"}, "--robot");
-  expectOneLineError({"backup"}, "PATH");
+  expectOneLineError({"backup"}, "NAME");
+  expectOneLineError({"loops", "--map", "m", "--format", "xml"}, "--format must be json, csv or g2o");
+  expectOneLineError({"trajectory", "--map", "m", "--robot", "r", "--out", "x", "--format", "g2o"}, "kitti or tum");
   expectOneLineError({"create-map"}, "MAP");
   expectOneLineError({"stats", "--top-k", "3"}, "--top-k");
   expectOneLineError({"query", "--map", "m", "--scan-id", "notanumber"}, "notanumber");
@@ -107,6 +109,17 @@ TEST(CliErrors, ConnectionProblemsNameTheStatus) {
 TEST(Cli, HelpListsEverySubcommand) {
   const auto r = t::run({t::cliBinary(), "--help"});
   EXPECT_EQ(r.exit_code, 0);
-  for (const char* sub : {"ingest", "query", "maps", "robots", "stats", "delete", "backup", "create-map"})
+  for (const char* sub : {"ingest", "query", "maps", "robots", "stats", "delete", "backup", "create-map", "loops",
+                          "trajectory", "health"})
     EXPECT_NE(r.out.find(sub), std::string::npos) << sub;
+}
+
+TEST(Cli, VersionAndHealthOfAServerThatIsNotThere) {
+  const auto v = t::run({t::cliBinary(), "--version"});
+  EXPECT_EQ(v.exit_code, 0);
+  EXPECT_EQ(v.out.rfind("sglc ", 0), 0u) << v.out;
+  // Nothing listens on port 1: the probe fails with exit 1 and names the status.
+  const auto h = t::run({t::cliBinary(), "health", "--server", "127.0.0.1:1", "--timeout", "5"});
+  EXPECT_EQ(h.exit_code, 1);
+  EXPECT_NE(h.err.find("UNAVAILABLE"), std::string::npos) << h.err;
 }

@@ -4,6 +4,9 @@
 Usage: test_server.py SERVER_BINARY PYTHON_STUB_DIR SHARED_DATA_DIR SIM_BINARY SGLC_CLI
 Starts real servers on free loopback ports with temporary databases. Exit 77 when grpcio/numpy are missing.
 """
+import csv
+import io
+import json
 import os
 import shutil
 import signal
@@ -439,6 +442,49 @@ def test_config_file(tmp):
         assert r.returncode != 0 and expected in r.stderr, (text, r.returncode, r.stderr)
 
 
+def check_exports(s, tmp, est, n, loops):
+    """sglc trajectory --format tum and sglc loops in every format agree with the server's poses and loops."""
+    tum = os.path.join(tmp, "a.tum")
+    subprocess.run([CLI, "trajectory", "--server", s.addr, "--map", "m", "--robot", "a", "--format", "tum",
+                    "--out", tum], check=True, stdout=subprocess.DEVNULL, timeout=60)
+    rows = np.loadtxt(tum)
+    # evo's TUM rules: 8 columns, increasing stamps, unit quaternions.
+    assert rows.shape == (n, 8) and np.all(np.diff(rows[:, 0]) > 0)
+    assert np.allclose(rows[:, 0], 1000.0 + 0.8 * np.arange(n), atol=1e-6)
+    assert np.allclose(np.linalg.norm(rows[:, 4:8], axis=1), 1.0, atol=1e-6)
+    assert np.allclose(rows[:, 1:4], np.array([T[:3, 3] for T in est]), atol=1e-6)
+    edges = s.graph.GetLoops(pb.GetLoopsRequest(map="m")).loops
+    assert len(edges) == loops and [e.id for e in edges] == sorted(e.id for e in edges)
+    page = s.graph.GetLoops(pb.GetLoopsRequest(map="m", page_size=7))
+    assert len(page.loops) == 7 and page.next_page_token == page.loops[-1].id
+    rest = s.graph.GetLoops(pb.GetLoopsRequest(map="m", page_token=page.next_page_token)).loops
+    assert [e.id for e in page.loops] + [e.id for e in rest] == [e.id for e in edges], "pages cover every loop once"
+    only_b = s.graph.GetLoops(pb.GetLoopsRequest(map="m", robot="b")).loops
+    assert 0 < len(only_b) < len(edges) and all("b" in (e.query.robot, e.candidate.robot) for e in only_b)
+    expect_code(grpc.StatusCode.NOT_FOUND, lambda: s.graph.GetLoops(pb.GetLoopsRequest(map="m", robot="ghost")),
+                "loops of an unknown robot")
+    cli = [CLI, "loops", "--server", s.addr, "--map", "m", "--format"]
+    lines = subprocess.run(cli + ["json"], check=True, capture_output=True, text=True, timeout=60).stdout.splitlines()
+    js = [json.loads(l) for l in lines]
+    assert [j["id"] for j in js] == [e.id for e in edges]
+    assert np.allclose(js[0]["T"], list(edges[0].t_query_candidate.m))
+    csv_rows = list(csv.DictReader(io.StringIO(
+        subprocess.run(cli + ["csv"], check=True, capture_output=True, text=True, timeout=60).stdout)))
+    assert len(csv_rows) == loops and int(csv_rows[-1]["candidate_scan"]) == edges[-1].candidate.scan_id
+    g2o = subprocess.run(cli + ["g2o"], check=True, capture_output=True, text=True, timeout=60).stdout.splitlines()
+    vertices = [l.split() for l in g2o if l.startswith("VERTEX_SE3:QUAT ")]
+    g2o_edges = [l.split() for l in g2o if l.startswith("EDGE_SE3:QUAT ")]
+    assert len(g2o_edges) == loops and all(len(e) == 3 + 7 + 21 for e in g2o_edges)
+    ends = {e.query.scan_id for e in edges} | {e.candidate.scan_id for e in edges}
+    assert {int(v[1]) for v in vertices} == ends and all(len(v) == 9 for v in vertices)
+    with_info = next(e for e in edges if len(e.information) == 36)
+    row = next(r for r in g2o_edges if (int(r[1]), int(r[2])) == (with_info.query.scan_id, with_info.candidate.scan_id))
+    info = np.array(with_info.information).reshape(6, 6)
+    upper = [float(v) for v in row[10:]]
+    # g2o's order is (x, y, z, qx, qy, qz): translation entries as they are, rotation ones x4 (q ~ r / 2).
+    assert np.isclose(upper[0], info[0, 0], rtol=1e-6) and np.isclose(upper[15], 4 * info[3, 3], rtol=1e-6)
+
+
 def test_pose_graph(tmp):
     # A drive of the built-in route (every 8th frame) with 2 % odometry drift, as two robots: "a" drives it
     # all, "b" the second half with its odometry in an unrelated frame. Loops correct both.
@@ -483,7 +529,7 @@ def test_pose_graph(tmp):
         expect_code(C.NOT_FOUND, lambda: s.graph.GetPoses(pb.GetPosesRequest(map="m", robot="ghost")), "unknown robot")
         opts = pb.QueryOptions(exclude_recent=12, top_k=3)
         reqs = [pb.IngestRequest(key=key("a", i), scan=scan(i), odometry_pose=tf(odom[i]), query=True,
-                                 query_options=opts) for i in range(n)]
+                                 query_options=opts, stamp=1000.0 + 0.8 * i) for i in range(n)]
         half = n // 2
         reqs += [pb.IngestRequest(key=key("b", i), scan=scan(i), odometry_pose=tf(offset @ odom[i]), query=True,
                                   query_options=opts) for i in range(half, n)]
@@ -532,6 +578,9 @@ def test_pose_graph(tmp):
                        stdout=subprocess.DEVNULL, timeout=60)
         rows = np.loadtxt(out).reshape(-1, 3, 4)
         assert len(rows) == n and np.allclose(rows, np.array([T[:3, :] for T in est]), atol=1e-6)
+        frames_list = [l.split() for l in open(out + ".frames") if not l.startswith("#")]
+        assert [int(f[2]) for f in frames_list] == list(range(n)) and all(f[0] == "a" for f in frames_list)
+        check_exports(s, tmp, est, n, loops)
     finally:
         s.stop(signal.SIGKILL)
     s = Server(db, ["--config", cfg])

@@ -10,6 +10,7 @@
 #include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/version.hpp"
 
 namespace {
 
@@ -58,6 +59,7 @@ nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fi
 
 int main(int argc, char** argv) {
   CLI::App app{"Checks whether two labelled LiDAR scans close a loop and estimates T_a_b (maps B into A)."};
+  app.set_version_flag("--version", std::string("sglc-pair ") + sglc::kVersion);
   std::string scan_a, labels_a, scan_b, labels_b, config_path, label_field = "label";
   bool dump = false, known_loop = false;
   app.add_flag("--dump-config", dump, "Print the effective configuration as YAML and exit");
@@ -74,6 +76,8 @@ int main(int argc, char** argv) {
   app.add_option("--config", config_path, "YAML file overriding engine parameters (see --dump-config)");
   try {
     app.parse(argc, argv);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {

@@ -80,16 +80,18 @@ class Client:
         except grpc.RpcError as e:
             raise SglcError.from_rpc(name, e) from None
 
-    def query_options(self, scope="all", top_k=0, exclude_recent=0, exclude_seconds=0.0, sessions=(), candidates=0,
+    def query_options(self, scope="all", top_k=0, exclude_recent=None, exclude_seconds=0.0, sessions=(), candidates=0,
                       refine=None, include_rejected=False, min_score=None, verify_scan_ids=(), known_loops=False):
         """Builds a QueryOptions message. scope: "all", "same", "other" or "sessions" (with sessions=["robot/session"]).
         verify_scan_ids: check exactly these stored scans instead of searching; known_loops: they are known to be
-        loops, so a pose is estimated for rejected ones too (see QueryOptions in sglc.proto)."""
+        loops, so a pose is estimated for rejected ones too (see QueryOptions in sglc.proto). exclude_recent=None
+        leaves the server's default (50 scans of the same session), as every other client does."""
         if scope not in SCOPES:
             raise ValueError(f"unknown scope {scope!r} (expected same, other, all or sessions)")
-        o = self.pb2.QueryOptions(scope=SCOPES[scope], exclude_recent=int(exclude_recent),
-                                  exclude_seconds=float(exclude_seconds), top_k=int(top_k), candidates=int(candidates),
+        o = self.pb2.QueryOptions(scope=SCOPES[scope], exclude_seconds=float(exclude_seconds), top_k=int(top_k), candidates=int(candidates),
                                   include_rejected=bool(include_rejected), known_loops=bool(known_loops))
+        if exclude_recent is not None:
+            o.exclude_recent = int(exclude_recent)
         o.sessions.extend(sessions)
         o.verify_scan_ids.extend(int(i) for i in verify_scan_ids)
         if refine is not None:

@@ -197,6 +197,12 @@ class Client {
   std::vector<v1::ScanPose> getPoses(const std::string& map, const std::string& robot = "",
                                      const std::string& session = "", const CallOptions& call = {}) const;
   v1::GetSessionFramesResponse getSessionFrames(const std::string& map, const CallOptions& call = {}) const;
+  // grpc.health.v1 Check of the whole server: true when SERVING (false while it loads or drains). Needs no
+  // token; RpcError when the server cannot be reached.
+  bool serving(const CallOptions& call = {}) const;
+  // Every verified loop of the map's pose graph (all pages), or those touching `robot`, in id order.
+  std::vector<v1::LoopEdge> getLoops(const std::string& map, const std::string& robot = "",
+                                     const CallOptions& call = {}) const;
 
  private:
   std::shared_ptr<const detail::ClientCore> core_;

@@ -1,0 +1,157 @@
+// The PoseGraph service's handlers: optimised poses, session frames and the loops of a map's pose graph
+// (WatchMap, a stream, is in streams.cpp).
+#include <map>
+
+#include "call.hpp"
+#include "rpc_error.hpp"
+#include "service.hpp"
+#include "sglc/wire/geometry_codec.hpp"
+
+namespace sglc::server {
+namespace {
+
+// scan id -> (robot, session, seq) of every scan of the map, for the ends of its loops.
+std::map<std::int64_t, v1::LoopEnd> loopEnds(const storage::MapStore& store, const std::string& map) {
+  std::map<std::int64_t, v1::LoopEnd> ends;
+  for (const auto& n : store.graphNodes(map)) {
+    v1::LoopEnd e;
+    e.set_scan_id(n.scan_id);
+    e.set_robot(n.robot);
+    e.set_session(n.session);
+    e.set_seq(n.seq);
+    ends.emplace(n.scan_id, std::move(e));
+  }
+  return ends;
+}
+
+void toWire(const storage::LoopRecord& l, const std::map<std::int64_t, v1::LoopEnd>& ends, v1::LoopEdge* o) {
+  o->set_id(l.id);
+  *o->mutable_query() = ends.at(l.query_scan);
+  *o->mutable_candidate() = ends.at(l.candidate_scan);
+  wire::toTransform(l.T, o->mutable_t_query_candidate());
+  o->set_score(l.score);
+  o->set_inliers(l.inliers);
+  o->set_fitness(l.fitness);
+  o->set_rmse(l.rmse);
+  if (l.information)
+    for (int k = 0; k < 36; ++k) o->add_information((*l.information)(k / 6, k % 6));
+}
+
+std::int64_t pageSize(std::uint32_t requested) {
+  if (requested > 10000) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_size must be at most 10000");
+  return requested ? requested : 1000;
+}
+
+}  // namespace
+
+void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
+  wire::checkName("map", map);
+  TokenTable::require(state.tokens().authenticate(*ctx), map);
+  if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
+}
+
+grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
+                                        v1::GetPosesResponse* resp) {
+  return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    if (!req->session().empty() && req->robot().empty())
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
+    if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
+    const std::int64_t page = pageSize(req->page_size());
+    auto& store = state_.store();
+    if (!req->robot().empty()) {
+      bool found = false;
+      for (const auto& s : store.listSessions(req->map(), req->robot()))
+        found = found || req->session().empty() || s.name == req->session();
+      if (!found)
+        throw RpcError(grpc::StatusCode::NOT_FOUND,
+                       "map '" + req->map() + "' has no robot '" + req->robot() + "'" +
+                           (req->session().empty() ? "" : " with session '" + req->session() + "'"));
+    }
+    const auto version = store.graphVersion(req->map());
+    std::map<std::int64_t, storage::SessionFrame> frames;
+    for (auto& f : store.sessionFrames(req->map())) frames[f.session_id] = f;
+    std::int64_t last = 0;
+    std::vector<storage::GraphNodeRecord> nodes;
+    for (auto& n : store.graphNodes(req->map(), req->page_token())) {
+      if (!n.odometry_pose) continue;
+      if (!req->robot().empty() && n.robot != req->robot()) continue;
+      if (!req->session().empty() && n.session != req->session()) continue;
+      if (static_cast<std::int64_t>(nodes.size()) == page) {
+        resp->set_next_page_token(last);
+        break;
+      }
+      last = n.scan_id;
+      nodes.push_back(std::move(n));
+    }
+    std::map<std::int64_t, Mat4d> optimised;
+    if (!nodes.empty())
+      for (const auto& p : store.optimisedPoses(req->map(), req->robot(), req->session(), req->page_token(), page))
+        optimised[p.scan_id] = p.pose;
+    for (const auto& n : nodes) {
+      auto* o = resp->add_poses();
+      o->set_scan_id(n.scan_id);
+      o->set_robot(n.robot);
+      o->set_session(n.session);
+      o->set_seq(n.seq);
+      if (n.stamp) o->set_stamp(*n.stamp);
+      const auto f = frames.find(n.session_id);
+      const bool connected = f != frames.end() && f->second.connected;
+      o->set_connected(connected);
+      if (const auto p = optimised.find(n.scan_id); p != optimised.end()) {
+        o->set_optimised(true);
+        wire::toTransform(p->second, o->mutable_t_map_scan());
+      } else {
+        // Not optimised yet: its odometry through the session's last known frame.
+        wire::toTransform(f != frames.end() ? Mat4d(f->second.T_map_session * *n.odometry_pose) : *n.odometry_pose,
+                          o->mutable_t_map_scan());
+      }
+    }
+    resp->set_graph_version(version);
+  });
+}
+
+grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const v1::GetSessionFramesRequest* req,
+                                                v1::GetSessionFramesResponse* resp) {
+  return run(ctx, {"GetSessionFrames", req->map(), ""}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    auto& store = state_.store();
+    resp->set_graph_version(store.graphVersion(req->map()));
+    std::map<std::pair<std::string, std::string>, storage::SessionFrame> frames;
+    for (auto& f : store.sessionFrames(req->map())) frames[{f.robot, f.session}] = f;
+    for (const auto& s : store.listSessions(req->map())) {
+      auto* o = resp->add_sessions();
+      o->set_robot(s.robot);
+      o->set_session(s.name);
+      const auto f = frames.find({s.robot, s.name});
+      o->set_connected(f != frames.end() && f->second.connected);
+      wire::toTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
+    }
+  });
+}
+
+grpc::Status PoseGraphService::GetLoops(grpc::ServerContext* ctx, const v1::GetLoopsRequest* req,
+                                        v1::GetLoopsResponse* resp) {
+  return run(ctx, {"GetLoops", req->map(), req->robot()}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
+    const std::int64_t page = pageSize(req->page_size());
+    const auto& store = state_.store();
+    if (!req->robot().empty() && store.listSessions(req->map(), req->robot()).empty())
+      throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + req->robot() + "'");
+    const auto ends = loopEnds(store, req->map());
+    for (const auto& l : store.loops(req->map(), req->page_token())) {
+      if (!ends.count(l.query_scan) || !ends.count(l.candidate_scan)) continue;  // an end was deleted
+      if (!req->robot().empty() && ends.at(l.query_scan).robot() != req->robot() &&
+          ends.at(l.candidate_scan).robot() != req->robot())
+        continue;
+      if (resp->loops_size() == page) {
+        resp->set_next_page_token(resp->loops(page - 1).id());
+        break;
+      }
+      toWire(l, ends, resp->add_loops());
+    }
+  });
+}
+
+}  // namespace sglc::server
