@@ -4,40 +4,50 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 #include <vector>
 
+#include "file_bytes.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc::detail {
 namespace {
+
+const std::vector<std::string> kPcdKeys{"VERSION", "FIELDS", "SIZE",      "TYPE",   "COUNT",
+                                        "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
 
 constexpr std::size_t kMaxHeaderBytes = 1 << 16;
 constexpr std::uint64_t kMaxPoints = 500'000'000;  // far above any LiDAR scan, below what would exhaust memory
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw InputError(path + ": " + what); }
 
-// The header lines (up to and including `last_key`'s line) and the byte offset where the data starts.
+// The file's bytes, its header lines (up to and including `last_key`'s line) and where the data starts.
 struct Header {
+  std::vector<char> bytes;
   std::vector<std::string> lines;
   std::uint64_t data_offset = 0;
   std::uint64_t file_size = 0;
 };
 
 Header readHeader(const std::string& path, const std::string& last_key, const char* format) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
   Header h;
-  std::error_code ec;
-  h.file_size = std::filesystem::file_size(path, ec);
-  std::string line;
-  while (h.data_offset < kMaxHeaderBytes && std::getline(in, line)) {
-    h.data_offset += line.size() + 1;
+  h.bytes = readAll(path);
+  h.file_size = h.bytes.size();
+  const std::size_t limit = std::min<std::size_t>(h.bytes.size(), kMaxHeaderBytes);
+  std::size_t pos = 0;
+  while (pos < limit) {
+    const auto* nl = static_cast<const char*>(std::memchr(h.bytes.data() + pos, '\n', limit - pos));
+    if (!nl) break;
+    std::string line(static_cast<const char*>(h.bytes.data() + pos), nl);
+    pos = static_cast<std::size_t>(nl - h.bytes.data()) + 1;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     h.lines.push_back(line);
-    if (line.rfind(last_key, 0) == 0) return h;
+    if (line.rfind(last_key, 0) == 0) {
+      h.data_offset = pos;
+      return h;
+    }
   }
   fail(path, std::string("not a ") + format + " file (no '" + last_key + "' line in its first 64 KiB)");
 }
@@ -55,14 +65,50 @@ std::uint64_t count(const std::string& text, const std::string& path, const std:
   return std::stoull(text);
 }
 
+// PCL 1.13 goes on reading header keys after DATA (a "COUNT ..." line at the start of the data changes the
+// layout after the buffer was sized: heap overflow), and turns an ascii line with the wrong number of values
+// into a point at the origin. So: no line of the data may start with a header key, and ascii data must be
+// exactly `points` lines of `values` numbers.
+void checkPcdBody(const Header& h, const std::string& path, bool ascii, std::uint64_t points, std::uint64_t values) {
+  const char* begin = h.bytes.data() + h.data_offset;
+  const char* end = h.bytes.data() + h.bytes.size();
+  std::uint64_t lines = 0;
+  for (const char* line = begin; line < end;) {
+    const char* nl = static_cast<const char*>(std::memchr(line, '\n', static_cast<std::size_t>(end - line)));
+    const char* stop = nl ? nl : end;
+    for (const auto& key : kPcdKeys)
+      if (static_cast<std::size_t>(stop - line) > key.size() && std::memcmp(line, key.data(), key.size()) == 0 &&
+          (line[key.size()] == ' ' || line[key.size()] == '\t'))
+        fail(path, "PCD data holds a '" + key + "' header line");
+    if (ascii) {
+      std::string text(line, stop);
+      if (text.find_first_not_of(" \t\r") != std::string::npos) {
+        if (++lines > points) fail(path, "PCD ascii data has more than POINTS " + std::to_string(points) + " lines");
+        const auto w = words(text);
+        if (w.size() != values)
+          fail(path, "PCD ascii line " + std::to_string(lines) + " has " + std::to_string(w.size()) +
+                         " values, the header declares " + std::to_string(values));
+        for (const auto& v : w) {
+          char* used = nullptr;
+          std::strtod(v.c_str(), &used);
+          if (used != v.c_str() + v.size())
+            fail(path, "PCD ascii line " + std::to_string(lines) + ": '" + v + "' is not a number");
+        }
+      }
+    }
+    line = stop + 1;
+  }
+  if (ascii && lines != points)
+    fail(path, "PCD ascii data has " + std::to_string(lines) + " lines for POINTS " + std::to_string(points));
+}
+
 }  // namespace
 
 void checkPcdHeader(const std::string& path) {
   const Header h = readHeader(path, "DATA", "PCD");
   // Only the keys of the PCD v0.7 specification, each at most once and in its order (PCL 1.13 crashes on an
   // unknown line, and reads SIZE/TYPE/COUNT against the FIELDS seen before them).
-  static const std::vector<std::string> kOrder{"VERSION", "FIELDS", "SIZE",      "TYPE",   "COUNT",
-                                               "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+  const std::vector<std::string>& kOrder = kPcdKeys;
   std::map<std::string, std::vector<std::string>> keys;
   std::size_t next = 0;
   for (const auto& line : h.lines) {
@@ -83,7 +129,7 @@ void checkPcdHeader(const std::string& path) {
   if (keys["SIZE"].size() != fields || keys["TYPE"].size() != fields ||
       (keys.count("COUNT") && keys["COUNT"].size() != fields))
     fail(path, "PCD header: FIELDS, SIZE, TYPE and COUNT list different numbers of entries");
-  std::uint64_t point_bytes = 0;
+  std::uint64_t point_bytes = 0, values = 0;
   for (std::size_t i = 0; i < fields; ++i) {
     const auto size = count(keys["SIZE"][i], path, "PCD SIZE");
     const std::string& type = keys["TYPE"][i];
@@ -95,6 +141,7 @@ void checkPcdHeader(const std::string& path) {
     const auto n = keys.count("COUNT") ? count(keys["COUNT"][i], path, "PCD COUNT") : 1;
     if (n < 1 || n > 4096) fail(path, "PCD field '" + keys["FIELDS"][i] + "': COUNT must be 1..4096");
     point_bytes += size * n;
+    values += n;
   }
   const auto width = count(keys["WIDTH"][0], path, "PCD WIDTH");
   const auto height = count(keys["HEIGHT"][0], path, "PCD HEIGHT");
@@ -108,10 +155,8 @@ void checkPcdHeader(const std::string& path) {
                    " points of " + std::to_string(point_bytes) + " bytes");
   if (data == "binary_compressed") {
     // Two uint32 (compressed size, uncompressed size), then the LZF data: both must fit the file and the points.
-    std::ifstream in(path, std::ios::binary);
-    in.seekg(static_cast<std::streamoff>(h.data_offset));
-    unsigned char b[8] = {};
-    if (left < 8 || !in.read(reinterpret_cast<char*>(b), 8)) fail(path, "PCD binary_compressed data is truncated");
+    if (left < 8) fail(path, "PCD binary_compressed data is truncated");
+    const auto* b = reinterpret_cast<const unsigned char*>(h.bytes.data() + h.data_offset);
     const std::uint64_t compressed = b[0] | (b[1] << 8) | (b[2] << 16) | (std::uint64_t(b[3]) << 24);
     const std::uint64_t uncompressed = b[4] | (b[5] << 8) | (b[6] << 16) | (std::uint64_t(b[7]) << 24);
     if (compressed > left - 8 || uncompressed != points * point_bytes || (points > 0 && compressed == 0))
@@ -121,48 +166,74 @@ void checkPcdHeader(const std::string& path) {
   }
   if (data != "ascii" && data != "binary" && data != "binary_compressed")
     fail(path, "PCD DATA '" + data + "' is not ascii, binary or binary_compressed");
+  checkPcdBody(h, path, data == "ascii", points, values);
 }
+
+namespace {
+
+// PCL 1.13's PLY reader writes colour properties by its own layout (a lone or reordered red/green/blue shifts
+// or overruns the point), sizes organised clouds by obj_info num_cols x num_rows, and reads camera and
+// range_grid elements into the cloud's size: only what it handles safely gets through.
+void checkPlyVertexProperties(const std::vector<std::string>& names, const std::string& path) {
+  static const std::set<std::string> kColour{"red",           "green",        "blue", "alpha", "diffuse_red",
+                                             "diffuse_green", "diffuse_blue", "rgb",  "rgba"};
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (!kColour.count(names[i])) continue;
+    const bool rgb = names[i] == "red" && i + 2 < names.size() && names[i + 1] == "green" && names[i + 2] == "blue";
+    if (!rgb) fail(path, "PLY colour property '" + names[i] + "' is supported only as red, green, blue in that order");
+    i += (i + 3 < names.size() && names[i + 3] == "alpha") ? 3 : 2;
+  }
+}
+
+}  // namespace
 
 void checkPlyHeader(const std::string& path) {
   const Header h = readHeader(path, "end_header", "PLY");
   if (h.lines.empty() || h.lines[0] != "ply") fail(path, "not a PLY file (first line is not 'ply')");
   std::string format;
   std::uint64_t vertices = 0, vertex_bytes = 0;
-  bool in_vertex = false, seen_vertex = false, vertex_first = false, any_element = false;
+  std::vector<std::string> names;
+  bool in_vertex = false, seen_vertex = false;
+  static const std::map<std::string, int> kSizes{{"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},
+                                                 {"short", 2}, {"ushort", 2},  {"int16", 2},  {"uint16", 2},
+                                                 {"int", 4},   {"uint", 4},    {"int32", 4},  {"uint32", 4},
+                                                 {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
   for (std::size_t i = 1; i < h.lines.size(); ++i) {
     const auto w = words(h.lines[i]);
     if (w.empty()) continue;
     if (w[0] == "format" && w.size() == 3) {
       format = w[1];
+    } else if (w[0] == "obj_info" && w.size() >= 2 && (w[1] == "num_cols" || w[1] == "num_rows")) {
+      fail(path, "organised PLY (obj_info " + w[1] + ") is not supported");
     } else if (w[0] == "element") {
       if (w.size() != 3) fail(path, "PLY: malformed line '" + h.lines[i] + "'");
       const auto n = count(w[2], path, "PLY element count");
       if (n > kMaxPoints) fail(path, "PLY element '" + w[1] + "' count " + w[2] + " is too large");
+      if (w[1] != "vertex" && w[1] != "face") fail(path, "PLY element '" + w[1] + "' is not supported (vertex, face)");
+      if (!seen_vertex && w[1] != "vertex") fail(path, "PLY: the vertex element must come first");
       in_vertex = w[1] == "vertex";
       if (in_vertex) {
         if (seen_vertex) fail(path, "PLY: two vertex elements");
         seen_vertex = true;
-        vertex_first = !any_element;
         vertices = n;
       }
-      any_element = true;
     } else if (w[0] == "property" && in_vertex) {
       if (w.size() != 3) fail(path, "PLY vertex property '" + h.lines[i] + "': only scalar properties are supported");
-      static const std::map<std::string, int> kSizes{{"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},
-                                                     {"short", 2}, {"ushort", 2},  {"int16", 2},  {"uint16", 2},
-                                                     {"int", 4},   {"uint", 4},    {"int32", 4},  {"uint32", 4},
-                                                     {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
       const auto it = kSizes.find(w[1]);
       if (it == kSizes.end()) fail(path, "PLY vertex property type '" + w[1] + "' is unknown");
       vertex_bytes += static_cast<std::uint64_t>(it->second);
+      names.push_back(w[2]);
     }
   }
   if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian")
     fail(path, "PLY: format must be ascii, binary_little_endian or binary_big_endian");
   if (!seen_vertex) fail(path, "PLY: no vertex element");
+  checkPlyVertexProperties(names, path);
   const std::uint64_t left = h.file_size - std::min(h.file_size, h.data_offset);
-  const std::uint64_t need = format == "ascii" ? vertices * 2 : vertices * vertex_bytes;  // ascii: "v\n" at least
-  if (vertex_first && left < need)
+  // ascii: at least "v " per value; binary: the declared bytes.
+  const std::uint64_t need =
+      format == "ascii" ? vertices * std::max<std::uint64_t>(names.size(), 1) * 2 : vertices * vertex_bytes;
+  if (left < need)
     fail(path,
          "PLY data holds " + std::to_string(left) + " bytes, too few for " + std::to_string(vertices) + " vertices");
 }

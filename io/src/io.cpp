@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 
 namespace sglc {
@@ -56,6 +57,20 @@ std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t point
 }
 
 namespace {
+// Calls f(line, "path:line") for each line that is not blank or a '#' comment, until f returns false.
+template <typename F>
+void forEachDataLine(const std::string& path, F&& f) {
+  std::ifstream in(path);
+  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
+  std::string line;
+  int line_no = 0;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+    if (!f(line, path + ":" + std::to_string(line_no))) return;
+  }
+}
+
 Mat4d parseRow12(std::istringstream& ss, const std::string& where) {
   Mat4d T = Mat4d::Identity();
   for (int k = 0; k < 12; ++k) {
@@ -71,35 +86,14 @@ Mat4d parseRow12(std::istringstream& ss, const std::string& where) {
 }  // namespace
 
 std::vector<Mat4d> readPoses(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
   std::vector<Mat4d> poses;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.find_first_not_of(" \t\r") == std::string::npos || line[0] == '#') continue;
+  forEachDataLine(path, [&](const std::string& line, const std::string& where) {
     std::istringstream ss(line);
-    poses.push_back(parseRow12(ss, path + ":" + std::to_string(line_no)));
-  }
+    poses.push_back(parseRow12(ss, where));
+    return true;
+  });
   return poses;
 }
-
-namespace {
-template <typename F>
-void forEachDataLine(const std::string& path, F&& f) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const auto first = line.find_first_not_of(" \t\r");
-    if (first == std::string::npos || line[first] == '#') continue;
-    if (!f(line, path + ":" + std::to_string(line_no))) return;
-  }
-}
-}  // namespace
 
 int posesColumns(const std::string& path) {
   int columns = 0;
@@ -184,13 +178,12 @@ void writePoses(const std::string& path, const std::vector<Mat4d>& poses) {
 void writeTumPoses(const std::string& path, const std::vector<StampedPose>& poses) {
   std::ofstream out(path, std::ios::trunc);
   if (!out) throw InputError(path + ": cannot create (" + std::strerror(errno) + ")");
-  char buf[256];
   for (const auto& p : poses) {
     const Eigen::Quaterniond q(Eigen::Matrix3d(p.pose.topLeftCorner<3, 3>()));
     const Eigen::Vector3d t = p.pose.topRightCorner<3, 1>();
-    std::snprintf(buf, sizeof(buf), "%.9f %.9e %.9e %.9e %.9e %.9e %.9e %.9e\n", p.stamp, t.x(), t.y(), t.z(), q.x(),
-                  q.y(), q.z(), q.w());
-    out << buf;
+    out << std::fixed << std::setprecision(9) << p.stamp << std::scientific;
+    for (double v : {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w()}) out << ' ' << v;
+    out << '\n';
   }
   if (!out) throw InputError(path + ": write failed");
 }

@@ -139,8 +139,11 @@ grpc::Status PoseGraphService::GetLoops(grpc::ServerContext* ctx, const v1::GetL
     const auto& store = state_.store();
     if (!req->robot().empty() && store.listSessions(req->map(), req->robot()).empty())
       throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + req->robot() + "'");
+    // Loops first, then the scans: a loop stored in between has both ends stored before it, so it is never
+    // taken for one whose end was deleted (and skipped below a page token that moved past it).
+    const auto loops = store.loops(req->map(), req->page_token());
     const auto ends = loopEnds(store, req->map());
-    for (const auto& l : store.loops(req->map(), req->page_token())) {
+    for (const auto& l : loops) {
       if (!ends.count(l.query_scan) || !ends.count(l.candidate_scan)) continue;  // an end was deleted
       if (!req->robot().empty() && ends.at(l.query_scan).robot() != req->robot() &&
           ends.at(l.candidate_scan).robot() != req->robot())

@@ -195,6 +195,46 @@ TEST(PclCloud, BrokenFilesAreRefusedWithTheReason) {
     const std::string msg = errorOf([&] { readScan(dir.file("bad.ply"), ""); });
     EXPECT_NE(msg.find(reason), std::string::npos) << msg;
   }
+  // Files that make PCL 1.13 write past its buffer, abort, or return a wrong cloud (an adversarial review).
+  const std::string head =
+      "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+      "POINTS 2\n";
+  const std::pair<std::string, std::string> bad_pcd[] = {
+      {head + "DATA ascii\nCOUNT 1 1 100000\n1 2 3\n", "holds a 'COUNT' header line"},
+      {head + "DATA binary\n" + std::string("COUNT 1 1 99999999\n\0\0\0\0\0", 24), "holds a 'COUNT' header line"},
+      {head + "DATA ascii\n1 2 3\n4 5\n", "has 2 values, the header declares 3"},
+      {head + "DATA ascii\n1 2 3\n4 5 six\n", "'six' is not a number"},
+      {head + "DATA ascii\n1 2 3\n", "1 lines for POINTS 2"},
+  };
+  for (const auto& [text, reason] : bad_pcd) {
+    writeBytes(dir.file("bad.pcd"), text);
+    const std::string msg = errorOf([&] { readScan(dir.file("bad.pcd"), ""); });
+    EXPECT_NE(msg.find(reason), std::string::npos) << msg;
+  }
+  const std::string xyz = "property float x\nproperty float y\nproperty float z\n";
+  const std::pair<std::string, std::string> bad_ply2[] = {
+      {"ply\nformat ascii 1.0\nobj_info num_cols 1\nobj_info num_rows 1\nelement vertex 2\n" + xyz +
+           "end_header\n0 0 0\n1 1 1\n",
+       "organised PLY"},
+      {"ply\nformat ascii 1.0\nelement vertex 1\nproperty uchar blue\n" + xyz + "end_header\n1 2 3 4\n",
+       "colour property 'blue'"},
+      {"ply\nformat ascii 1.0\nelement vertex 1\n" + xyz +
+           "element camera 1\nproperty int viewportx\nend_header\n1 2 3\n0\n",
+       "element 'camera' is not supported"},
+      {"ply\nformat ascii 1.0\nelement face 0\nproperty list uchar int vertex_indices\nelement vertex 1\n" + xyz +
+           "end_header\n1 2 3\n",
+       "vertex element must come first"},
+  };
+  for (const auto& [text, reason] : bad_ply2) {
+    writeBytes(dir.file("bad.ply"), text);
+    const std::string msg = errorOf([&] { readScan(dir.file("bad.ply"), ""); });
+    EXPECT_NE(msg.find(reason), std::string::npos) << msg;
+  }
+  // Full red, green, blue in order is fine.
+  writeBytes(dir.file("rgb.ply"), "ply\nformat ascii 1.0\nelement vertex 1\n" + xyz +
+                                      "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+                                      "end_header\n1 2 3 10 20 30\n");
+  EXPECT_EQ(readScan(dir.file("rgb.ply"), "").points, (Points{Vec3f(1, 2, 3)}));
   writeBytes(dir.file("nofields.pcd"), "VERSION .7\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n");
   EXPECT_NE(errorOf([&] { readScan(dir.file("nofields.pcd"), ""); }).find("no FIELDS line"), std::string::npos);
   writeBytes(dir.file("neg.pcd"),
