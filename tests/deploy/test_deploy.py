@@ -87,9 +87,12 @@ def test_dockerfile():
     needed = {}
     for binary in ("sglc-server", "sglc"):
         ldd = subprocess.run(["ldd", os.path.join(BIN, binary)], capture_output=True, text=True, check=True).stdout
+        if "libasan" in ldd:
+            # The sanitizer build's sglc needs more of PCL's libraries (Qt, octree) than the Release one;
+            # the image holds a Release build, which the Release run checks.
+            print("  sanitizer build: runtime package check skipped")
+            return
         for lib in re.findall(r"=> (/\S+)", ldd):
-            if os.path.basename(lib).startswith(("libasan", "libubsan")):
-                continue  # the sanitizer build's runtimes; the image is a Release build
             pkg = package_of(lib)
             if pkg:
                 needed.setdefault(pkg, set()).add(f"{binary}: {os.path.basename(lib)}")
