@@ -18,7 +18,7 @@ GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions o
     : store_(store), options_(options) {
   const auto now = Clock::now();
   for (const auto& m : store_.listMaps())
-    if (!store_.loops(m.name).empty()) due_[m.name] = now;
+    if (!store_.loops(m.name, 0, 1).empty()) due_[m.name] = now;
   worker_ = std::thread([this] { run(); });
 }
 

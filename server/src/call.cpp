@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <cstdio>
 
 #include "sglc/log/log_line.hpp"
 #include "sglc/storage/map_store.hpp"
@@ -35,9 +36,31 @@ grpc::StatusCode toGrpc(StorageError::Code code) {
   }
 }
 
-}  // namespace
+// Names in messages come from clients: control characters are escaped (a NUL cut the message short, a
+// newline split it) and long text is cut at a UTF-8 boundary (a 200 kB robot name echoed back exceeded the
+// client's metadata limit and turned NOT_FOUND into RESOURCE_EXHAUSTED).
+std::string bounded(const std::string& text, std::size_t max_bytes) {
+  std::string out;
+  for (const unsigned char c : text) {
+    if (out.size() >= max_bytes) break;
+    if (c < 0x20 || c == 0x7f) {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", c);
+      out += buf;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  if (out.size() < text.size() && out.size() >= max_bytes) {
+    out.resize(max_bytes);
+    while (!out.empty() && (static_cast<unsigned char>(out.back()) & 0xC0) == 0x80) out.pop_back();
+    if (!out.empty() && static_cast<unsigned char>(out.back()) >= 0xC0) out.pop_back();
+    out += "... (" + std::to_string(text.size()) + " bytes)";
+  }
+  return out;
+}
 
-grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
+grpc::Status rawStatusOf(std::exception_ptr error, std::string* detail) {
   try {
     std::rethrow_exception(error);
   } catch (const RpcError& e) {
@@ -59,11 +82,18 @@ grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
   }
 }
 
+}  // namespace
+
+grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
+  const grpc::Status status = rawStatusOf(error, detail);
+  return grpc::Status(status.error_code(), bounded(status.error_message(), kMaxStatusMessageBytes));
+}
+
 grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, const grpc::Status& status,
                      const std::string& detail) {
   nlohmann::ordered_json line = {{"method", log.method},
-                                 {"map", log.map},
-                                 {"robot", log.robot},
+                                 {"map", bounded(log.map, kMaxStatusMessageBytes)},
+                                 {"robot", bounded(log.robot, kMaxStatusMessageBytes)},
                                  {"code", wire::statusCodeName(status.error_code())},
                                  {"ms", std::round(msSince(log.start) * 1000.0) / 1000.0},
                                  {"peer", ctx.peer()}};

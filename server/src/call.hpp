@@ -25,6 +25,9 @@ struct CallLog {
   long messages = -1;  // streams: requests processed (-1: not a stream)
 };
 
+// Status messages (and the log's map and robot fields) are cut to this many bytes, control characters escaped.
+inline constexpr std::size_t kMaxStatusMessageBytes = 1024;
+
 // The status for an exception thrown by a handler (RpcError, StorageError, InputError, bad_alloc, other).
 // Storage failures below the service (I/O, damage, constraint) are answered without internals (no SQL, no
 // paths); `detail` receives what the log should say.

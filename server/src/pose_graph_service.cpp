@@ -1,6 +1,7 @@
 // The PoseGraph service's handlers: optimised poses, session frames and the loops of a map's pose graph
 // (WatchMap, a stream, is in streams.cpp).
 #include <map>
+#include <optional>
 
 #include "call.hpp"
 #include "rpc_error.hpp"
@@ -10,24 +11,35 @@
 namespace sglc::server {
 namespace {
 
-// scan id -> (robot, session, seq) of every scan of the map, for the ends of its loops.
-std::map<std::int64_t, v1::LoopEnd> loopEnds(const storage::MapStore& store, const std::string& map) {
-  std::map<std::int64_t, v1::LoopEnd> ends;
-  for (const auto& n : store.graphNodes(map)) {
-    v1::LoopEnd e;
-    e.set_scan_id(n.scan_id);
-    e.set_robot(n.robot);
-    e.set_session(n.session);
-    e.set_seq(n.seq);
-    ends.emplace(n.scan_id, std::move(e));
+// The ends of loops as the wire names them, looked up once per scan (nullptr: the scan is gone).
+class LoopEnds {
+ public:
+  explicit LoopEnds(const storage::MapStore& store) : store_(store) {}
+  const v1::LoopEnd* find(std::int64_t scan_id) {
+    auto it = ends_.find(scan_id);
+    if (it == ends_.end()) {
+      std::optional<v1::LoopEnd> end;
+      if (const auto info = store_.scanInfo(scan_id)) {
+        end.emplace();
+        end->set_scan_id(scan_id);
+        end->set_robot(info->robot);
+        end->set_session(info->session);
+        end->set_seq(info->seq);
+      }
+      it = ends_.emplace(scan_id, std::move(end)).first;
+    }
+    return it->second ? &*it->second : nullptr;
   }
-  return ends;
-}
 
-void toWire(const storage::LoopRecord& l, const std::map<std::int64_t, v1::LoopEnd>& ends, v1::LoopEdge* o) {
+ private:
+  const storage::MapStore& store_;
+  std::map<std::int64_t, std::optional<v1::LoopEnd>> ends_;
+};
+
+void toWire(const storage::LoopRecord& l, const v1::LoopEnd& query, const v1::LoopEnd& candidate, v1::LoopEdge* o) {
   o->set_id(l.id);
-  *o->mutable_query() = ends.at(l.query_scan);
-  *o->mutable_candidate() = ends.at(l.candidate_scan);
+  *o->mutable_query() = query;
+  *o->mutable_candidate() = candidate;
   wire::toTransform(l.T, o->mutable_t_query_candidate());
   o->set_score(l.score);
   o->set_inliers(l.inliers);
@@ -50,10 +62,16 @@ void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
 }
 
+void checkFilterName(const std::string& what, const std::string& name) {
+  if (!name.empty()) wire::checkName(what, name);
+}
+
 grpc::Status PoseGraphService::GetPoses(grpc::ServerContext* ctx, const v1::GetPosesRequest* req,
                                         v1::GetPosesResponse* resp) {
   return run(ctx, {"GetPoses", req->map(), req->robot()}, [&](CallLog&) {
     requireMap(state_, ctx, req->map());
+    checkFilterName("robot", req->robot());
+    checkFilterName("session", req->session());
     if (!req->session().empty() && req->robot().empty())
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "a session needs its robot");
     if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
@@ -134,25 +152,30 @@ grpc::Status PoseGraphService::GetLoops(grpc::ServerContext* ctx, const v1::GetL
                                         v1::GetLoopsResponse* resp) {
   return run(ctx, {"GetLoops", req->map(), req->robot()}, [&](CallLog&) {
     requireMap(state_, ctx, req->map());
+    checkFilterName("robot", req->robot());
     if (req->page_token() < 0) throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "page_token must be >= 0");
     const std::int64_t page = pageSize(req->page_size());
     const auto& store = state_.store();
     if (!req->robot().empty() && store.listSessions(req->map(), req->robot()).empty())
       throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + req->robot() + "'");
-    // Loops first, then the scans: a loop stored in between has both ends stored before it, so it is never
-    // taken for one whose end was deleted (and skipped below a page token that moved past it).
-    const auto loops = store.loops(req->map(), req->page_token());
-    const auto ends = loopEnds(store, req->map());
-    for (const auto& l : loops) {
-      if (!ends.count(l.query_scan) || !ends.count(l.candidate_scan)) continue;  // an end was deleted
-      if (!req->robot().empty() && ends.at(l.query_scan).robot() != req->robot() &&
-          ends.at(l.candidate_scan).robot() != req->robot())
-        continue;
-      if (resp->loops_size() == page) {
-        resp->set_next_page_token(resp->loops(page - 1).id());
-        break;
+    // Loops in chunks from the token on (each read bounded, so paging a large map is linear), their ends
+    // looked up after the loop was read: a loop's ends are stored before it, so a missing end was deleted.
+    LoopEnds ends(store);
+    for (std::int64_t after = req->page_token();;) {
+      const auto chunk = store.loops(req->map(), after, page + 1);
+      for (const auto& l : chunk) {
+        after = l.id;
+        const auto* query = ends.find(l.query_scan);
+        const auto* candidate = ends.find(l.candidate_scan);
+        if (!query || !candidate) continue;
+        if (!req->robot().empty() && query->robot() != req->robot() && candidate->robot() != req->robot()) continue;
+        if (resp->loops_size() == page) {
+          resp->set_next_page_token(resp->loops(page - 1).id());
+          return;
+        }
+        toWire(l, *query, *candidate, resp->add_loops());
       }
-      toWire(l, ends, resp->add_loops());
+      if (static_cast<std::int64_t>(chunk.size()) <= page) return;
     }
   });
 }

@@ -226,6 +226,7 @@ grpc::Status MapAdminService::ListSessions(grpc::ServerContext* ctx, const v1::L
                                            v1::ListSessionsResponse* resp) {
   return run(ctx, {"ListSessions", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    checkFilterName("robot", req->robot());
     for (const auto& s : state_.store().listSessions(req->map(), req->robot())) {
       auto* o = resp->add_sessions();
       o->set_robot(s.robot);
@@ -282,6 +283,8 @@ grpc::Status MapAdminService::DeleteSession(grpc::ServerContext* ctx, const v1::
                                             v1::DeleteResponse* resp) {
   return run(ctx, {"DeleteSession", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    checkFilterName("robot", req->robot());
+    checkFilterName("session", req->session());
     resp->set_scans_removed(state_.store().deleteSession(req->map(), req->robot(), req->session()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
     if (auto* graph = state_.graph(); graph && resp->scans_removed() > 0) graph->scansRemoved(req->map());
@@ -292,6 +295,7 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
                                           v1::DeleteResponse* resp) {
   return run(ctx, {"DeleteRobot", req->map(), req->robot()}, [&](CallLog&) {
     TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    checkFilterName("robot", req->robot());
     resp->set_scans_removed(state_.store().deleteRobot(req->map(), req->robot()));
     // The pose graph drops the removed scans and their loops and is solved again without them.
     if (auto* graph = state_.graph(); graph && resp->scans_removed() > 0) graph->scansRemoved(req->map());

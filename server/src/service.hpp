@@ -141,5 +141,8 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
                 v1::IngestResponse* resp, MemoryBudget::Lease* held = nullptr);
 // Checks the map name and the caller's access, and that the map exists (NOT_FOUND).
 void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map);
+// A robot or session name given as a filter: empty, or a valid name (INVALID_ARGUMENT otherwise, before it is
+// echoed in any message).
+void checkFilterName(const std::string& what, const std::string& name);
 
 }  // namespace sglc::server

@@ -90,8 +90,8 @@ class SqliteMapStore final : public MapStore {
   std::int64_t addLoop(const std::string& map, const LoopRecord& loop) override {
     return pose_graph_tables::addLoop(core_, map, loop);
   }
-  std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id) const override {
-    return pose_graph_tables::loops(core_, map, after_id);
+  std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id, std::int64_t limit) const override {
+    return pose_graph_tables::loops(core_, map, after_id, limit);
   }
   std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan) const override {
     return pose_graph_tables::nodes(core_, map, after_scan);

@@ -55,13 +55,14 @@ std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& 
   return id;
 }
 
-std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std::int64_t after_id) {
+std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std::int64_t after_id,
+                              std::int64_t limit) {
   const auto map_id = core.mapId(map);
   auto reader = core.readers.acquire();
   sql::Stmt st(*reader,
                "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information FROM loops"
-               " WHERE map_id = ? AND id > ? ORDER BY id");
-  st.bind(1, map_id).bind(2, after_id);
+               " WHERE map_id = ? AND id > ? ORDER BY id LIMIT ?");
+  st.bind(1, map_id).bind(2, after_id).bind(3, limit > 0 ? limit : std::int64_t{-1});  // -1: no limit
   std::vector<LoopRecord> out;
   while (st.step()) {
     LoopRecord r;

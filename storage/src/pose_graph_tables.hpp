@@ -11,7 +11,7 @@
 namespace sglc::storage::pose_graph_tables {
 
 std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& loop);
-std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std::int64_t after_id);
+std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std::int64_t after_id, std::int64_t limit);
 std::vector<GraphNodeRecord> nodes(const StoreCore& core, const std::string& map, std::int64_t after_scan);
 std::int64_t saveOptimised(StoreCore& core, const std::string& map, const std::vector<OptimisedPose>& poses,
                            const std::vector<SessionFrame>& frames, std::int64_t through_loop);

@@ -4,6 +4,7 @@
 #include <atomic>
 #include <thread>
 
+#include "call.hpp"
 #include "memory_budget.hpp"
 #include "rpc_error.hpp"
 #include "stream_registry.hpp"
@@ -143,6 +144,26 @@ TEST(StreamRegistry, IdleIngestStreamsAreClosedWatchersAndBusyStreamsAreNot) {
   EXPECT_EQ(watcher->closed, 0);
   registry.closeAll(grpc::Status::OK);
   for (auto* s : {idle, busy, watcher}) s->unref();
+}
+
+// Messages built from client text are bounded and one line, whatever the handler put in them.
+TEST(StatusOf, MessagesAreCutAndControlCharactersEscaped) {
+  std::string detail;
+  const auto of = [&](const std::string& text) {
+    return statusOf(std::make_exception_ptr(RpcError(grpc::StatusCode::NOT_FOUND, text)), &detail);
+  };
+  const grpc::Status cut = of("no robot '" + std::string(100000, 'x') + "'");
+  EXPECT_EQ(cut.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_LE(cut.error_message().size(), kMaxStatusMessageBytes + 32);
+  EXPECT_NE(cut.error_message().find("(100011 bytes)"), std::string::npos) << cut.error_message();
+  EXPECT_EQ(of("a\nb\tc").error_message(), "a\\x0ab\\x09c");
+  // A cut never splits a UTF-8 character: 2-byte characters up to the limit leave whole characters only.
+  std::string accents;
+  for (int i = 0; i < 600; ++i) accents += "\xc3\xa9";
+  const std::string m = of(accents).error_message();
+  const std::string kept = m.substr(0, m.find("..."));
+  EXPECT_EQ(kept.size() % 2, 0u);
+  EXPECT_EQ(static_cast<unsigned char>(kept[0]), 0xc3);
 }
 
 }  // namespace

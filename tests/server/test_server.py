@@ -463,6 +463,18 @@ def check_exports(s, tmp, est, n, loops):
     assert 0 < len(only_b) < len(edges) and all("b" in (e.query.robot, e.candidate.robot) for e in only_b)
     expect_code(grpc.StatusCode.NOT_FOUND, lambda: s.graph.GetLoops(pb.GetLoopsRequest(map="m", robot="ghost")),
                 "loops of an unknown robot")
+    # Filter names that no robot can have are refused before they are echoed: no control characters, and no
+    # 200 kB name turning the answer into RESOURCE_EXHAUSTED (the echo exceeded the client's metadata limit).
+    for call in (lambda r: s.graph.GetLoops(pb.GetLoopsRequest(map="m", robot=r)),
+                 lambda r: s.graph.GetPoses(pb.GetPosesRequest(map="m", robot=r)),
+                 lambda r: s.admin.ListSessions(pb.ListSessionsRequest(map="m", robot=r)),
+                 lambda r: s.admin.DeleteRobot(pb.DeleteRobotRequest(map="m", robot=r))):
+        for bad in ("a\nb", "\x00x", "x" * 200000):
+            try:
+                call(bad)
+                raise AssertionError(f"robot {bad[:8]!r} accepted")
+            except grpc.RpcError as e:
+                assert e.code() == grpc.StatusCode.INVALID_ARGUMENT and len(e.details()) < 200, (e.code(), e.details())
     cli = [CLI, "loops", "--server", s.addr, "--map", "m", "--format"]
     lines = subprocess.run(cli + ["json"], check=True, capture_output=True, text=True, timeout=60).stdout.splitlines()
     js = [json.loads(l) for l in lines]

@@ -616,6 +616,8 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
     EXPECT_DOUBLE_EQ(loops[1].score, 0.9);
     EXPECT_TRUE(loops[1].T.isApprox(rigid(0.1, 1, 2), 1e-15));
     EXPECT_EQ(store->loops("m", loops[0].id).size(), 1u);
+    ASSERT_EQ(store->loops("m", 0, 1).size(), 1u);  // at most `limit`, from the first
+    EXPECT_EQ(store->loops("m", 0, 1)[0].id, loops[0].id);
     const auto r1 = store->optimisedPoses("m", "r1", "", 0, 100);
     ASSERT_EQ(r1.size(), 3u);
     EXPECT_EQ(r1[0].scan_id, all[3].id);

@@ -225,8 +225,9 @@ class MapStore {
   // Records a loop between two scans of the map; a second loop for the same (query, candidate) replaces the
   // first. Returns its id. kNotFound for a scan that is not in the map, kInvalidArgument for a non-finite T.
   virtual std::int64_t addLoop(const std::string& map, const LoopRecord& loop) = 0;
-  // Loops with id > after_id, in id order.
-  virtual std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id = 0) const = 0;
+  // Loops with id > after_id, in id order; at most `limit` of them (0: all).
+  virtual std::vector<LoopRecord> loops(const std::string& map, std::int64_t after_id = 0,
+                                        std::int64_t limit = 0) const = 0;
   // Scans with id > after_scan, in id order.
   virtual std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan = 0) const = 0;
   // Replaces the optimised poses of the given scans and the given sessions' frames in one transaction and
