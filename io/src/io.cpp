@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <optional>
 #include <sstream>
 
 namespace sglc {
@@ -95,6 +96,20 @@ std::vector<Mat4d> readPoses(const std::string& path) {
   return poses;
 }
 
+std::vector<double> readStamps(const std::string& path) {
+  std::vector<double> stamps;
+  forEachDataLine(path, [&](const std::string& line, const std::string& where) {
+    std::istringstream ss(line);
+    double v;
+    std::string extra;
+    if (!(ss >> v) || (ss >> extra) || !std::isfinite(v))
+      throw InputError(where + ": expected one timestamp in seconds");
+    stamps.push_back(v);
+    return true;
+  });
+  return stamps;
+}
+
 int posesColumns(const std::string& path) {
   int columns = 0;
   forEachDataLine(path, [&](const std::string& line, const std::string&) {
@@ -130,18 +145,15 @@ std::vector<StampedPose> readTumPoses(const std::string& path) {
 }
 
 Mat4d readCalibTr(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.rfind("Tr:", 0) == 0) {
-      std::istringstream ss(line.substr(3));
-      return parseRow12(ss, path + ":" + std::to_string(line_no));
-    }
-  }
-  throw InputError(path + ": no 'Tr:' line (velodyne -> camera calibration)");
+  std::optional<Mat4d> tr;
+  forEachDataLine(path, [&](const std::string& line, const std::string& where) {
+    if (line.rfind("Tr:", 0) != 0) return true;
+    std::istringstream ss(line.substr(3));
+    tr = parseRow12(ss, where);
+    return false;
+  });
+  if (!tr) throw InputError(path + ": no 'Tr:' line (velodyne -> camera calibration)");
+  return *tr;
 }
 
 void writeKittiBin(const std::string& path, const Points& points, const std::vector<float>& intensities) {

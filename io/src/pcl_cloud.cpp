@@ -103,18 +103,12 @@ const pcl::PCLPointField& requireField(const pcl::PCLPointCloud2& cloud, const s
 }
 
 pcl::PCLPointCloud2 readCloud2(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not a file");
-  if (!std::filesystem::is_regular_file(path, ec)) fail(path, "cannot open (no such file)");
+  // The checks read the file (InputError when it is missing, a directory or unreadable) before PCL does.
+  const std::string ext = std::filesystem::path(path).extension().string();
+  ext == ".pcd" ? detail::checkPcdHeader(path) : detail::checkPlyHeader(path);
   // PCL reports its parse errors on stderr; the InputError below says what failed.
-  if (std::filesystem::path(path).extension() == ".pcd") {
-    detail::checkPcdHeader(path);
-  } else {
-    detail::checkPlyHeader(path);
-  }
   pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
   pcl::PCLPointCloud2 cloud;
-  const std::string ext = std::filesystem::path(path).extension().string();
   int rc = -1;
   try {
     if (ext == ".pcd") {

@@ -22,25 +22,6 @@ bool allDigits(const std::string& s) {
   return !s.empty() && std::all_of(s.begin(), s.end(), [](unsigned char c) { return std::isdigit(c); });
 }
 
-std::vector<double> readStamps(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
-  std::vector<double> stamps;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    std::istringstream ss(line);
-    double v;
-    std::string extra;
-    if (!(ss >> v) || (ss >> extra) || !std::isfinite(v))
-      throw InputError(path + ":" + std::to_string(line_no) + ": expected one timestamp in seconds");
-    stamps.push_back(v);
-  }
-  return stamps;
-}
-
 // Index into a per-frame file (poses.txt, times.txt) for each frame, per the rule in sequence.hpp.
 enum class Indexing { kByNumber, kByPosition };
 

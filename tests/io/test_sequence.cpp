@@ -175,7 +175,7 @@ TEST(Sequence, TumPosesGiveStampsAndPoses) {
   EXPECT_NEAR((*s.frames[1].pose)(0, 3), 1.0, 1e-12);
   EXPECT_NEAR((*s.frames[1].pose)(1, 0), 1.0, 1e-9);  // x axis turned onto y
   // times.txt wins over the TUM stamps.
-  writeFile(dir + "/times.txt", "0\n0.1\n0.2\n");
+  writeFile(dir + "/times.txt", "# seconds\n0\n0.1\n0.2\n");  // comments as in every other line-based file
   EXPECT_DOUBLE_EQ(*sglc::openSequence(dir).frames[1].stamp, 0.1);
   writeFile(dir + "/poses.txt", "1 2 3 4 5\n");
   try {

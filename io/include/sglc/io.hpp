@@ -15,8 +15,12 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities = n
 // A .label file: uint32 per point (SemanticKITTI); given the scan's point count, also 1 or 2 bytes per point
 // (nuScenes-lidarseg's uint8), chosen by the file's size. Little-endian.
 std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points = 0);
+// Poses, stamps and calibration files are read line by line: blank lines and lines starting with '#' are
+// skipped, errors name the file and line.
 // KITTI poses file: one row-major 3x4 matrix per line (12 numbers).
 std::vector<Mat4d> readPoses(const std::string& path);
+// A times.txt: one finite timestamp in seconds per line.
+std::vector<double> readStamps(const std::string& path);
 // A TUM trajectory file (evo, TUM RGB-D): "timestamp tx ty tz qx qy qz qw" per line, '#' comments. The
 // quaternion is normalised (refused when its norm is far from 1).
 struct StampedPose {
