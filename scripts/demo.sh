@@ -16,7 +16,7 @@ PORT=${SGLC_DEMO_PORT:-50051}
 build/bin/sglc-server --db "$WORK/map.db" --listen "127.0.0.1:$PORT" > "$WORK/server.log" 2>&1 &
 SERVER=$!
 trap 'kill -TERM $SERVER 2>/dev/null; wait $SERVER 2>/dev/null || true' EXIT
-for _ in $(seq 100); do build/bin/sglc maps --server "127.0.0.1:$PORT" >/dev/null 2>&1 && break; sleep 0.1; done
+for _ in $(seq 100); do build/bin/sglc health --server "127.0.0.1:$PORT" >/dev/null 2>&1 && break; sleep 0.1; done
 N=$(ls "$WORK/seq/velodyne" | wc -l)
 HALF=$((N / 2))
 echo "== ingesting $N scans: alpha = 0..$((HALF - 1)), bravo = $HALF..$((N - 1))"
