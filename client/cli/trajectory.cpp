@@ -105,7 +105,9 @@ int runLoops(const Common& common, const LoopsArgs& a) {
     std::vector<v1::ScanPose> vertices;
     for (auto& p : client.getPoses(a.map))
       if (ends.count(p.scan_id())) vertices.push_back(std::move(p));
-    sc::writeLoopsG2o(loops, vertices, out);
+    if (const auto missing = sc::writeLoopsG2o(loops, vertices, out); missing > 0)
+      std::cerr << "sglc: warning: " << missing
+                << " loop ends have no pose (scans ingested without an odometry pose); written at the identity\n";
   }
   if (!a.out.empty()) {
     closeOut(file, a.out);

@@ -71,19 +71,21 @@ void writeLoopsCsv(const std::vector<v1::LoopEdge>& loops, std::ostream& out) {
       out << buf;
     }
     for (double v : l.t_query_candidate().m()) {
-      std::snprintf(buf, sizeof buf, ",%.12g", v);
+      std::snprintf(buf, sizeof buf, ",%.17g", v);  // round-trips a double
       out << buf;
     }
     out << "," << (l.information_size() == 36 ? 1 : 0) << "\n";
   }
 }
 
-void writeLoopsG2o(const std::vector<v1::LoopEdge>& loops, const std::vector<v1::ScanPose>& vertices,
-                   std::ostream& out) {
+std::size_t writeLoopsG2o(const std::vector<v1::LoopEdge>& loops, const std::vector<v1::ScanPose>& vertices,
+                          std::ostream& out) {
   std::map<std::int64_t, Mat4d> poses;
   for (const auto& v : vertices) poses[v.scan_id()] = wire::toMatrix(v.t_map_scan());
+  std::size_t without_pose = 0;
   for (const auto& l : loops)
-    for (const auto id : {l.query().scan_id(), l.candidate().scan_id()}) poses.emplace(id, Mat4d::Identity());
+    for (const auto id : {l.query().scan_id(), l.candidate().scan_id()})
+      without_pose += poses.emplace(id, Mat4d::Identity()).second;
   for (const auto& [id, T] : poses) out << "VERTEX_SE3:QUAT " << id << " " << poseG2o(T) << "\n";
   Eigen::Matrix<double, 6, 1> scale;
   scale << 1, 1, 1, 2, 2, 2;
@@ -99,6 +101,7 @@ void writeLoopsG2o(const std::vector<v1::LoopEdge>& loops, const std::vector<v1:
       }
     out << "\n";
   }
+  return without_pose;
 }
 
 }  // namespace sglc::client

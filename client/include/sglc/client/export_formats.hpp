@@ -18,8 +18,9 @@ namespace sglc::client {
 
 nlohmann::ordered_json loopJson(const v1::LoopEdge& loop);
 void writeLoopsCsv(const std::vector<v1::LoopEdge>& loops, std::ostream& out);
-// `vertices`: the poses of the scans at the loops' ends (those without a pose are written at the identity).
-void writeLoopsG2o(const std::vector<v1::LoopEdge>& loops, const std::vector<v1::ScanPose>& vertices,
-                   std::ostream& out);
+// `vertices`: the poses of the scans at the loops' ends. Ends without one (scans ingested without an odometry
+// pose are no graph nodes) are written at the identity; returns how many.
+std::size_t writeLoopsG2o(const std::vector<v1::LoopEdge>& loops, const std::vector<v1::ScanPose>& vertices,
+                          std::ostream& out);
 
 }  // namespace sglc::client

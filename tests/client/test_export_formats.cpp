@@ -1,0 +1,95 @@
+// The loop exports of sglc/client/export_formats.hpp: g2o layout and information conversion, CSV precision
+// and quoting, JSON fields.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <sstream>
+
+#include "sglc/client/export_formats.hpp"
+#include "sglc/wire/geometry_codec.hpp"
+
+namespace sglc::client {
+namespace {
+
+v1::LoopEdge edge(std::int64_t id, std::int64_t query, std::int64_t candidate, bool with_information) {
+  v1::LoopEdge e;
+  e.set_id(id);
+  e.mutable_query()->set_scan_id(query);
+  e.mutable_query()->set_robot("r,\"1\"");
+  e.mutable_candidate()->set_scan_id(candidate);
+  Mat4d T = Mat4d::Identity();
+  T(0, 3) = 0.1 + 1e-16;  // needs 17 significant digits to come back
+  wire::toTransform(T, e.mutable_t_query_candidate());
+  if (with_information)
+    for (int k = 0; k < 36; ++k) e.add_information(k / 6 == k % 6 ? 10.0 * (k / 6 + 1) : 0.0);
+  return e;
+}
+
+std::vector<std::vector<std::string>> linesOf(const std::string& text) {
+  std::vector<std::vector<std::string>> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    std::istringstream words(line);
+    out.emplace_back();
+    for (std::string w; words >> w;) out.back().push_back(w);
+  }
+  return out;
+}
+
+TEST(ExportFormats, G2oVerticesEdgesAndInformationOrder) {
+  v1::ScanPose p;
+  p.set_scan_id(7);
+  Mat4d T = Mat4d::Identity();
+  T(1, 3) = 2.5;
+  wire::toTransform(T, p.mutable_t_map_scan());
+  std::ostringstream out;
+  // Scan 9 has no pose: written at the identity and counted.
+  EXPECT_EQ(writeLoopsG2o({edge(1, 7, 9, true), edge(2, 9, 7, false)}, {p}, out), 1u);
+  const auto lines = linesOf(out.str());
+  ASSERT_EQ(lines.size(), 4u);
+  EXPECT_EQ(lines[0][0], "VERTEX_SE3:QUAT");
+  EXPECT_EQ(lines[0][1], "7");
+  EXPECT_EQ(std::stod(lines[0][3]), 2.5);
+  EXPECT_EQ(lines[1][1], "9");
+  ASSERT_EQ(lines[2].size(), 3u + 7u + 21u);
+  EXPECT_EQ(lines[2][0], "EDGE_SE3:QUAT");
+  EXPECT_EQ(lines[2][1], "7");
+  EXPECT_EQ(lines[2][2], "9");
+  // Upper triangle, row by row: (0,0) at 10, (3,3) is entry 15 (= 40 x 4 for the quaternion's half angle).
+  EXPECT_DOUBLE_EQ(std::stod(lines[2][10]), 10.0);
+  EXPECT_DOUBLE_EQ(std::stod(lines[2][10 + 15]), 160.0);
+  EXPECT_DOUBLE_EQ(std::stod(lines[2][10 + 1]), 0.0);
+  // Without information: sigma 0.1 m -> 100, 1 deg -> (180/pi)^2, times 4.
+  EXPECT_DOUBLE_EQ(std::stod(lines[3][10]), 100.0);
+  EXPECT_NEAR(std::stod(lines[3][10 + 15]), 4 * (180 / M_PI) * (180 / M_PI), 1e-3);
+}
+
+TEST(ExportFormats, CsvQuotesNamesAndKeepsFullPrecision) {
+  std::ostringstream out;
+  writeLoopsCsv({edge(5, 1, 2, false)}, out);
+  std::istringstream in(out.str());
+  std::string header, row;
+  std::getline(in, header);
+  std::getline(in, row);
+  EXPECT_EQ(header.rfind("id,query_scan,query_robot,", 0), 0u);
+  EXPECT_NE(row.find(",\"r,\"\"1\"\"\","), std::string::npos) << row;  // RFC 4180
+  // T03 reads back to the same double. A naive split by ',' sees the quoted robot name as two cells.
+  auto split = [](const std::string& text) {
+    std::vector<std::string> cells;
+    std::istringstream cells_in(text);
+    for (std::string c; std::getline(cells_in, c, ',');) cells.push_back(c);
+    return cells;
+  };
+  const auto names = split(header), cells = split(row);
+  const auto t03 = std::find(names.begin(), names.end(), "T03") - names.begin();
+  ASSERT_EQ(cells.size(), names.size() + 1);
+  EXPECT_EQ(std::stod(cells[t03 + 1]), 0.1 + 1e-16) << row;
+  const auto j = loopJson(edge(5, 1, 2, true));
+  EXPECT_EQ(j["id"], 5);
+  EXPECT_EQ(j["query"]["robot"], "r,\"1\"");
+  EXPECT_EQ(j["information"].size(), 36u);
+  EXPECT_DOUBLE_EQ(j["T"][3].get<double>(), 0.1 + 1e-16);
+}
+
+}  // namespace
+}  // namespace sglc::client
