@@ -20,6 +20,8 @@ PACKAGES=(
   # the format check of scripts/test.sh, and scripts/tidy.sh
   clang-format clang-tidy
   python3 python3-numpy python3-grpcio python3-protobuf python3-matplotlib
+  # the Python package: its engine module (pybind11), offline `pip install` into a venv, its pytest suite
+  pybind11-dev python3-dev python3-venv python3-pip python3-pytest
   # the deployment-file test (tests/deploy) parses compose.yaml
   python3-yaml
   # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)

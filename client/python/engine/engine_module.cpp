@@ -1,0 +1,145 @@
+// sglc._engine: the SGLC engine in-process, for Python (sglc.Engine wraps it; see sglc/engine.py).
+//
+// The module takes checked, contiguous arrays (float32 (N, 3) points, uint32 (N,) labels) from the Python
+// wrapper, runs sglc::Pipeline exactly as sglc-pair and the server do, and returns plain Python values. The GIL
+// is released while the engine works, so several Python threads can fingerprint at once (Pipeline is const).
+// sglc::InputError becomes ValueError with the engine's message.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "sglc/config/engine_file.hpp"
+#include "sglc/pipeline.hpp"
+#include "sglc/version.hpp"
+
+namespace py = pybind11;
+
+namespace {
+
+using PointArray = py::array_t<float, py::array::c_style>;
+using LabelArray = py::array_t<std::uint32_t, py::array::c_style>;
+
+// A fingerprint with where its labels came from and the engine's warnings about it.
+struct PyFingerprint {
+  sglc::Fingerprint fingerprint;
+  sglc::ScanReport report;
+};
+
+const char* labelSourceName(sglc::ScanReport::LabelSource source) {
+  switch (source) {
+    case sglc::ScanReport::LabelSource::kComputed:
+      return "computed";
+    case sglc::ScanReport::LabelSource::kCompleted:
+      return "completed";
+    case sglc::ScanReport::LabelSource::kProvided:
+      break;
+  }
+  return "provided";
+}
+
+sglc::LabelledScan toScan(const PointArray& points, const std::optional<LabelArray>& labels) {
+  if (points.ndim() != 2 || points.shape(1) != 3)
+    throw sglc::InputError("points must have shape (N, 3) (the wrapper passes the first three columns)");
+  const auto n = static_cast<std::size_t>(points.shape(0));
+  sglc::LabelledScan scan;
+  scan.points.resize(n);
+  const float* p = points.data();
+  for (std::size_t i = 0; i < n; ++i) scan.points[i] = sglc::Vec3f(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+  if (labels) {
+    if (labels->ndim() != 1) throw sglc::InputError("labels must have shape (N,)");
+    scan.labels.resize(static_cast<std::size_t>(labels->shape(0)));
+    if (!scan.labels.empty())
+      std::memcpy(scan.labels.data(), labels->data(), scan.labels.size() * sizeof(std::uint32_t));
+  }
+  sglc::validateScan(scan);  // one label per point (or none) and finite coordinates, as the server checks
+  return scan;
+}
+
+template <int R, int C>
+py::array_t<double> toArray(const Eigen::Matrix<double, R, C>& m) {
+  py::array_t<double> out({R, C});
+  auto v = out.mutable_unchecked<2>();
+  for (int r = 0; r < R; ++r)
+    for (int c = 0; c < C; ++c) v(r, c) = m(r, c);
+  return out;
+}
+
+py::dict resultDict(const sglc::LoopResult& r) {
+  py::dict d;
+  d["is_loop"] = r.is_loop;
+  d["score"] = r.score;
+  d["T"] = toArray(r.T);
+  d["information"] = toArray(r.information);
+  d["refined"] = r.refined;
+  d["inliers"] = r.inliers;
+  d["matches"] = r.matches;
+  d["graph_similarity"] = r.graph_similarity;
+  d["background_similarity"] = r.background_similarity;
+  d["fitness"] = r.fitness;
+  d["rmse"] = r.rmse;
+  d["reason"] = std::string(r.reason);
+  return d;
+}
+
+class PyEngine {
+ public:
+  explicit PyEngine(const std::string& config_yaml)
+      : pipeline_(config_yaml.empty() ? sglc::Config{} : sglc::parseConfig(config_yaml)) {}
+
+  std::shared_ptr<PyFingerprint> fingerprint(const PointArray& points, const std::optional<LabelArray>& labels) const {
+    auto scan = toScan(points, labels);
+    auto out = std::make_shared<PyFingerprint>();
+    py::gil_scoped_release release;
+    out->fingerprint = pipeline_.fingerprint(scan, &out->report);
+    return out;
+  }
+
+  py::dict match(const PyFingerprint& a, const PyFingerprint& b, bool known_loop) const {
+    sglc::LoopResult result;
+    {
+      py::gil_scoped_release release;
+      result = pipeline_.verify(a.fingerprint, b.fingerprint);
+      pipeline_.refine(a.fingerprint, b.fingerprint, result, known_loop);
+    }
+    return resultDict(result);
+  }
+
+  std::string config() const { return sglc::dumpConfig(pipeline_.config()); }
+
+ private:
+  sglc::Pipeline pipeline_;
+};
+
+}  // namespace
+
+PYBIND11_MODULE(_engine, m) {
+  m.doc() = "The SGLC engine in-process (use sglc.Engine).";
+  m.attr("__version__") = sglc::kVersion;
+  py::register_exception<sglc::InputError>(m, "InputError", PyExc_ValueError);
+
+  py::class_<PyFingerprint, std::shared_ptr<PyFingerprint>>(m, "Fingerprint")
+      .def_property_readonly("nodes", [](const PyFingerprint& f) { return f.fingerprint.nodes.size(); })
+      .def_property_readonly("num_points", [](const PyFingerprint& f) { return f.fingerprint.num_points; })
+      .def_property_readonly("label_source",
+                             [](const PyFingerprint& f) { return std::string(labelSourceName(f.report.label_source)); })
+      .def_property_readonly("warnings", [](const PyFingerprint& f) { return f.report.warnings; })
+      .def_property_readonly("descriptor", [](const PyFingerprint& f) {
+        const auto& d = f.fingerprint.descriptor;
+        py::array_t<float> out(static_cast<py::ssize_t>(d.size()));
+        if (!d.empty()) std::memcpy(out.mutable_data(), d.data(), d.size() * sizeof(float));
+        return out;
+      });
+
+  py::class_<PyEngine>(m, "Engine")
+      .def(py::init<const std::string&>(), py::arg("config_yaml") = std::string())
+      .def("fingerprint", &PyEngine::fingerprint, py::arg("points"), py::arg("labels") = py::none())
+      .def("match", &PyEngine::match, py::arg("a"), py::arg("b"), py::arg("known_loop") = false)
+      .def("config", &PyEngine::config);
+}

@@ -1,0 +1,181 @@
+"""sglc.Client against a real sglc-server, with the real loop pair KITTI 00 000052-004501."""
+import os
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+import sglc
+from conftest import BUILD, REPO, pose_error
+
+
+def test_requests_without_a_server():
+    c = sglc.Client("127.0.0.1:1", chunk_bytes=16 * 100, timeout=5)
+    pts, lab = np.zeros((500, 3), np.float32), np.arange(500, dtype=np.uint32)
+    req = c.ingest_request("m", "r", "s", 7, pts, lab, stamp=1.5, query=True, scope="other", top_k=3)
+    chunks = list(c._chunks(req))
+    assert len(chunks) == 1 + 5 and chunks[0].HasField("header") and not chunks[0].header.scan.points
+    assert b"".join(x.points for x in chunks[1:]) == req.scan.points
+    assert b"".join(x.labels for x in chunks[1:]) == req.scan.labels
+    assert chunks[0].header.query_options.scope == sglc.SCOPES["other"] and chunks[0].header.stamp == 1.5
+    assert not req.query_options.HasField("exclude_recent")  # the server's default, as every client
+    with pytest.raises(ValueError, match="scope"):
+        c.query_options(scope="galaxy")
+    with pytest.raises(ValueError, match="without query=True"):
+        c.ingest_request("m", "r", "s", 7, pts, top_k=3)
+    with pytest.raises(ValueError, match="either scan_id or points"):
+        c.query("m")
+    with pytest.raises(sglc.UnavailableError):
+        c.list_maps()
+    assert not c.serving(timeout=2)
+    c.close()
+
+
+def test_service_flow(client, kitti, reference_pose):
+    info = client.server_info()
+    assert info.label_preset == "semantickitti" and info.labeller_mode == "auto" and info.version
+    assert info.node_classes == ["vehicle", "trunk", "pole"] and info.label_ids["road"] and info.max_points > 0
+    assert client.create_map("py").name == "py"
+    client.ensure_map("py")  # idempotent
+    assert [m.name for m in client.list_maps()] == ["py"]
+
+    p52, l52 = kitti("000052")
+    p4501, l4501 = kitti("004501")
+    a = client.ingest("py", "a", "00", 52, p52, l52, stamp=10.0, odometry_pose=np.eye(4))
+    assert isinstance(a, sglc.IngestResult) and a.seq == 52 and a.loops == [] and a.label_source == "provided"
+    # KITTI's own (N, 4) array and int64 labels are accepted as they are.
+    raw = np.hstack([p4501, np.zeros((len(p4501), 1), np.float32)])
+    b = client.ingest("py", "b", "00", 4501, raw, l4501.astype(np.int64), query=True, scope="other",
+                      odometry_pose=np.eye(4))
+    assert len(b.loops) >= 1 and b.loops[0].scan_id == a.scan_id and b.loops[0].robot == "a"
+    loop = b.loops[0]
+    dt, dr = pose_error(loop.T, np.linalg.inv(reference_pose))
+    assert dt < 0.2 and dr < 1.0, (dt, dr)
+    assert loop.information.shape == (6, 6) and np.linalg.eigvalsh(loop.information).min() > 0
+
+    q = client.query("py", scan_id=a.scan_id, scope="other")
+    hit = [x for x in q.candidates if x.scan_id == b.scan_id]
+    assert len(hit) == 1 and hit[0].verified
+    dt, dr = pose_error(hit[0].T, reference_pose)
+    assert dt < 0.2 and dr < 1.0
+    q = client.query("py", points=p4501, labels=l4501, top_k=5)  # relocalization: a scan not stored
+    assert any(x.scan_id == a.scan_id for x in q.candidates)
+
+    again = client.ingest("py", "a", "00", 52, p52, l52, stamp=10.0, odometry_pose=np.eye(4))
+    assert again.already_stored and again.scan_id == a.scan_id  # a retry answers the stored scan
+    p88, l88 = kitti("000088")
+    with pytest.raises(sglc.AlreadyExistsError) as e:
+        client.ingest("py", "a", "00", 52, p88, l88)
+    assert e.value.code_name == "ALREADY_EXISTS" and "52" in e.value.details
+    with pytest.raises(sglc.NotFoundError):
+        client.list_robots("nosuch")
+    with pytest.raises(sglc.InvalidArgumentError):
+        client.create_map("bad/name\n")
+
+    # Admin views, as dataclasses.
+    assert sorted(r.name for r in client.list_robots("py")) == ["a", "b"]
+    s = client.list_sessions("py", "a")
+    assert len(s) == 1 and (s[0].first_seq, s[0].last_seq, s[0].scans) == (52, 52, 1)
+    g = client.get_scan(a.scan_id, include_graph=True)
+    assert (g.robot, g.seq, g.stamp) == ("a", 52, 10.0) and g.nodes and g.descriptor is not None
+    assert np.array_equal(g.odometry_pose, np.eye(4))
+    st = client.stats("py")
+    assert (st.scans, st.robots) == (2, 2)
+    assert client.backup("py-backup.db").bytes > 0
+
+
+def test_pose_graph_calls(client, kitti):
+    client.create_map("graph")
+    frames = ["000052", "000088", "000850", "004501"]
+    with client.watch("graph") as watch:
+        for robot in ("r1", "r2"):
+            for i, f in enumerate(frames if robot == "r1" else frames[::-1][:1]):
+                p, lab = kitti(f)
+                T = np.eye(4)
+                T[0, 3] = 5.0 * i
+                client.ingest("graph", robot, "run", i, p, lab, stamp=100.0 + i, odometry_pose=T, query=True,
+                              scope="other")
+        event = next(watch)  # r2's scan closed a loop with r1's: the graph is solved
+    assert isinstance(event, sglc.MapEvent) and event.graph_version >= 1 and event.loops >= 1 and not event.failed
+    loops = client.loops("graph")
+    assert loops and all(isinstance(e, sglc.LoopEdge) for e in loops)
+    assert {loops[0].query.robot, loops[0].candidate.robot} == {"r1", "r2"}
+    assert loops[0].T.shape == (4, 4) and loops[0].information.shape == (6, 6)
+    assert [e.id for e in client.loops("graph", page_size=1)] == [e.id for e in loops]  # paging loses nothing
+    assert [e.id for e in client.loops("graph", robot="r2")] == [e.id for e in loops]
+    with pytest.raises(sglc.NotFoundError):
+        client.loops("graph", robot="nosuch")
+    poses = client.poses("graph", page_size=2)
+    assert [p.seq for p in poses if p.robot == "r1"] == [0, 1, 2, 3] and all(p.stamp is not None for p in poses)
+    assert [p.scan_id for p in poses] == sorted(p.scan_id for p in poses)
+    frames_ = client.session_frames("graph")
+    assert {(f.robot, f.session) for f in frames_} == {("r1", "run"), ("r2", "run")}
+    assert all(f.T.shape == (4, 4) for f in frames_)
+    with pytest.raises(sglc.NotFoundError):
+        client.poses("no-such-map")
+
+
+def test_streaming_ingest(client, kitti):
+    client.create_map("stream")
+    frames = ["000052", "000088", "000850", "004501"]
+    scans = (sglc.ScanInput("stream", "d", "run", i, *kitti(f), query=True, query_options={"exclude_recent": 0})
+             for i, f in enumerate(frames))
+    results = list(client.ingest_stream(scans, window=2))
+    assert [r.seq for r in results] == [0, 1, 2, 3]
+    assert any(x.seq == 0 for x in results[3].loops)  # 4501 finds 52 on the stream
+    # Dicts work too; a conflicting key ends the stream with its status, after the earlier results.
+    bad = [dict(map="stream", robot="d", session="run2", seq=9, points=kitti("000088")[0]),
+           dict(map="stream", robot="d", session="run", seq=1, points=kitti("000850")[0])]
+    got = []
+    with pytest.raises(sglc.AlreadyExistsError):
+        for r in client.ingest_stream(bad):
+            got.append(r.seq)
+    assert got == [9]
+    # Stopping early cancels the stream; the scans answered before were stored.
+    gen = client.ingest_stream(dict(map="stream", robot="e", session="s", seq=i, points=kitti(f)[0])
+                               for i, f in enumerate(frames))
+    first = next(gen)
+    gen.close()
+    assert first.seq == 0 and client.get_scan(first.scan_id).robot == "e"
+
+
+def test_concurrent_clients(server, kitti):
+    """Several threads with their own clients ingest at once (the package holds no global state)."""
+    with sglc.Client(server) as c:
+        c.create_map("threads")
+    errors = []
+
+    def run(robot):
+        try:
+            with sglc.Client(server, timeout=120) as c:
+                for i, f in enumerate(["000052", "000088"]):
+                    c.ingest("threads", robot, "s", i, *kitti(f))
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=run, args=(f"t{k}",)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    with sglc.Client(server) as c:
+        assert c.stats("threads").scans == 6
+
+
+def test_unlabelled_scans(client, kitti):
+    client.create_map("raw")
+    u = client.ingest("raw", "u", "00", 52, kitti("000052")[0])
+    assert u.label_source == "computed"
+    u2 = client.ingest("raw", "u", "00", 4501, kitti("004501")[0], query=True, exclude_recent=50)
+    assert any(x.scan_id == u.scan_id and x.verified for x in u2.loops)
+
+
+def test_example_runs(server, kitti_dir):
+    env = dict(os.environ, PYTHONPATH=os.path.join(BUILD, "python"))
+    ex = subprocess.run([sys.executable, os.path.join(REPO, "client", "python", "examples", "two_robots.py"), "--server", server,
+                         "--data", kitti_dir], capture_output=True, text=True, timeout=300, env=env)
+    assert ex.returncode == 0, ex.stderr
+    assert "inter-robot loop" in ex.stdout and "robot alice" in ex.stdout
