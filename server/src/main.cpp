@@ -14,10 +14,13 @@
 
 #include "call.hpp"
 #include "io_poller.hpp"
+#include "metrics_http.hpp"
+#include "server_metrics.hpp"
 #include "service.hpp"
 #include "settings.hpp"
 #include "sglc/config/settings_file.hpp"
 #include "sglc/elapsed.hpp"
+#include "sglc/log/json_lines.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/version.hpp"
 
@@ -68,7 +71,8 @@ Settings settingsFrom(const Request& r) {
   return sglc::server::settingsFrom(r.config_path, overrides);
 }
 
-void configure(grpc::ServerBuilder& builder, const Settings& s, grpc::ResourceQuota& quota) {
+void configure(grpc::ServerBuilder& builder, const Settings& s, grpc::ResourceQuota& quota,
+               sglc::server::Metrics& metrics) {
   // A second server must not share the port (gRPC sets SO_REUSEPORT by default: clients would be split
   // between two processes with diverging indexes).
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
@@ -87,6 +91,8 @@ void configure(grpc::ServerBuilder& builder, const Settings& s, grpc::ResourceQu
   builder.SetResourceQuota(quota);
   std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
   interceptors.push_back(sglc::server::makeBadRequestInterceptorFactory());
+  // After the one above, so that it counts the status the client gets.
+  if (!s.metrics_listen.empty()) interceptors.push_back(sglc::server::makeMetricsInterceptorFactory(metrics));
   builder.experimental().SetInterceptorCreators(std::move(interceptors));
   builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2);
 }
@@ -118,6 +124,29 @@ std::unique_ptr<sglc::storage::MapStore> openStore(const Settings& s, grpc::Serv
   return store;
 }
 
+// gRPC's own log lines (e.g. a failed TLS handshake) as JSON lines too.
+void grpcLog(gpr_log_func_args* args) {
+  const auto line = sglc::logging::logLine(
+      {{"event", "grpc"}, {"file", args->file ? args->file : ""}, {"line", args->line}, {"msg", args->message}});
+  if (args->severity == GPR_LOG_SEVERITY_ERROR)
+    spdlog::error("{}", line);
+  else if (args->severity == GPR_LOG_SEVERITY_INFO)
+    spdlog::info("{}", line);
+  else
+    spdlog::debug("{}", line);
+}
+
+// The Prometheus endpoint, when asked for (null otherwise).
+std::unique_ptr<sglc::server::MetricsHttpServer> serveMetrics(const Settings& s, sglc::server::ServiceState& state) {
+  if (s.metrics_listen.empty()) return nullptr;
+  sglc::server::declareServerGauges(state.metrics(), state);
+  auto http = std::make_unique<sglc::server::MetricsHttpServer>(s.metrics_listen,
+                                                                [&state] { return state.metrics().render(); });
+  spdlog::info("{}",
+               sglc::logging::logLine({{"event", "metrics"}, {"address", s.metrics_listen}, {"port", http->port()}}));
+  return http;
+}
+
 // Serves until SIGTERM or SIGINT, then shuts down in order.
 int serve(const Settings& s, sigset_t& signals) {
   const auto state = std::make_unique<sglc::server::ServiceState>(
@@ -134,8 +163,9 @@ int serve(const Settings& s, sigset_t& signals) {
   builder.RegisterService(&admin_service);
   builder.RegisterService(&graph_service);
   grpc::ResourceQuota quota("sglc");
-  configure(builder, s, quota);
-  sglc::server::IoPoller io_poller(builder);  // see io_poller.hpp
+  configure(builder, s, quota, state->metrics());
+  sglc::server::IoPoller io_poller(builder);          // see io_poller.hpp
+  const auto metrics_http = serveMetrics(s, *state);  // before the server starts: a bad address stops nothing
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
     if (server) server->Shutdown();  // before its completion queues go
@@ -152,6 +182,9 @@ int serve(const Settings& s, sigset_t& signals) {
                                              {"auth", state->tokens().enabled()}}));
   auto store = openStore(s, *server);
   auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, s.graph);
+  const auto solves = graph->subscribe([&metrics = state->metrics()](const std::string&, const auto& event) {
+    sglc::server::observeSolve(metrics, event);
+  });
   state->attach(store.get(), graph.get());
   health->SetServingStatus(true);
 
@@ -160,6 +193,7 @@ int serve(const Settings& s, sigset_t& signals) {
   spdlog::info("{}", sglc::logging::logLine({{"event", "shutdown"}, {"signal", sig}}));
   health->SetServingStatus(false);
   graph->stop();  // loops recorded from now on are optimised after the next start
+  graph->unsubscribe(solves);
   // Watchers end; ingest streams end after the request they are working on; new streams are refused.
   state->streams().closeAll(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   // Refuse new calls, let in-flight ones finish (up to the grace period), then close the database cleanly.
@@ -188,6 +222,8 @@ int main(int argc, char** argv) {
   // when freed instead of growing the heap (glibc's adaptive threshold would move them onto it after the first
   // free). Ordinary keyframes (~2 MB) stay on the heap: mmapping those too cost 3-5 ms per ingest in page faults.
   mallopt(M_MMAP_THRESHOLD, 16 << 20);
+  sglc::logging::useJsonLines();  // every log line one JSON object
+  gpr_set_log_function(grpcLog);
   CLI::App app{"SGLC loop-closure service: gRPC (sglc.v1) on a persistent SQLite map database."};
   app.set_version_flag("--version", std::string("sglc-server ") + sglc::kVersion);
   Request request;

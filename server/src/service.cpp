@@ -13,6 +13,7 @@
 #include "call.hpp"
 #include "query_codec.hpp"
 #include "rpc_error.hpp"
+#include "server_metrics.hpp"
 #include "sglc/closing/ingestor.hpp"
 #include "sglc/closing/loop_finder.hpp"
 #include "sglc/config/engine_file.hpp"
@@ -117,6 +118,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
     spdlog::warn("{}", logging::logLine({{"event", "loop_not_recorded"}, {"scan", done.scan_id}, {"error", error}}));
   resp->set_seq(key.seq());
   timing->set_total_ms(msSince(t_start));
+  observeStages(state.metrics(), *timing);
 }
 
 storage::MapStore& ServiceState::store() const {
@@ -168,6 +170,7 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     toWire(finder.find(*fp, who, options, executionOf(state_, ctx), &timing), resp->mutable_candidates());
     toWire(timing, resp->mutable_timing());
     resp->mutable_timing()->set_total_ms(msSince(t_start));
+    observeStages(state_.metrics(), resp->timing());
   });
 }
 

@@ -10,6 +10,7 @@
 #include "compute_pool.hpp"
 #include "executor.hpp"
 #include "memory_budget.hpp"
+#include "server_metrics.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
@@ -60,6 +61,7 @@ class ServiceState {
   MemoryBudget& memory() const { return *memory_; }
   Executor& executor() const { return *executor_; }
   StreamRegistry& streams() const { return *streams_; }
+  Metrics& metrics() const { return *metrics_; }           // served with --metrics-listen
   GraphOptimiser* graph() const { return graph_.load(); }  // null: no pose graph (tests, loading)
 
  private:
@@ -70,6 +72,7 @@ class ServiceState {
   std::unique_ptr<MemoryBudget> memory_;
   std::unique_ptr<Executor> executor_;
   std::unique_ptr<StreamRegistry> streams_;
+  std::unique_ptr<Metrics> metrics_ = newServerMetrics();
   std::atomic<storage::MapStore*> store_{nullptr};
   std::atomic<GraphOptimiser*> graph_{nullptr};
 };

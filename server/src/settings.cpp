@@ -18,6 +18,9 @@ using namespace params;
 void addServer(Table<Settings>& t) {
   t.add(field<Settings>(SGLC_KEY(db), {}, "map database (SQLite file; created with its directory if missing)"));
   t.add(field<Settings>(SGLC_KEY(listen), {}, "address to serve on (host:port)"));
+  t.add(field<Settings>(SGLC_KEY(metrics_listen), {},
+                        "serve Prometheus metrics over HTTP at host:port/metrics (empty: off; no TLS, no tokens: "
+                        "keep it on loopback or a trusted network)"));
   t.add(field<Settings>(SGLC_KEY(threads), closed(0, 256), "compute threads (0: the machine's cores)"));
   t.add(field<Settings>(SGLC_KEY(max_calls), closed(1, 4096),
                         "unary calls served at once (open streams hold no thread); beyond: RESOURCE_EXHAUSTED"));

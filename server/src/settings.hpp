@@ -19,8 +19,9 @@ namespace sglc::server {
 struct Settings {
   std::string db = "var/sglc.db";
   std::string listen = "127.0.0.1:50051";
-  int threads = 0;      // compute threads; 0 = the machine's cores
-  int max_calls = 256;  // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
+  std::string metrics_listen;  // host:port of the Prometheus endpoint; empty: none
+  int threads = 0;             // compute threads; 0 = the machine's cores
+  int max_calls = 256;         // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
   double max_message_mb = 64;
   std::uint64_t max_points = 2'000'000;
   std::string tls_cert, tls_key, tokens;

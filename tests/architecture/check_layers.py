@@ -43,7 +43,7 @@ EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/":
 # Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
 POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
          "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
-         "sys/time.h", "time.h", "dirent.h", "pthread.h"}
+         "sys/time.h", "time.h", "dirent.h", "pthread.h", "netdb.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
 ALL = {"types", "core", "config", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
@@ -58,7 +58,7 @@ LAYERS = {
     # The use cases: the engine and the map database, nothing of any transport.
     "closing": (["closing"], {"types", "core", "storage", "closing"}, {"eigen"}),
     # One JSON object per log line.
-    "log": (["log"], {"log"}, {"json"}),
+    "log": (["log"], {"log"}, {"json", "spdlog"}),
     # Each map's pose graph: the map database's graph tables and Ceres.
     "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph"}, {"eigen", "ceres", "spdlog"}),
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),

@@ -1,0 +1,155 @@
+#include "server_metrics.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <fstream>
+
+#include "service.hpp"
+#include "sglc/version.hpp"
+
+namespace sglc::server {
+namespace {
+
+namespace gx = grpc::experimental;
+using Clock = std::chrono::steady_clock;
+
+std::string codeName(grpc::StatusCode code) {
+  static const char* const kNames[] = {
+      "OK",        "CANCELLED",      "UNKNOWN",           "INVALID_ARGUMENT",   "DEADLINE_EXCEEDED",
+      "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+      "ABORTED",   "OUT_OF_RANGE",   "UNIMPLEMENTED",     "INTERNAL",           "UNAVAILABLE",
+      "DATA_LOSS", "UNAUTHENTICATED"};
+  const auto i = static_cast<int>(code);
+  return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
+}
+
+// "/sglc.v1.LoopClosure/Ingest" -> service "sglc.v1.LoopClosure", method "Ingest".
+Labels methodLabels(const char* full) {
+  std::string name = full != nullptr ? full : "";
+  if (!name.empty() && name.front() == '/') name.erase(0, 1);
+  const auto slash = name.find('/');
+  if (slash == std::string::npos) return {{"service", ""}, {"method", name}};
+  return {{"service", name.substr(0, slash)}, {"method", name.substr(slash + 1)}};
+}
+
+class MetricsInterceptor final : public gx::Interceptor {
+ public:
+  MetricsInterceptor(Metrics& metrics, gx::ServerRpcInfo* info)
+      : metrics_(metrics), labels_(methodLabels(info->method())) {}
+  void Intercept(gx::InterceptorBatchMethods* methods) override {
+    if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::PRE_SEND_STATUS)) {
+      auto labels = labels_;
+      labels.emplace_back("code", codeName(methods->GetSendStatus().error_code()));
+      metrics_.add(kRpcTotal, labels);
+      metrics_.observe(kRpcSeconds, labels, std::chrono::duration<double>(Clock::now() - start_).count());
+    }
+    methods->Proceed();
+  }
+
+ private:
+  Metrics& metrics_;
+  Labels labels_;
+  Clock::time_point start_ = Clock::now();
+};
+
+class MetricsInterceptorFactory final : public gx::ServerInterceptorFactoryInterface {
+ public:
+  explicit MetricsInterceptorFactory(Metrics& metrics) : metrics_(metrics) {}
+  gx::Interceptor* CreateServerInterceptor(gx::ServerRpcInfo* info) override {
+    return new MetricsInterceptor(metrics_, info);
+  }
+
+ private:
+  Metrics& metrics_;
+};
+
+double residentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  double pages_total = 0, pages_resident = 0;
+  statm >> pages_total >> pages_resident;
+  return pages_resident * static_cast<double>(sysconf(_SC_PAGESIZE));
+}
+
+void declareStoreGauges(Metrics& m, const ServiceState& state) {
+  using S = Metrics::Sample;
+  m.gauge("sglc_maps", "Maps in the database", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.store().stats().maps)}};
+  });
+  m.gauge("sglc_map_scans", "Scans stored per map", [&state] {
+    std::vector<S> out;
+    for (const auto& map : state.store().listMaps())
+      out.push_back({{{"map", map.name}}, static_cast<double>(map.scans)});
+    return out;
+  });
+  m.gauge("sglc_map_robots", "Robots per map", [&state] {
+    std::vector<S> out;
+    for (const auto& map : state.store().listMaps())
+      out.push_back({{{"map", map.name}}, static_cast<double>(map.robots)});
+    return out;
+  });
+  m.gauge("sglc_index_entries", "Descriptors in the in-memory search indexes (all maps)", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.store().stats().index_entries)}};
+  });
+  m.gauge("sglc_db_bytes", "Size of the map database file (bytes)", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.store().stats().db_bytes)}};
+  });
+  m.gauge("sglc_fingerprint_cache_bytes", "Fingerprints held in the memory cache (bytes)", [&state] {
+    return std::vector<S>{{{}, state.store().stats().cache_mb * 1024.0 * 1024.0}};
+  });
+}
+
+}  // namespace
+
+std::unique_ptr<Metrics> newServerMetrics() {
+  auto m = std::make_unique<Metrics>();
+  m->counter(kRpcTotal, "RPCs finished, by service, method and status code");
+  m->histogram(kRpcSeconds, "RPC duration by service, method and status code (streams: their whole life), seconds");
+  m->histogram(kStageSeconds,
+               "Time per engine stage of an ingest or query (fingerprint, store, search, verify, "
+               "refine), seconds");
+  m->histogram(kSolveSeconds, "Pose-graph solve time by result (converged, bounded, failed), seconds");
+  return m;
+}
+
+void declareServerGauges(Metrics& m, const ServiceState& state) {
+  using S = Metrics::Sample;
+  m.gauge("sglc_build_info", "Version of this server", [] { return std::vector<S>{{{{"version", kVersion}}, 1.0}}; });
+  m.gauge("sglc_compute_busy", "Compute threads running engine work", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.compute().busy())}};
+  });
+  m.gauge("sglc_compute_queue_depth", "Calls waiting for a compute thread", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.compute().waiting())}};
+  });
+  m.gauge("sglc_inflight_bytes", "Scan memory reserved by calls in flight (3 x wire bytes), bytes", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.memory().inUse())}};
+  });
+  m.gauge("sglc_inflight_bytes_limit", "Limit of sglc_inflight_bytes (server.max_inflight_mb), bytes", [&state] {
+    return std::vector<S>{{{}, static_cast<double>(state.memory().capacity())}};
+  });
+  m.gauge("process_resident_memory_bytes", "Resident memory of the server process, bytes", [] {
+    return std::vector<S>{{{}, residentBytes()}};
+  });
+  declareStoreGauges(m, state);
+}
+
+std::unique_ptr<gx::ServerInterceptorFactoryInterface> makeMetricsInterceptorFactory(Metrics& metrics) {
+  return std::make_unique<MetricsInterceptorFactory>(metrics);
+}
+
+void observeStages(Metrics& m, const v1::Timing& t) {
+  const std::pair<const char*, double> stages[] = {{"fingerprint", t.fingerprint_ms()},
+                                                   {"store", t.store_ms()},
+                                                   {"search", t.search_ms()},
+                                                   {"verify", t.verify_ms()},
+                                                   {"refine", t.refine_ms()}};
+  for (const auto& [stage, ms] : stages)
+    if (ms > 0) m.observe(kStageSeconds, {{"stage", stage}}, ms / 1000);
+}
+
+void observeSolve(Metrics& m, const posegraph::GraphEvent& event) {
+  const char* result = event.failed ? "failed" : event.converged ? "converged" : "bounded";
+  m.observe(kSolveSeconds, {{"result", result}}, event.optimise_ms / 1000);
+}
+
+}  // namespace sglc::server
