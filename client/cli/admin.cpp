@@ -197,6 +197,23 @@ int runBackup(const Common& common, const std::string& path) {
   return 0;
 }
 
+// Without --yes nothing is deleted: the map's size is shown and the command fails.
+int runDeleteMap(const Common& common, const std::string& map, bool yes) {
+  const sc::Client client = connectClient(common);
+  if (!yes) {
+    const auto s = client.getStats(map);  // NOT_FOUND for an unknown map
+    std::cerr << "sglc: error: map '" << map << "' holds " << s.scans() << " scans of " << s.robots()
+              << " robots; deleting it cannot be undone: repeat with --yes\n";
+    return 1;
+  }
+  const std::int64_t removed = client.deleteMap(map);
+  if (common.json)
+    std::cout << json{{"map", map}, {"deleted", true}, {"scans_removed", removed}}.dump() << std::endl;
+  else
+    std::cout << "deleted map " << map << " (" << removed << " scans)\n";
+  return 0;
+}
+
 int runCreateMap(const Common& common, const std::string& name) {
   const auto m = connectClient(common).createMap(name);
   if (common.json) {
@@ -218,6 +235,13 @@ void addMapEdits(CLI::App& app, Common& common, Commands& out) {
   c->add_option("--robot", del->robot, "Robot name")->required();
   c->add_option("--session", del->session, "Only this session");
   out.push_back({c, [&common, del] { return runDelete(common, del->map, del->robot, del->session); }});
+
+  auto delete_map = std::make_shared<std::pair<std::string, bool>>();
+  c = app.add_subcommand("delete-map", "Delete a whole map: scans, robots, sessions, loops, poses (irreversible)");
+  addCommon(c, common);
+  c->add_option("MAP", delete_map->first, "Map name")->required();
+  c->add_flag("--yes", delete_map->second, "Really delete (without it: show the map's size and stop)");
+  out.push_back({c, [&common, delete_map] { return runDeleteMap(common, delete_map->first, delete_map->second); }});
 
   auto backup_path = std::make_shared<std::string>();
   c = app.add_subcommand("backup", "Online backup of the database to a new file on the server");

@@ -256,6 +256,13 @@ std::int64_t Client::deleteRobot(const std::string& map, const std::string& robo
       .scans_removed();
 }
 
+std::int64_t Client::deleteMap(const std::string& map, const CallOptions& call) const {
+  v1::DeleteMapRequest request;
+  request.set_map(map);
+  return core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::DeleteMap, "MapAdmin.DeleteMap", request, call)
+      .scans_removed();
+}
+
 v1::GetStatsResponse Client::getStats(const std::string& map, const CallOptions& call) const {
   v1::GetStatsRequest request;
   request.set_map(map);

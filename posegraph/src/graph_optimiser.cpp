@@ -58,6 +58,13 @@ void GraphOptimiser::scansRemoved(const std::string& map) {
   wake_.notify_all();
 }
 
+void GraphOptimiser::mapDeleted(const std::string& map) {
+  std::lock_guard lock(mutex_);
+  due_.erase(map);
+  latest_.erase(map);
+  stale_.insert(map);
+}
+
 std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map, std::int64_t after,
                                                          std::chrono::milliseconds timeout) {
   std::unique_lock lock(mutex_);

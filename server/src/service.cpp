@@ -305,6 +305,18 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
   });
 }
 
+grpc::Status MapAdminService::DeleteMap(grpc::ServerContext* ctx, const v1::DeleteMapRequest* req,
+                                        v1::DeleteResponse* resp) {
+  return run(ctx, {"DeleteMap", req->map(), ""}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    wire::checkName("map", req->map());
+    resp->set_scans_removed(state_.store().deleteMap(req->map()));
+    if (auto* graph = state_.graph()) graph->mapDeleted(req->map());
+    spdlog::info("{}",
+                 logging::logLine({{"event", "map_deleted"}, {"map", req->map()}, {"scans", resp->scans_removed()}}));
+  });
+}
+
 grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req,
                                        v1::GetStatsResponse* resp) {
   return run(ctx, {"GetStats", req->map(), ""}, [&](CallLog&) {

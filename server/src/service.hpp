@@ -111,6 +111,7 @@ class MapAdminService final : public v1::MapAdmin::Service {
                              v1::DeleteResponse* resp) override;
   grpc::Status DeleteRobot(grpc::ServerContext* ctx, const v1::DeleteRobotRequest* req,
                            v1::DeleteResponse* resp) override;
+  grpc::Status DeleteMap(grpc::ServerContext* ctx, const v1::DeleteMapRequest* req, v1::DeleteResponse* resp) override;
   grpc::Status GetStats(grpc::ServerContext* ctx, const v1::GetStatsRequest* req, v1::GetStatsResponse* resp) override;
   grpc::Status GetServerInfo(grpc::ServerContext* ctx, const v1::GetServerInfoRequest* req,
                              v1::GetServerInfoResponse* resp) override;

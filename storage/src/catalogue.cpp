@@ -89,4 +89,11 @@ MapState& Catalogue::add(MapState state) {
   return inserted;
 }
 
+void Catalogue::remove(const std::string& name) {
+  const auto it = maps_.find(name);
+  if (it == maps_.end()) return;
+  names_.erase(it->second.id);
+  maps_.erase(it);
+}
+
 }  // namespace sglc::storage

@@ -49,6 +49,7 @@ class Catalogue {
   // The name of map `id` ("" if there is none).
   std::string nameOf(std::int64_t id) const;
   MapState& add(MapState state);
+  void remove(const std::string& name);
 
   const std::map<std::string, MapState>& maps() const { return maps_; }
   std::map<std::string, MapState>& maps() { return maps_; }

@@ -91,4 +91,9 @@ void snapshot(StoreCore& core) {
   }
 }
 
+void removeSnapshot(const StoreCore& core, std::int64_t map_id) {
+  std::error_code ec;
+  fs::remove(snapshotPath(core, map_id), ec);
+}
+
 }  // namespace sglc::storage::map_index

@@ -15,5 +15,8 @@ std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& reques
 // Writes every map's snapshot; a map with deletions since its index was built gets none (the next open
 // rebuilds it without the deleted scans).
 void snapshot(StoreCore& core);
+// Removes the snapshot of a deleted map (best effort: a failure only leaves a file whose id no longer matches,
+// as long as no new map gets the id; the removal is logged by the caller's result, not thrown).
+void removeSnapshot(const StoreCore& core, std::int64_t map_id);
 
 }  // namespace sglc::storage::map_index

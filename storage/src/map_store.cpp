@@ -74,6 +74,7 @@ class SqliteMapStore final : public MapStore {
   std::int64_t deleteRobot(const std::string& map, const std::string& robot) override {
     return scan_table::deleteRobot(core_, map, robot);
   }
+  std::int64_t deleteMap(const std::string& map) override { return scan_table::deleteMap(core_, map); }
 
   // ---- Descriptor indexes
   std::vector<SearchHit> search(const SearchRequest& request) const override {

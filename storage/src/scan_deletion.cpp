@@ -1,8 +1,11 @@
-// Deleting a session's or a robot's scans with everything that hangs on them (blobs, loops, optimised poses,
-// session frames, then the session and robot rows), in one transaction, and out of the index and the cache.
+// Deleting a session's, a robot's or a whole map's scans with everything that hangs on them (blobs, loops,
+// optimised poses, session frames, then the session, robot and map rows), in one transaction, and out of the
+// index and the cache.
 #include <array>
 #include <unordered_set>
+#include <vector>
 
+#include "map_index.hpp"
 #include "scan_table.hpp"
 
 namespace sglc::storage::scan_table {
@@ -98,6 +101,44 @@ std::int64_t deleteRobot(StoreCore& core, const std::string& map, const std::str
     for (auto it = m->sessions.begin(); it != m->sessions.end();)
       it = it->first.first == robot_id ? m->sessions.erase(it) : std::next(it);
   });
+}
+
+std::int64_t deleteMap(StoreCore& core, const std::string& map) {
+  std::lock_guard write(core.write_mutex);
+  MapState* m;
+  {
+    std::shared_lock lock(core.state_mutex);
+    m = &core.catalogue.map(map);
+  }
+  const auto& db = core.writer();
+  sql::Transaction tx(db);
+  std::vector<std::int64_t> ids;
+  {
+    sql::Stmt st(db, "SELECT id FROM scans WHERE map_id = ?1");
+    st.bind(1, m->id);
+    while (st.step()) ids.push_back(st.i64(0));
+  }
+  static constexpr std::array<const char*, 8> kRows = {
+      "DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1)",
+      "DELETE FROM loops WHERE map_id = ?1",
+      "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1)",
+      "DELETE FROM session_frames WHERE session_id IN"
+      " (SELECT x.id FROM sessions x JOIN robots r ON r.id = x.robot_id WHERE r.map_id = ?1)",
+      "DELETE FROM scans WHERE map_id = ?1",
+      "DELETE FROM sessions WHERE robot_id IN (SELECT id FROM robots WHERE map_id = ?1)",
+      "DELETE FROM robots WHERE map_id = ?1",
+      "DELETE FROM maps WHERE id = ?1"};
+  for (const char* text : kRows) sql::Stmt(db, text).bind(1, m->id).run();
+  const auto map_id = m->id;
+  {
+    std::unique_lock lock(core.state_mutex);
+    tx.commit();
+    core.catalogue.remove(map);  // m dangles from here
+  }
+  for (auto sid : ids) core.cache.erase(sid);
+  // A map created later may get the same id: its index must not load this map's snapshot.
+  map_index::removeSnapshot(core, map_id);
+  return static_cast<std::int64_t>(ids.size());
 }
 
 }  // namespace sglc::storage::scan_table

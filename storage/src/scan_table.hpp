@@ -22,5 +22,8 @@ std::optional<std::int64_t> find(const StoreCore& core, const std::string& map, 
 std::int64_t deleteSession(StoreCore& core, const std::string& map, const std::string& robot,
                            const std::string& session);
 std::int64_t deleteRobot(StoreCore& core, const std::string& map, const std::string& robot);
+// The whole map: its scans with everything that hangs on them, robots, sessions, the map row, its index and its
+// index snapshot. Returns the number of scans removed.
+std::int64_t deleteMap(StoreCore& core, const std::string& map);
 
 }  // namespace sglc::storage::scan_table

@@ -179,3 +179,27 @@ def test_example_runs(server, kitti_dir):
                          "--data", kitti_dir], capture_output=True, text=True, timeout=300, env=env)
     assert ex.returncode == 0, ex.stderr
     assert "inter-robot loop" in ex.stdout and "robot alice" in ex.stdout
+
+
+def test_delete_map(client, server, kitti):
+    client.create_map("gone")
+    client.ingest("gone", "r", "s", 1, *kitti("000052"))
+    client.ingest("gone", "r", "s", 2, *kitti("000088"))
+    cli = os.path.join(BUILD, "bin", "sglc")
+    if os.access(cli, os.X_OK):  # the command line refuses without --yes and says what would go
+        refused = subprocess.run([cli, "delete-map", "gone", "--server", server], capture_output=True, text=True,
+                                 timeout=60)
+        assert refused.returncode == 1 and "holds 2 scans" in refused.stderr and "--yes" in refused.stderr
+        assert client.stats("gone").scans == 2
+        done = subprocess.run([cli, "delete-map", "gone", "--yes", "--json", "--server", server],
+                              capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0 and '"scans_removed":2' in done.stdout, done.stdout + done.stderr
+    else:
+        assert client.delete_map("gone") == 2
+    assert "gone" not in [m.name for m in client.list_maps()]
+    with pytest.raises(sglc.NotFoundError):
+        client.delete_map("gone")
+    # A map of the same name starts empty, and its first scans do not meet the deleted ones.
+    client.create_map("gone")
+    r = client.ingest("gone", "q", "s", 1, *kitti("004501"), query=True)
+    assert r.loops == [] and client.stats("gone").scans == 1

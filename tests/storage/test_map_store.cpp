@@ -567,6 +567,59 @@ TEST(MapStore, DamagedRowsAreCorruptNotServed) {
   EXPECT_EQ(errorCode([&] { MapStore::open(options(path)); }), StorageError::Code::kCorrupt);
 }
 
+TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));
+    store->createMap("other", DescriptorLayout{}.scanDim());
+    Fingerprint keep = randomFingerprint(4242);
+    store->addScan({.map = "other", .robot = "x", .session = "s", .seq = 0, .fingerprint = &keep});
+    all = fill(*store, 2, 2, 3);  // map "m", the newest id: 12 scans
+    store->addLoop("m", {0, all[2].id, all[0].id, rigid(0.1, 1, 2), 0.8, 0.9, 0.05, 12});
+    const auto nodes = store->graphNodes("m");
+    store->saveOptimised("m", {{all[0].id, rigid(0.2, 1, 0)}}, {{nodes[0].session_id, "", "", Mat4d::Identity(), true}},
+                         1);
+    store->snapshot();  // both maps get an index snapshot
+    EXPECT_EQ(store->deleteMap("m"), 12);
+    EXPECT_EQ(errorCode([&] { store->deleteMap("m"); }), StorageError::Code::kNotFound);
+    EXPECT_EQ(errorCode([&] { store->stats("m"); }), StorageError::Code::kNotFound);
+    EXPECT_FALSE(store->findMap("m"));
+    for (const auto& st : all) EXPECT_EQ(store->fingerprint(st.id), nullptr);
+  }
+  // The same name again, in a session that writes no snapshot on close: it gets the deleted map's id (the
+  // newest) and as many scans as it had, so the next open must rebuild its index, not load the deleted map's
+  // snapshot of the same generation.
+  std::vector<Fingerprint> fresh;
+  for (int i = 0; i < 12; ++i) fresh.push_back(randomFingerprint(90000 + static_cast<std::uint64_t>(i)));
+  std::vector<std::int64_t> fresh_ids;
+  {
+    auto o = options(path);
+    o.snapshot_index = false;
+    auto store = MapStore::open(o);
+    store->createMap("m", DescriptorLayout{}.scanDim());
+    EXPECT_EQ(store->stats("m").scans, 0);
+    EXPECT_EQ(store->stats("m").index_entries, 0);
+    EXPECT_TRUE(store->search({.map = "m", .descriptor = all[0].fp.descriptor, .k = 5}).empty());
+    EXPECT_TRUE(store->loops("m", 0, 100).empty());
+    EXPECT_TRUE(store->graphNodes("m").empty());
+    EXPECT_EQ(store->graphVersion("m"), 0);
+    for (int i = 0; i < 12; ++i)
+      fresh_ids.push_back(store->addScan({.map = "m", .robot = "n", .session = "s", .seq = i, .fingerprint = &fresh[i]}));
+  }
+  auto store = MapStore::open(options(path));  // reopened: from the database and whatever snapshots remain
+  const auto hits = ids(store->search({.map = "m", .descriptor = fresh[5].descriptor, .k = 20}));
+  EXPECT_EQ(hits.size(), 12u);
+  EXPECT_EQ(hits.front(), fresh_ids[5]);
+  for (const auto& st : all) EXPECT_EQ(std::count(hits.begin(), hits.end(), st.id), 0) << "deleted scan found";
+  EXPECT_EQ(store->deleteMap("m"), 12);
+  EXPECT_EQ(store->stats("other").scans, 1);  // the other map is untouched
+  EXPECT_EQ(store->stats("other").index_entries, 1);
+  EXPECT_EQ(store->stats().scans, 1);
+  EXPECT_EQ(store->integrityCheck(), "ok");
+}
+
 TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
   TempDir dir;
   const auto path = dir.file("map.db");

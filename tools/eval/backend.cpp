@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <iostream>
 #include <map>
 #include <stdexcept>
 
@@ -124,11 +125,22 @@ class InProcess final : public Backend {
 
 class Remote final : public Backend {
  public:
-  Remote(const std::string& address, const std::string& token, std::string map)
+  Remote(const std::string& address, const std::string& token, std::string map, bool keep_map)
       : client_(client::Client::connect(address, {.token = token, .default_deadline = std::chrono::minutes(5)})),
-        map_(std::move(map)) {
+        map_(std::move(map)),
+        keep_map_(keep_map) {
     client_.createMap(map_);
   }
+  ~Remote() override {
+    if (keep_map_) return;
+    try {
+      client_.deleteMap(map_);
+    } catch (const std::exception& e) {
+      std::cerr << "sglc-eval: warning: could not delete map " << map_ << " on the server: " << e.what() << "\n";
+    }
+  }
+  Remote(const Remote&) = delete;
+  Remote& operator=(const Remote&) = delete;
   std::string name() const override { return "server"; }
 
   void add(int frame, const LabelledScan& scan, StageTimes* t) override {
@@ -208,6 +220,7 @@ class Remote final : public Backend {
 
   client::Client client_;
   std::string map_;
+  bool keep_map_ = false;
   std::map<int, std::int64_t> ids_;
   std::map<std::int64_t, int> frames_;
 };
@@ -218,8 +231,9 @@ std::unique_ptr<Backend> inProcessBackend(const Config& config, const std::strin
   return std::make_unique<InProcess>(config, scratch_dir);
 }
 
-std::unique_ptr<Backend> serverBackend(const std::string& address, const std::string& token, const std::string& map) {
-  return std::make_unique<Remote>(address, token, map);
+std::unique_ptr<Backend> serverBackend(const std::string& address, const std::string& token, const std::string& map,
+                                       bool keep_map) {
+  return std::make_unique<Remote>(address, token, map, keep_map);
 }
 
 }  // namespace sglc::eval

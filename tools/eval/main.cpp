@@ -453,6 +453,7 @@ struct SlamOptions {
   double odom_noise = 0.01;
   int robots = 1;
   std::uint64_t seed = 7;
+  bool keep_map = false;  // leave the map on the server (--keep-maps)
 };
 
 void slamProtocol(Run& run, const std::string& server, const std::string& token, const std::string& map,
@@ -574,6 +575,8 @@ void slamProtocol(Run& run, const std::string& server, const std::string& token,
       run.summary["frame_alignment_error"] = {{"m", e.rte_m}, {"deg", e.rre_deg}, {"connected", s.connected()}};
     }
   }
+  run.summary["server_map_kept"] = o.keep_map;
+  if (!o.keep_map) cl.deleteMap(map);
 }
 
 }  // namespace
@@ -619,6 +622,9 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({1, 2}));
   app.add_option("--server", server, "measure a running sglc-server instead of the in-process engine");
   app.add_option("--token", token, "bearer token for --server");
+  bool keep_maps = false;
+  app.add_flag("--keep-maps", keep_maps,
+               "with --server: leave the maps this run creates (default: deleted at the end)");
   app.add_option("--config", config_path, "engine configuration (YAML, as sglc-pair --config)");
   app.add_option("--threads", threads, "frames loaded or rendered ahead")->check(CLI::Range(1, 64));
   app.add_option("--title", title, "figure title");
@@ -659,7 +665,8 @@ int main(int argc, char** argv) {
     if (server.empty())
       backend = inProcessBackend(config, out + "/scratch");
     else
-      backend = serverBackend(server, token, map_name);
+      backend = serverBackend(server, token, map_name, keep_maps);
+    slam.keep_map = keep_maps;
 
     std::set<int> stored;
     // One invocation may run several protocols over the same stored frames ("all": sequence first, then
@@ -682,7 +689,10 @@ int main(int argc, char** argv) {
         run.summary["labeller_mode"] = config.labeller.mode;
       }
       if (sim) run.summary["beams"] = beams;
-      if (!server.empty()) run.summary["server_map"] = map_name;
+      if (!server.empty()) {
+        run.summary["server_map"] = map_name;
+        run.summary["server_map_kept"] = keep_maps;
+      }
       run.summary["frames"] = source->frames().size();
       if (name == "sequence") {
         run.summary["exclude_recent"] = query.exclude_recent;

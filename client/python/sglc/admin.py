@@ -44,6 +44,11 @@ class AdminCalls:
         """Deletes one robot's scans; returns how many were removed."""
         return self._admin_call("DeleteRobot", pb2.DeleteRobotRequest(map=map, robot=robot), timeout).scans_removed
 
+    def delete_map(self, map: str, timeout: Optional[float] = None) -> int:
+        """Deletes the whole map (scans, robots, sessions, loops, poses), irreversibly; returns how many scans
+        were removed. NotFoundError for an unknown map."""
+        return self._admin_call("DeleteMap", pb2.DeleteMapRequest(map=map), timeout).scans_removed
+
     def stats(self, map: str = "", timeout: Optional[float] = None) -> Stats:
         """Counts and sizes of one map, or of the whole database (map="")."""
         return Stats.from_proto(self._admin_call("GetStats", pb2.GetStatsRequest(map=map), timeout))

@@ -101,6 +101,13 @@ def main():
         if plots:
             assert os.path.getsize(os.path.join(slam, "slam.png")) > 1000
         run(["--protocol", "slam", "--sim", "--out", slam], expect=1)  # needs --server
+        # The maps both runs created on the server were deleted at their end (no --keep-maps).
+        assert r["server_map_kept"] is False and sl["server_map_kept"] is False
+        cli = os.path.join(os.path.dirname(SERVER), "sglc")
+        if os.access(cli, os.X_OK):
+            listed = subprocess.run([cli, "maps", "--json", "--server", f"127.0.0.1:{port}"], capture_output=True,
+                                    text=True, timeout=60)
+            assert listed.returncode == 0 and "eval-" not in listed.stdout, listed.stdout + listed.stderr
 
         # 3. Pose and pair protocols on pairs taken from the run: its true detections, and far-apart frames.
         rows = list(csv.DictReader(open(os.path.join(local, "trajectory.csv"))))

@@ -186,6 +186,8 @@ class Client {
   std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session,
                              const CallOptions& call = {}) const;
   std::int64_t deleteRobot(const std::string& map, const std::string& robot, const CallOptions& call = {}) const;
+  // The whole map, irreversibly.
+  std::int64_t deleteMap(const std::string& map, const CallOptions& call = {}) const;
   // Empty map: the whole database.
   v1::GetStatsResponse getStats(const std::string& map = "", const CallOptions& call = {}) const;
   // `path` is on the server's filesystem and must not exist yet.

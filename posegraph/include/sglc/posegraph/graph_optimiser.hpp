@@ -75,6 +75,9 @@ class GraphOptimiser {
   void loopsAdded(const std::string& map);
   // Scans (and with them loops) of `map` were deleted: rebuild its graph from the database and optimise now.
   void scansRemoved(const std::string& map);
+  // `map` was deleted: drop its pending solve and its last event; a map created later under the name starts
+  // with a graph rebuilt from the database.
+  void mapDeleted(const std::string& map);
   // The latest event of the map once its graph version exceeds `after`, waiting at most `timeout`; nullopt on
   // timeout or when stopping.
   std::optional<GraphEvent> waitForVersion(const std::string& map, std::int64_t after,

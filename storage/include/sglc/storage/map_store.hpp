@@ -212,6 +212,9 @@ class MapStore {
   // Deletions remove scans from the index and the database together. Return the number of scans removed.
   virtual std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session) = 0;
   virtual std::int64_t deleteRobot(const std::string& map, const std::string& robot) = 0;
+  // The whole map (scans, robots, sessions, loops, poses, its index); kNotFound for an unknown map. Returns the
+  // number of scans removed. A map of the same name created afterwards starts empty.
+  virtual std::int64_t deleteMap(const std::string& map) = 0;
 
   // Online backup of the live database to a new file (VACUUM INTO). Fails if dest exists.
   virtual void backup(const std::string& dest) const = 0;
