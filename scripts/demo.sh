@@ -24,5 +24,5 @@ build/bin/sglc ingest --server "127.0.0.1:$PORT" --map demo --robot alpha --fram
   --exclude-recent 30 --json --no-progress "$WORK/seq" > "$WORK/alpha.jsonl"
 build/bin/sglc ingest --server "127.0.0.1:$PORT" --map demo --robot bravo --frames "$HALF:" --query \
   --exclude-recent 30 --json --no-progress "$WORK/seq" > "$WORK/bravo.jsonl"
-/usr/bin/python3 scripts/demo_report.py "$WORK"
+/usr/bin/python3 scripts/demo_report.py "$WORK"   # also draws $WORK/demo.png
 build/bin/sglc stats --server "127.0.0.1:$PORT"

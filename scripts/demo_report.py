@@ -55,3 +55,36 @@ if errors:
     print(f"median RTE {sorted(e[0] for e in errors)[len(errors) // 2]:.3f} m, "
           f"median RRE {sorted(e[1] for e in errors)[len(errors) // 2]:.3f} deg, "
           f"loops more than 2 m / 5 deg off: {sum(1 for e in errors if e[0] > 2 or e[1] > 5)}")
+
+# The picture: both robots' paths and every loop (needs matplotlib; skipped without it).
+try:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+except ImportError:
+    sys.exit(0)
+fig, ax = plt.subplots(figsize=(7, 6), dpi=110)
+for robot, colour in (("alpha", "tab:blue"), ("bravo", "tab:orange")):
+    frames = sorted(int(r["frame"]) for rb, r in rows if rb == robot)
+    ax.plot([poses[f][0][3] for f in frames], [poses[f][1][3] for f in frames], color=colour, lw=1.2,
+            label=f"robot {robot} ({len(frames)} scans)")
+for kind, colour in (("intra", "tab:green"), ("inter", "tab:red")):
+    first = True
+    for robot, r in rows:
+        q = int(r["frame"])
+        for loop in r["loops"]:
+            if (loop["robot"] != robot) != (kind == "inter"):
+                continue
+            c = frame_of[loop["scan_id"]]
+            ax.plot([poses[q][0][3], poses[c][0][3]], [poses[q][1][3], poses[c][1][3]], color=colour, lw=0.6,
+                    alpha=0.5, label=f"{kind}-robot loops ({count[kind]})" if first else None)
+            ax.scatter([poses[q][0][3]], [poses[q][1][3]], s=4, color=colour)
+            first = False
+ax.set_aspect("equal")
+ax.set_xlabel("x (m)")
+ax.set_ylabel("y (m)")
+ax.set_title("scripts/demo.sh: loops the server found between and within two robots")
+ax.legend(loc="best", fontsize=8)
+fig.tight_layout()
+fig.savefig(os.path.join(work, "demo.png"))
+print(f"picture: {os.path.join(work, 'demo.png')}")

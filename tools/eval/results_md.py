@@ -165,7 +165,7 @@ def main():
       f"Summaries, CSV files and figures are in `docs/results/` after running it (not committed). Engine "
       f"configuration: the defaults of this commit (`build/bin/sglc-pair --dump-config`). Only the runs present "
       f"in `docs/results/` are listed (`SEQS=... NOISES=...` select them; the default is every sequence at 5, 0 "
-      f"and 15 % noise). Times come from whatever else the machine was running; the benchmarks in the README "
+      f"and 15 % noise). Times come from whatever else the machine was running; the benchmarks in docs/PERFORMANCE.md "
       f"are the reference for speed.")
     w("")
     w("Data: the simulator (`tools/sim`) following the KITTI ground-truth trajectories 00, 05 and 08 (HDL-64, "
@@ -262,7 +262,7 @@ def main():
     w("")
     w("Pairs verification rejects (places whose noisy labels leave too few consistent landmarks or too little "
       "background agreement) are registered from the landmarks' coarse pose or, where that fails, from the "
-      "background views alone (README, \"known loops\").")
+      "background views alone (docs/ENGINE.md, \"known loops\").")
     w("")
 
     w("## Time per frame (sequence protocol, in-process, medians / p90 in ms)")
