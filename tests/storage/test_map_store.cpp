@@ -606,7 +606,8 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
     EXPECT_TRUE(store->graphNodes("m").empty());
     EXPECT_EQ(store->graphVersion("m"), 0);
     for (int i = 0; i < 12; ++i)
-      fresh_ids.push_back(store->addScan({.map = "m", .robot = "n", .session = "s", .seq = i, .fingerprint = &fresh[i]}));
+      fresh_ids.push_back(
+          store->addScan({.map = "m", .robot = "n", .session = "s", .seq = i, .fingerprint = &fresh[i]}));
   }
   auto store = MapStore::open(options(path));  // reopened: from the database and whatever snapshots remain
   const auto hits = ids(store->search({.map = "m", .descriptor = fresh[5].descriptor, .k = 20}));
