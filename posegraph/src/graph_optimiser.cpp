@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <unordered_map>
+#include <utility>
 
 #include "map_graph.hpp"
 #include "sglc/elapsed.hpp"
@@ -59,10 +60,14 @@ void GraphOptimiser::scansRemoved(const std::string& map) {
 }
 
 void GraphOptimiser::mapDeleted(const std::string& map) {
-  std::lock_guard lock(mutex_);
-  due_.erase(map);
-  latest_.erase(map);
-  stale_.insert(map);
+  {
+    std::lock_guard lock(mutex_);
+    due_.erase(map);
+    latest_.erase(map);
+    stale_.insert(map);
+    forget_.insert(map);  // the worker frees the map's graph (it owns graphs_)
+  }
+  wake_.notify_all();
 }
 
 std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map, std::int64_t after,
@@ -81,6 +86,16 @@ std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map,
 void GraphOptimiser::run() {
   std::unique_lock lock(mutex_);
   while (!stop_) {
+    if (!forget_.empty()) {
+      const auto names = std::exchange(forget_, {});
+      lock.unlock();
+      {
+        std::lock_guard one(optimise_mutex_);
+        for (const auto& name : names) graphs_.erase(name);
+      }
+      lock.lock();
+      continue;
+    }
     if (due_.empty()) {
       wake_.wait(lock);
       continue;

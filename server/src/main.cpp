@@ -164,8 +164,8 @@ int serve(const Settings& s, sigset_t& signals) {
   builder.RegisterService(&graph_service);
   grpc::ResourceQuota quota("sglc");
   configure(builder, s, quota, state->metrics());
-  sglc::server::IoPoller io_poller(builder);          // see io_poller.hpp
-  const auto metrics_http = serveMetrics(s, *state);  // before the server starts: a bad address stops nothing
+  sglc::server::IoPoller io_poller(builder);    // see io_poller.hpp
+  auto metrics_http = serveMetrics(s, *state);  // before the server starts: a bad address stops nothing
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
     if (server) server->Shutdown();  // before its completion queues go
@@ -201,6 +201,7 @@ int serve(const Settings& s, sigset_t& signals) {
                    std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));
   server->Wait();
   io_poller.stop();
+  metrics_http.reset();  // its gauges read the store: no scrape may outlive it
   state->detach();
   graph.reset();
   store.reset();

@@ -34,37 +34,28 @@ std::string labelText(const Labels& labels, const std::string& extra_name = "", 
   return out + "}";
 }
 
-// HELP text: backslash and line feed escaped.
-std::string helpText(const std::string& help) {
+// Backslash and line feed escaped (HELP text), and the double quote too (label values).
+std::string escaped(const std::string& text, bool quote) {
   std::string out;
-  for (char c : help) {
+  out.reserve(text.size());
+  for (char c : text) {
     if (c == '\\')
       out += "\\\\";
     else if (c == '\n')
       out += "\\n";
+    else if (c == '"' && quote)
+      out += "\\\"";
     else
       out += c;
   }
   return out;
 }
+
+std::string helpText(const std::string& help) { return escaped(help, false); }
 
 }  // namespace
 
-std::string escapeLabelValue(const std::string& value) {
-  std::string out;
-  out.reserve(value.size());
-  for (char c : value) {
-    if (c == '\\')
-      out += "\\\\";
-    else if (c == '"')
-      out += "\\\"";
-    else if (c == '\n')
-      out += "\\n";
-    else
-      out += c;
-  }
-  return out;
-}
+std::string escapeLabelValue(const std::string& value) { return escaped(value, true); }
 
 Metrics::Family& Metrics::family(const std::string& name, Family::Type type) {
   auto it = families_.find(name);
@@ -89,6 +80,11 @@ void Metrics::gauge(const std::string& name, const std::string& help, GaugeReade
   families_.try_emplace(name, Family{help, Family::Type::kGauge, {}, {}, std::move(read)});
 }
 
+void Metrics::beforeScrape(std::function<void()> hook) {
+  const std::lock_guard lock(mutex_);
+  hooks_.push_back(std::move(hook));
+}
+
 void Metrics::add(const std::string& name, const Labels& labels, double amount) {
   const std::lock_guard lock(mutex_);
   family(name, Family::Type::kCounter).counters[labels] += amount;
@@ -107,11 +103,20 @@ void Metrics::observe(const std::string& name, const Labels& labels, double seco
 std::string Metrics::render() const {
   // Gauges are read outside the lock (readers may be slow, e.g. database counts).
   std::vector<std::pair<std::string, GaugeReader>> readers;
+  std::vector<std::function<void()>> hooks;
   std::string out;
   {
     const std::lock_guard lock(mutex_);
     for (const auto& [name, f] : families_)
       if (f.type == Family::Type::kGauge) readers.emplace_back(name, f.read);
+    hooks = hooks_;
+  }
+  for (const auto& hook : hooks) {
+    try {
+      hook();
+    } catch (...) {
+      // The gauges that depend on it fail on their own and are left out.
+    }
   }
   std::map<std::string, std::vector<Sample>> gauges;
   for (const auto& [name, read] : readers) {

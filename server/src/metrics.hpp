@@ -35,6 +35,9 @@ class Metrics {
   // A gauge whose samples `read` gives at every scrape (it must not call back into this object). A reader
   // that throws leaves its family out of that scrape.
   void gauge(const std::string& name, const std::string& help, GaugeReader read);
+  // Runs once at the start of every render(), before the gauges are read (e.g. to take one snapshot of the
+  // database that several gauges share). A hook that throws is ignored for that scrape.
+  void beforeScrape(std::function<void()> hook);
 
   // Updates; the family must have been declared (std::logic_error otherwise: a programming error).
   void add(const std::string& name, const Labels& labels, double amount = 1);
@@ -60,6 +63,7 @@ class Metrics {
 
   mutable std::mutex mutex_;
   std::map<std::string, Family> families_;
+  std::vector<std::function<void()>> hooks_;
 };
 
 // A label value escaped for the exposition format (backslash, double quote and line feed).

@@ -21,9 +21,12 @@ std::pair<std::string, std::string> hostPort(const std::string& address) {
   const auto colon = address.rfind(':');
   if (colon == std::string::npos || colon + 1 == address.size())
     throw std::runtime_error("metrics address '" + address + "' is not host:port");
+  const std::string port = address.substr(colon + 1);
+  if (port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos || std::stoi(port) > 65535)
+    throw std::runtime_error("metrics address '" + address + "': port must be a number 0..65535");
   std::string host = address.substr(0, colon);
   if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
-  return {host, address.substr(colon + 1)};
+  return {host, port};
 }
 
 int listenOn(const std::string& address, int& port) {
@@ -125,12 +128,17 @@ void MetricsHttpServer::serve() {
   for (;;) {
     pollfd fds[2] = {{listen_fd_, POLLIN, 0}, {wake_[0], POLLIN, 0}};
     if (poll(fds, 2, -1) < 0) {
-      if (errno == EINTR) continue;
-      return;
+      // EINTR, or a transient failure: wait a little (still woken by stop) instead of spinning or giving up.
+      poll(&fds[1], 1, 100);
+      continue;
     }
     if (fds[1].revents != 0) return;
     const int fd = accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (fd < 0) continue;
+    if (fd < 0) {
+      // Out of descriptors (EMFILE/ENFILE) leaves the connection queued and poll ready at once: back off.
+      if (errno != EINTR && errno != EAGAIN && errno != ECONNABORTED) poll(&fds[1], 1, 100);
+      continue;
+    }
     answer(fd);
     close(fd);
   }
@@ -155,7 +163,9 @@ void MetricsHttpServer::answer(int fd) const {
     return sendAll(fd, response(405, "Method Not Allowed", "only GET and HEAD\n", false), deadline);
   const std::string path = target.substr(0, target.find('?'));
   if (path != "/metrics") return sendAll(fd, response(404, "Not Found", "see /metrics\n", head_only), deadline);
-  sendAll(fd, response(200, "OK", render_(), head_only, "text/plain; version=0.0.4; charset=utf-8"), deadline);
+  const std::string body = render_();  // the send gets its own time: a slow render must not void the answer
+  sendAll(fd, response(200, "OK", body, head_only, "text/plain; version=0.0.4; charset=utf-8"),
+          Clock::now() + kRequestTimeout);
 }
 
 }  // namespace sglc::server

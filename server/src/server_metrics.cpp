@@ -4,6 +4,10 @@
 
 #include <chrono>
 #include <fstream>
+#include <memory>
+#include <mutex>
+#include <stdexcept>
+#include <vector>
 
 #include "service.hpp"
 #include "sglc/version.hpp"
@@ -71,32 +75,52 @@ double residentBytes() {
   return pages_resident * static_cast<double>(sysconf(_SC_PAGESIZE));
 }
 
+// One look at the database per scrape, shared by the gauges below (its statistics scan the scans table).
+struct StoreSnapshot {
+  std::mutex mutex;
+  bool valid = false;
+  storage::Stats stats;
+  std::vector<storage::MapInfo> maps;
+
+  template <typename F>
+  auto read(F&& f) {
+    const std::lock_guard lock(mutex);
+    if (!valid) throw std::runtime_error("the map database is not loaded");
+    return f(*this);
+  }
+};
+
 void declareStoreGauges(Metrics& m, const ServiceState& state) {
   using S = Metrics::Sample;
-  m.gauge("sglc_maps", "Maps in the database", [&state] {
-    return std::vector<S>{{{}, static_cast<double>(state.store().stats().maps)}};
+  auto snap = std::make_shared<StoreSnapshot>();
+  m.beforeScrape([snap, &state] {
+    const std::lock_guard lock(snap->mutex);
+    snap->valid = false;
+    snap->stats = state.store().stats();  // throws while loading: the gauges are left out
+    snap->maps = state.store().listMaps();
+    snap->valid = true;
   });
-  m.gauge("sglc_map_scans", "Scans stored per map", [&state] {
-    std::vector<S> out;
-    for (const auto& map : state.store().listMaps())
-      out.push_back({{{"map", map.name}}, static_cast<double>(map.scans)});
-    return out;
-  });
-  m.gauge("sglc_map_robots", "Robots per map", [&state] {
-    std::vector<S> out;
-    for (const auto& map : state.store().listMaps())
-      out.push_back({{{"map", map.name}}, static_cast<double>(map.robots)});
-    return out;
-  });
-  m.gauge("sglc_index_entries", "Descriptors in the in-memory search indexes (all maps)", [&state] {
-    return std::vector<S>{{{}, static_cast<double>(state.store().stats().index_entries)}};
-  });
-  m.gauge("sglc_db_bytes", "Size of the map database file (bytes)", [&state] {
-    return std::vector<S>{{{}, static_cast<double>(state.store().stats().db_bytes)}};
-  });
-  m.gauge("sglc_fingerprint_cache_bytes", "Fingerprints held in the memory cache (bytes)", [&state] {
-    return std::vector<S>{{{}, state.store().stats().cache_mb * 1024.0 * 1024.0}};
-  });
+  auto one = [snap](auto value) {
+    return [snap, value] { return snap->read([&](const StoreSnapshot& s) { return std::vector<S>{{{}, value(s)}}; }); };
+  };
+  auto perMap = [snap](auto value) {
+    return [snap, value] {
+      return snap->read([&](const StoreSnapshot& s) {
+        std::vector<S> out;
+        for (const auto& map : s.maps) out.push_back({{{"map", map.name}}, value(map)});
+        return out;
+      });
+    };
+  };
+  m.gauge("sglc_maps", "Maps in the database", one([](const StoreSnapshot& s) { return double(s.stats.maps); }));
+  m.gauge("sglc_map_scans", "Scans stored per map", perMap([](const storage::MapInfo& x) { return double(x.scans); }));
+  m.gauge("sglc_map_robots", "Robots per map", perMap([](const storage::MapInfo& x) { return double(x.robots); }));
+  m.gauge("sglc_index_entries", "Descriptors in the in-memory search indexes (all maps)",
+          one([](const StoreSnapshot& s) { return double(s.stats.index_entries); }));
+  m.gauge("sglc_db_bytes", "Size of the map database file (bytes)",
+          one([](const StoreSnapshot& s) { return double(s.stats.db_bytes); }));
+  m.gauge("sglc_fingerprint_cache_bytes", "Fingerprints held in the memory cache (bytes)",
+          one([](const StoreSnapshot& s) { return s.stats.cache_mb * 1024.0 * 1024.0; }));
 }
 
 }  // namespace

@@ -72,17 +72,18 @@ def _free_port():
         return s.getsockname()[1]
 
 
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    """A fresh sglc-server on a free loopback port; yields its address."""
+def start_server(tmp, extra=()):
+    """Starts this build's sglc-server on a free loopback port with a fresh database in `tmp` (retrying when
+    the port was taken in between); returns (process, address) once it answers SERVING. `extra` may hold
+    "{port}", replaced by another free port (e.g. for --metrics-listen)."""
     binary = _binary("SGLC_SERVER_BIN", "sglc-server")
     if binary is None:
         pytest.skip("sglc-server is not built")
-    tmp = tmp_path_factory.mktemp("server")
-    for attempt in range(3):  # the free port may be taken in between
+    for attempt in range(3):
         address = f"127.0.0.1:{_free_port()}"
+        args = [x.replace("{port}", str(_free_port())) for x in extra]
         log = open(tmp / f"server{attempt}.log", "wb")
-        proc = subprocess.Popen([binary, "--db", str(tmp / "map.db"), "--listen", address],
+        proc = subprocess.Popen([binary, "--db", str(tmp / "map.db"), "--listen", address, *args],
                                 stdout=log, stderr=subprocess.STDOUT)
         up = False
         deadline = time.monotonic() + 120
@@ -92,11 +93,17 @@ def server(tmp_path_factory):
             if not up:
                 time.sleep(0.05)
         if up:
-            break
+            proc.args_used = args
+            return proc, address
         proc.kill()
         proc.wait()
-    else:
-        pytest.fail(f"sglc-server did not start; see {tmp}")
+    pytest.fail(f"sglc-server did not start; see {tmp}")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    """A fresh sglc-server on a free loopback port; yields its address."""
+    proc, address = start_server(tmp_path_factory.mktemp("server"))
     yield address
     proc.terminate()
     try:

@@ -13,7 +13,7 @@ import urllib.request
 import pytest
 
 import sglc
-from conftest import _binary, _free_port
+from conftest import _binary, _free_port, start_server
 
 SAMPLE = re.compile(r'^([a-zA-Z_:][a-zA-Z0-9_:]*)(\{(?:[a-zA-Z_][a-zA-Z0-9_]*="(?:[^"\\\n]|\\[\\"n])*",?)*\})? '
                     r'(-?[0-9.eE+-]+|[+-]Inf|NaN)$')
@@ -46,28 +46,8 @@ def value(samples, name, **labels):
 
 @pytest.fixture(scope="module")
 def metrics_server(tmp_path_factory):
-    binary = _binary("SGLC_SERVER_BIN", "sglc-server")
-    if binary is None:
-        pytest.skip("sglc-server is not built")
-    tmp = tmp_path_factory.mktemp("metrics")
-    for _ in range(3):
-        grpc_port, http_port = _free_port(), _free_port()
-        proc = subprocess.Popen([binary, "--db", str(tmp / "m.db"), "--listen", f"127.0.0.1:{grpc_port}",
-                                 "--metrics-listen", f"127.0.0.1:{http_port}"],
-                                stdout=open(tmp / "log", "ab"), stderr=subprocess.STDOUT)
-        deadline = time.monotonic() + 120
-        up = False
-        while not up and proc.poll() is None and time.monotonic() < deadline:
-            with sglc.Client(f"127.0.0.1:{grpc_port}", timeout=2) as c:
-                up = c.serving(timeout=2)
-            time.sleep(0 if up else 0.05)
-        if up:
-            break
-        proc.kill()
-        proc.wait()
-    else:
-        pytest.fail(f"sglc-server with --metrics-listen did not start; see {tmp}/log")
-    yield f"127.0.0.1:{grpc_port}", f"http://127.0.0.1:{http_port}/metrics"
+    proc, address = start_server(tmp_path_factory.mktemp("metrics"), ["--metrics-listen", "127.0.0.1:{port}"])
+    yield address, f"http://{proc.args_used[1]}/metrics"
     proc.terminate()
     proc.wait(timeout=60)
 

@@ -90,3 +90,10 @@ def test_errors_by_status_code():
             assert cls is not sglc.SglcError and issubclass(cls, sglc.SglcError), code
             e = cls("MapAdmin.ListMaps", code, "why")
             assert e.code_name == code.name and "why" in str(e) and "MapAdmin.ListMaps" in str(e)
+
+
+def test_memoryview_of_numbers_is_an_array_not_bytes():
+    a = np.float64([[1, 2, 3], [4, 5, 6]])
+    assert packing.pack_points(memoryview(a)) == np.float32(a).tobytes()  # converted, not passed through
+    raw = np.float32(a).tobytes()
+    assert packing.pack_points(memoryview(raw)) == raw  # a memoryview of bytes is packed bytes

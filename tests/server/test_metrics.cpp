@@ -56,6 +56,22 @@ TEST(Metrics, LabelValuesAreEscapedAndGaugesReadAtScrape) {
   EXPECT_EQ(reads, 2);
 }
 
+TEST(Metrics, HooksRunOnceBeforeTheGaugesOfEachScrape) {
+  Metrics m;
+  int snapshot = 0, seen = -1;
+  m.beforeScrape([&] { ++snapshot; });
+  m.beforeScrape([] { throw std::runtime_error("ignored"); });
+  m.gauge("g", "x", [&] {
+    seen = snapshot;
+    return std::vector<Metrics::Sample>{{{}, 1.0}};
+  });
+  m.render();
+  EXPECT_EQ(snapshot, 1);
+  EXPECT_EQ(seen, 1) << "the gauge reads after the hook";
+  m.render();
+  EXPECT_EQ(snapshot, 2);
+}
+
 TEST(Metrics, UndeclaredFamilyIsAProgrammingError) {
   Metrics m;
   m.counter("c", "x");
@@ -116,6 +132,9 @@ TEST(MetricsHttp, BadAddressesAreNamed) {
     FAIL() << "no port accepted";
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("no-port"), std::string::npos) << e.what();
+  }
+  for (const char* bad : {"127.0.0.1:70000", "127.0.0.1:-1", "127.0.0.1:9x"}) {
+    EXPECT_THROW(MetricsHttpServer(bad, [] { return std::string(); }), std::runtime_error) << bad;
   }
   MetricsHttpServer first("127.0.0.1:0", [] { return std::string(); });
   try {

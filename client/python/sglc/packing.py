@@ -21,7 +21,11 @@ ArrayOrBytes = Union[np.ndarray, Sequence, bytes, bytearray, memoryview]
 
 
 def _is_bytes(x) -> bool:
-    return isinstance(x, (bytes, bytearray, memoryview))
+    """Packed bytes: bytes, bytearray, or a memoryview of bytes (a memoryview over an array of numbers is an
+    array, not packed bytes)."""
+    if isinstance(x, memoryview):
+        return x.format in ("B", "b", "c")
+    return isinstance(x, (bytes, bytearray))
 
 
 def as_points(points) -> np.ndarray:

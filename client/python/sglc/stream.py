@@ -52,6 +52,7 @@ class IngestSession:
 
     def __init__(self, client, timeout: Optional[float] = None):
         self._client = client
+        self._timeout = timeout
         self._requests: "queue.Queue" = queue.Queue()
         self._outstanding: collections.deque = collections.deque()  # None: from the stream; else a known result
         self._error: Optional[SglcError] = None
@@ -68,6 +69,14 @@ class IngestSession:
             self._closed = True
             self.end_requests()
             self._responses.cancel()
+
+    def __del__(self) -> None:
+        # A session dropped without finish() or a with-block: release gRPC's request thread and the server's
+        # stream slot.
+        try:
+            self.__exit__(None, None, None)
+        except Exception:  # noqa: BLE001 - nothing can be reported from a finalizer
+            pass
 
     def __len__(self) -> int:
         return len(self._outstanding)
@@ -102,7 +111,7 @@ class IngestSession:
                 if r is None:
                     self._outstanding[i] = self._read()
             try:
-                result = self._client.ingest_chunked(request, timeout=None)
+                result = self._client.ingest_chunked(request, timeout=self._timeout)
             except SglcError as e:
                 self._error = e
                 raise

@@ -112,6 +112,7 @@ class GraphOptimiser {
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
   std::set<std::string> stale_;                              // maps whose in-memory graph must be rebuilt
+  std::set<std::string> forget_;                             // deleted maps whose in-memory graph the worker drops
   std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
   std::mutex optimise_mutex_;                                // one optimisation at a time
   bool stop_ = false;
