@@ -114,6 +114,14 @@ void GraphOptimiser::run() {
   }
 }
 
+bool GraphOptimiser::mapExists(const std::string& map) const {
+  try {
+    return store_.findMap(map).has_value();
+  } catch (const std::exception&) {
+    return true;  // the database failed: report the failure as usual
+  }
+}
+
 GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise(map); }
 
 GraphEvent GraphOptimiser::optimise(const std::string& map) {
@@ -124,6 +132,11 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
     graphs_.erase(map);
     GraphEvent event = latest(map).value_or(GraphEvent{});
+    if (!mapExists(map)) {  // deleted while it was being solved: nothing to report about a map that is gone
+      event.failed = true;
+      event.error = "the map was deleted";
+      return event;
+    }
     try {
       if (!event.graph_version) event.graph_version = store_.graphVersion(map);
     } catch (const std::exception&) {

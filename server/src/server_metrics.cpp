@@ -11,22 +11,13 @@
 
 #include "service.hpp"
 #include "sglc/version.hpp"
+#include "sglc/wire/error.hpp"
 
 namespace sglc::server {
 namespace {
 
 namespace gx = grpc::experimental;
 using Clock = std::chrono::steady_clock;
-
-std::string codeName(grpc::StatusCode code) {
-  static const char* const kNames[] = {
-      "OK",        "CANCELLED",      "UNKNOWN",           "INVALID_ARGUMENT",   "DEADLINE_EXCEEDED",
-      "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-      "ABORTED",   "OUT_OF_RANGE",   "UNIMPLEMENTED",     "INTERNAL",           "UNAVAILABLE",
-      "DATA_LOSS", "UNAUTHENTICATED"};
-  const auto i = static_cast<int>(code);
-  return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
-}
 
 // "/sglc.v1.LoopClosure/Ingest" -> service "sglc.v1.LoopClosure", method "Ingest".
 Labels methodLabels(const char* full) {
@@ -44,7 +35,7 @@ class MetricsInterceptor final : public gx::Interceptor {
   void Intercept(gx::InterceptorBatchMethods* methods) override {
     if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::PRE_SEND_STATUS)) {
       auto labels = labels_;
-      labels.emplace_back("code", codeName(methods->GetSendStatus().error_code()));
+      labels.emplace_back("code", wire::statusCodeName(methods->GetSendStatus().error_code()));
       metrics_.add(kRpcTotal, labels);
       metrics_.observe(kRpcSeconds, labels, std::chrono::duration<double>(Clock::now() - start_).count());
     }

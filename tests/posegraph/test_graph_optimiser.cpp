@@ -2,6 +2,8 @@
 // false loop, and a restart that continues from the stored poses.
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include <filesystem>
 #include <mutex>
 #include <random>
@@ -268,6 +270,35 @@ TEST(GraphOptimiser, DeletedScansAndReplacedLoopsLeaveTheGraph) {
 // A database written before the server checked poses may hold scans whose odometry pose is no rigid motion
 // (the all-zero rotation that crashed the server in a loop) and loops with a damaged transform: the optimiser
 // leaves them out and solves the rest; it never aborts.
+TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  drive(*store);
+  GraphOptimiser graph(*store, {.debounce = std::chrono::hours(1)});  // only optimiseNow solves here
+  const auto first = graph.optimiseNow("m");
+  ASSERT_FALSE(first.failed) << first.error;
+  EXPECT_EQ(first.nodes, 240);
+  std::atomic<int> events{0};
+  const auto id = graph.subscribe([&](const std::string&, const GraphEvent&) { ++events; });
+  EXPECT_EQ(store->deleteMap("m"), 240);
+  graph.mapDeleted("m");
+  EXPECT_FALSE(graph.latest("m").has_value());
+  // A solve of the deleted map (one already queued, or racing the delete) says so and publishes nothing.
+  const auto gone = graph.optimiseNow("m");
+  EXPECT_TRUE(gone.failed);
+  EXPECT_EQ(gone.error, "the map was deleted");
+  EXPECT_EQ(events.load(), 0);
+  EXPECT_FALSE(graph.latest("m").has_value());
+  // The same name again: a graph of the new scans only, not the deleted map's graph with them added.
+  drive(*store);
+  const auto fresh = graph.optimiseNow("m");
+  ASSERT_FALSE(fresh.failed) << fresh.error;
+  EXPECT_EQ(fresh.nodes, 240);
+  EXPECT_EQ(fresh.loops, first.loops);
+  EXPECT_EQ(events.load(), 1);
+  graph.unsubscribe(id);
+}
+
 TEST(GraphOptimiser, PosesThatAreNotRigidMotionsAreLeftOut) {
   TempDir dir;
   auto store = storage::MapStore::open(options(dir.file("map.db")));

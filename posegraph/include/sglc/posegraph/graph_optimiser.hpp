@@ -103,6 +103,7 @@ class GraphOptimiser {
   // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
   void continueIfUnconverged(const std::string& map, const MapGraph& graph);
   void publish(const std::string& map, const GraphEvent& event);
+  bool mapExists(const std::string& map) const;
 
   storage::MapStore& store_;
   GraphOptimiserOptions options_;
