@@ -61,8 +61,8 @@ int listenOn(const std::string& address, int& port) {
   return fd;
 }
 
-// Reads the request head (up to the blank line) within the deadline. Returns "" on timeout or a closed
-// connection; sets `too_large` when the head exceeds the limit.
+// Reads the request head (up to the blank line) within the deadline. Returns "" on timeout, what came before
+// the peer closed (no blank line then), and sets `too_large` when the head exceeds the limit.
 std::string readHead(int fd, Clock::time_point deadline, bool& too_large) {
   std::string head;
   char buffer[1024];
@@ -71,7 +71,7 @@ std::string readHead(int fd, Clock::time_point deadline, bool& too_large) {
     pollfd p{fd, POLLIN, 0};
     if (left <= 0 || poll(&p, 1, static_cast<int>(left)) <= 0) return "";
     const ssize_t n = recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) return "";
+    if (n <= 0) return head;  // closed: whatever came (an incomplete request is answered 400)
     head.append(buffer, static_cast<std::size_t>(n));
     if (head.size() > MetricsHttpServer::kMaxRequestBytes) {
       too_large = true;
@@ -155,8 +155,10 @@ void MetricsHttpServer::answer(int fd) const {
   const auto line_end = head.find("\r\n");
   const std::string line = head.substr(0, line_end);
   const auto sp1 = line.find(' '), sp2 = line.rfind(' ');
-  if (sp1 == std::string::npos || sp2 <= sp1 || line.compare(sp2 + 1, 7, "HTTP/1.") != 0)
-    return sendAll(fd, response(400, "Bad Request", "malformed request line\n", false), deadline);
+  if (head.find("\r\n\r\n") == std::string::npos || sp1 == std::string::npos || sp2 <= sp1 ||
+      line.compare(sp2 + 1, 7, "HTTP/1.") != 0)
+    return sendAll(fd, response(400, "Bad Request", "malformed request (HTTP/1.x, lines end in CRLF)\n", false),
+                   deadline);
   const std::string method = line.substr(0, sp1), target = line.substr(sp1 + 1, sp2 - sp1 - 1);
   const bool head_only = method == "HEAD";
   if (method != "GET" && !head_only)

@@ -19,8 +19,9 @@ def test_points_any_float_array_with_three_or_more_columns():
                                       (np.float64([[0, np.nan, 0]]), "non-finite"),
                                       (np.float64([[0, 0, 1e39]]), "non-finite")])
 def test_points_rejected_with_reason(bad, why):
-    with pytest.raises(ValueError, match=why):
-        packing.pack_points(bad)
+    with np.errstate(all="raise"):  # no numpy warning on the way to the error either
+        with pytest.raises(ValueError, match=why):
+            packing.pack_points(bad)
 
 
 def test_labels_any_integer_type():

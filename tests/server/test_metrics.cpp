@@ -118,10 +118,12 @@ TEST(MetricsHttp, ServesMetricsAndRefusesTheRest) {
   EXPECT_EQ(exchange(http.port(), "GET / HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 404", 0), 0u);
   EXPECT_EQ(exchange(http.port(), "POST /metrics HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 405", 0), 0u);
   EXPECT_EQ(exchange(http.port(), "garbage\r\n\r\n").rfind("HTTP/1.1 400", 0), 0u);
+  EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\n\n").rfind("HTTP/1.1 400", 0), 0u) << "LF only";
+  EXPECT_EQ(exchange(http.port(), std::string("\xff\0\x01 binary", 10)).rfind("HTTP/1.1 400", 0), 0u);
   EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\r\nX: " + std::string(20000, 'a') + "\r\n\r\n")
                 .rfind("HTTP/1.1 431", 0),
             0u);
-  // A connection that closes without a request gets nothing, and the server goes on.
+  // A connection that closes without sending anything gets nothing, and the server goes on.
   EXPECT_EQ(exchange(http.port(), ""), "");
   EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 200", 0), 0u);
 }

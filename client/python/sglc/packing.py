@@ -35,7 +35,8 @@ def as_points(points) -> np.ndarray:
         raise ValueError(f"points must have shape (N, 3) or (N, C >= 3), got {a.shape}")
     if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
         raise ValueError(f"points must be numeric, got dtype {a.dtype}")
-    out = np.ascontiguousarray(a[:, :3], dtype=np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):  # values beyond float32 become inf: reported below
+        out = np.ascontiguousarray(a[:, :3], dtype=np.float32)
     if out.size and not np.isfinite(out).all():
         bad = int(np.argwhere(~np.isfinite(out).all(axis=1))[0][0])
         raise ValueError(f"points: point {bad} has a non-finite coordinate (NaN, inf, or beyond float32's range)")
