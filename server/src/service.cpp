@@ -308,8 +308,7 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
 grpc::Status MapAdminService::DeleteMap(grpc::ServerContext* ctx, const v1::DeleteMapRequest* req,
                                         v1::DeleteResponse* resp) {
   return run(ctx, {"DeleteMap", req->map(), ""}, [&](CallLog&) {
-    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
-    wire::checkName("map", req->map());
+    requireMap(state_, ctx, req->map());
     resp->set_scans_removed(state_.store().deleteMap(req->map()));
     if (auto* graph = state_.graph()) graph->mapDeleted(req->map());
     spdlog::info("{}",

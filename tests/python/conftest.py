@@ -74,8 +74,8 @@ def _free_port():
 
 def start_server(tmp, extra=()):
     """Starts this build's sglc-server on a free loopback port with a fresh database in `tmp` (retrying when
-    the port was taken in between); returns (process, address) once it answers SERVING. `extra` may hold
-    "{port}", replaced by another free port (e.g. for --metrics-listen)."""
+    the port was taken in between); returns (process, address, extra with "{port}" replaced) once it answers
+    SERVING. "{port}" in `extra` becomes another free port (e.g. for --metrics-listen)."""
     binary = _binary("SGLC_SERVER_BIN", "sglc-server")
     if binary is None:
         pytest.skip("sglc-server is not built")
@@ -93,8 +93,7 @@ def start_server(tmp, extra=()):
             if not up:
                 time.sleep(0.05)
         if up:
-            proc.args_used = args
-            return proc, address
+            return proc, address, args
         proc.kill()
         proc.wait()
     pytest.fail(f"sglc-server did not start; see {tmp}")
@@ -103,7 +102,7 @@ def start_server(tmp, extra=()):
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     """A fresh sglc-server on a free loopback port; yields its address."""
-    proc, address = start_server(tmp_path_factory.mktemp("server"))
+    proc, address, _ = start_server(tmp_path_factory.mktemp("server"))
     yield address
     proc.terminate()
     try:

@@ -46,8 +46,8 @@ def value(samples, name, **labels):
 
 @pytest.fixture(scope="module")
 def metrics_server(tmp_path_factory):
-    proc, address = start_server(tmp_path_factory.mktemp("metrics"), ["--metrics-listen", "127.0.0.1:{port}"])
-    yield address, f"http://{proc.args_used[1]}/metrics"
+    proc, address, args = start_server(tmp_path_factory.mktemp("metrics"), ["--metrics-listen", "127.0.0.1:{port}"])
+    yield address, f"http://{args[1]}/metrics"
     proc.terminate()
     proc.wait(timeout=60)
 

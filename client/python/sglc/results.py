@@ -10,7 +10,10 @@ from typing import List, Optional
 
 import numpy as np
 
-LABEL_SOURCES = {0: "unspecified", 1: "provided", 2: "computed", 3: "completed"}
+from ._stubs import pb2
+
+LABEL_SOURCES = {pb2.LABEL_SOURCE_UNSPECIFIED: "unspecified", pb2.LABELS_PROVIDED: "provided",
+                 pb2.LABELS_COMPUTED: "computed", pb2.LABELS_COMPLETED: "completed"}
 
 
 def matrix(transform) -> np.ndarray:
