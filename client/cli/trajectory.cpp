@@ -6,7 +6,6 @@
 // loops --format json: one object per line; csv: a header and one row per loop; g2o: VERTEX_SE3:QUAT for every
 //   scan at the end of a loop (at its optimised pose) and EDGE_SE3:QUAT per loop, information in g2o's order.
 #include <fstream>
-#include <iomanip>
 #include <iostream>
 #include <memory>
 #include <set>
@@ -31,16 +30,14 @@ void closeOut(std::ofstream& out, const std::string& path) {
 }
 
 void writeKitti(const std::vector<v1::ScanPose>& poses, const std::string& path) {
-  auto out = openOut(path);
+  std::vector<Mat4d> matrices;
   auto frames = openOut(path + ".frames");
-  out << std::setprecision(9);
   frames << "# robot session seq scan_id, one line per pose of " << path << "\n";
   for (const auto& p : poses) {
-    for (int k = 0; k < 12; ++k) out << (k ? " " : "") << p.t_map_scan().m(k);
-    out << "\n";
+    matrices.push_back(sglc::wire::toMatrix(p.t_map_scan()));
     frames << p.robot() << " " << p.session() << " " << p.seq() << " " << p.scan_id() << "\n";
   }
-  closeOut(out, path);
+  sglc::writePoses(path, matrices);
   closeOut(frames, path + ".frames");
 }
 
