@@ -269,6 +269,19 @@ v1::GetStatsResponse Client::getStats(const std::string& map, const CallOptions&
   return core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::GetStats, "MapAdmin.GetStats", request, call);
 }
 
+namespace {
+
+// Page tokens only grow (they are the last id returned): a server that answers otherwise would keep a client
+// paging forever.
+void checkNextPage(const std::string& method, std::int64_t token, std::int64_t next) {
+  if (next != 0 && next <= token)
+    throw RpcError(method,
+                   grpc::Status(grpc::StatusCode::INTERNAL, "the server's next_page_token " + std::to_string(next) +
+                                                                " does not follow " + std::to_string(token)));
+}
+
+}  // namespace
+
 std::vector<v1::ScanPose> Client::getPoses(const std::string& map, const std::string& robot, const std::string& session,
                                            const CallOptions& call) const {
   std::vector<v1::ScanPose> out;
@@ -280,6 +293,7 @@ std::vector<v1::ScanPose> Client::getPoses(const std::string& map, const std::st
   do {
     auto page = core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetPoses, "PoseGraph.GetPoses", request, call);
     for (auto& p : *page.mutable_poses()) out.push_back(std::move(p));
+    checkNextPage("PoseGraph.GetPoses", request.page_token(), page.next_page_token());
     request.set_page_token(page.next_page_token());
   } while (request.page_token() != 0);
   return out;
@@ -302,6 +316,7 @@ std::vector<v1::LoopEdge> Client::getLoops(const std::string& map, const std::st
   do {
     auto page = core_->unary(core_->graph.get(), &v1::PoseGraph::Stub::GetLoops, "PoseGraph.GetLoops", request, call);
     for (auto& l : *page.mutable_loops()) out.push_back(std::move(l));
+    checkNextPage("PoseGraph.GetLoops", request.page_token(), page.next_page_token());
     request.set_page_token(page.next_page_token());
   } while (request.page_token() != 0);
   return out;

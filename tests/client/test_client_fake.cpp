@@ -150,6 +150,21 @@ class FakeMapAdmin final : public v1::MapAdmin::Service {
   std::vector<std::string> maps_;
 };
 
+// A pose-graph service whose paging is broken: every page names the same next token.
+class StuckPoseGraph final : public v1::PoseGraph::Service {
+ public:
+  grpc::Status GetPoses(grpc::ServerContext*, const v1::GetPosesRequest*, v1::GetPosesResponse* resp) override {
+    resp->add_poses()->set_scan_id(1);
+    resp->set_next_page_token(1);
+    return grpc::Status::OK;
+  }
+  grpc::Status GetLoops(grpc::ServerContext*, const v1::GetLoopsRequest*, v1::GetLoopsResponse* resp) override {
+    resp->add_loops()->set_id(7);
+    resp->set_next_page_token(7);
+    return grpc::Status::OK;
+  }
+};
+
 class FakeServer : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -157,6 +172,7 @@ class FakeServer : public ::testing::Test {
     builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port_);
     builder.RegisterService(&loop_);
     builder.RegisterService(&admin_);
+    builder.RegisterService(&graph_);
     server_ = builder.BuildAndStart();
     ASSERT_TRUE(server_ && port_ > 0) << "in-process server did not start";
   }
@@ -180,6 +196,7 @@ class FakeServer : public ::testing::Test {
 
   FakeLoopClosure loop_;
   FakeMapAdmin admin_;
+  StuckPoseGraph graph_;
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
 };
@@ -374,4 +391,18 @@ TEST_F(FakeServer, AbandonedSessionIsCancelledCleanly) {
     session.send(sc::makeKey("m", "r", "s", 1), scanOf(3));
   }                                     // destroyed without finish()
   EXPECT_EQ(c.getStats().scans(), 11);  // the channel still works
+}
+
+TEST_F(FakeServer, APageTokenThatDoesNotGrowEndsPagingWithAnError) {
+  const auto c = client();
+  for (const auto& call :
+       {std::function<void()>([&] { c.getPoses("m"); }), std::function<void()>([&] { c.getLoops("m"); })}) {
+    try {
+      call();
+      FAIL() << "paged forever or accepted a token that does not grow";
+    } catch (const sc::RpcError& e) {
+      EXPECT_EQ(e.code(), grpc::StatusCode::INTERNAL);
+      EXPECT_NE(std::string(e.what()).find("does not follow"), std::string::npos) << e.what();
+    }
+  }
 }

@@ -203,3 +203,18 @@ def test_delete_map(client, server, kitti):
     client.create_map("gone")
     r = client.ingest("gone", "q", "s", 1, *kitti("004501"), query=True)
     assert r.loops == [] and client.stats("gone").scans == 1
+
+
+def test_a_page_token_that_does_not_grow_ends_paging_with_an_error():
+    """A server whose next_page_token never advances must not keep the client paging forever."""
+    class Stuck:
+        def GetPoses(self, request, timeout=None, metadata=None):
+            r = sglc.pb2.GetPosesResponse(next_page_token=5)
+            r.poses.add(scan_id=5)
+            return r
+
+    c = sglc.Client("127.0.0.1:1")
+    c._graph = Stuck()
+    with pytest.raises(sglc.InternalError, match="does not follow"):
+        c.poses("m")
+    c.close()

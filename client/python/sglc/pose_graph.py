@@ -6,7 +6,7 @@ from typing import List, Optional
 import grpc
 
 from ._stubs import pb2
-from .errors import SglcError
+from .errors import InternalError, SglcError
 from .results import LoopEdge, MapEvent, ScanPose, SessionFrame
 
 
@@ -52,6 +52,10 @@ class PoseGraphCalls:
             yield from getattr(r, field)
             if r.next_page_token == 0:
                 return
+            if r.next_page_token <= request.page_token:  # tokens only grow: do not page forever
+                raise InternalError("PoseGraph." + method, grpc.StatusCode.INTERNAL,
+                                    f"the server's next_page_token {r.next_page_token} does not follow "
+                                    f"{request.page_token}")
             request.page_token = r.next_page_token
 
     def poses(self, map: str, robot: str = "", session: str = "", page_size: int = 1000,
