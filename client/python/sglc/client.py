@@ -37,7 +37,6 @@ class Client(AdminCalls, PoseGraphCalls):
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES):
         if chunk_bytes < packing.POINT_BYTES + packing.LABEL_BYTES:
             raise ValueError("chunk_bytes must hold at least one point (16 bytes)")
-        self.pb2 = pb2
         self.address = address
         self.timeout = timeout
         self.chunk_bytes = chunk_bytes
