@@ -59,7 +59,6 @@ class Backend {
 
 // The engine with a map database in `scratch_dir` (created; synchronous=OFF).
 std::unique_ptr<Backend> inProcessBackend(const Config& config, const std::string& scratch_dir);
-// A running server; a new map named `map` is created there (it must not exist).
 // A map on a running server, created now and deleted when the backend is destroyed unless keep_map.
 std::unique_ptr<Backend> serverBackend(const std::string& address, const std::string& token, const std::string& map,
                                        bool keep_map = false);

@@ -153,14 +153,30 @@ def main():
             assert combined["pairs"][k] == pr[k], f"all/pairs {k}"
         for k in ("rr", "rte_mean", "rre_mean", "pose_pairs"):
             assert combined["pose"][k] == ps[k], f"all/pose {k}"
-        run(["--protocol", "all", "--sim", "--frames", FRAMES, "--pairs", pairs, "--out", out], expect=1)
+
+        # 3c. "all --sim" without pair files: the pair and pose lists come from the simulator's ground truth, as
+        # sglc-sim writes them (loops: horizontal distance < 3 m, frames more than 50 apart).
+        out = os.path.join(tmp, "derived")
+        run(["--protocol", "all", "--sim", "--frames", FRAMES, "--out", out, "--no-plots"])
+        derived = json.load(open(os.path.join(out, "summary.json")))
+        for k in METRICS:
+            assert derived["sequence"][k] == s[k], f"derived/sequence {k}"
+        dp, dq = derived["pairs"], derived["pose"]
+        assert dp["pairs_file"].startswith("simulator ground truth") and dq["pairs_file"].startswith("simulator"), dp
+        expected = sum(1 for i, a in enumerate(frames) for b in frames[:i]
+                       if a - b > 50 and math.dist(pos[a], pos[b]) < 3.0)
+        assert dp["positives"] == expected and dp["negatives"] >= expected, (dp, expected)
+        print(f"derived pairs: F1max {dp['f1max']:.3f} ({dp['positives']} + {dp['negatives']} pairs); pose: RR "
+              f"{dq['rr']:.3f} over {dq['pose_pairs']} pairs, RTE median {dq['rte_median']:.3f} m")
+        assert dp["f1max"] >= 0.9 and dq["pose_pairs"] >= expected // 2 and dq["rr"] >= 0.9, (dp, dq)
 
         # 4. Bad input: a clear message and exit 1 (CLI misuse: 106 from CLI11 for a missing required flag).
         bad = os.path.join(tmp, "bad.txt")
         with open(bad, "w") as f:
             f.write("1 2 1\n3 x 0\n")
         cases = [
-            (["--protocol", "pairs", "--sim", "--out", tmp], "needs --pairs"),
+            (["--protocol", "pairs", "--data", tmp, "--out", tmp], "needs --pairs"),
+            (["--protocol", "all", "--data", tmp, "--pairs", bad, "--out", tmp], "needs --pose-pairs"),
             (["--protocol", "sequence", "--sim", "--data", tmp, "--out", tmp], "exactly one of --data"),
             (["--protocol", "pairs", "--sim", "--pairs", bad, "--out", tmp], "bad.txt:2"),
             (["--protocol", "pairs", "--sim", "--pairs", os.path.join(tmp, "none.txt"), "--out", tmp], "cannot read"),
