@@ -114,9 +114,10 @@ void GraphOptimiser::run() {
   }
 }
 
-bool GraphOptimiser::mapExists(const std::string& map) const {
+bool GraphOptimiser::sameMap(const std::string& map, std::int64_t map_id) const {
   try {
-    return store_.findMap(map).has_value();
+    const auto info = store_.findMap(map);
+    return info && (map_id == 0 || info->id == map_id);
   } catch (const std::exception&) {
     return true;  // the database failed: report the failure as usual
   }
@@ -126,13 +127,19 @@ GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise
 
 GraphEvent GraphOptimiser::optimise(const std::string& map) {
   std::lock_guard one(optimise_mutex_);
+  std::int64_t map_id = 0;
   try {
-    return solve(map);
+    const auto info = store_.findMap(map);
+    if (!info) throw storage::StorageError(storage::StorageError::Code::kNotFound, "no map '" + map + "'");
+    map_id = info->id;
+    return solve(map, map_id);
   } catch (const std::exception& e) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
     graphs_.erase(map);
     GraphEvent event = latest(map).value_or(GraphEvent{});
-    if (!mapExists(map)) {  // deleted while it was being solved: nothing to report about a map that is gone
+    // Deleted while it was being solved (and perhaps created again under its name, a new map with its own
+    // events): nothing to report about a map that is gone.
+    if (!sameMap(map, map_id)) {
       event.failed = true;
       event.error = "the map was deleted";
       return event;
@@ -154,15 +161,16 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   }
 }
 
-GraphEvent GraphOptimiser::solve(const std::string& map) {
+GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id) {
   const auto t0 = Clock::now();
   auto& slot = graphs_[map];
   {
     std::lock_guard lock(mutex_);
-    if (stale_.erase(map)) slot.reset();
+    if (stale_.erase(map) || slot.map_id != map_id) slot.graph.reset();
   }
-  if (!slot) slot = std::make_unique<MapGraph>();
-  MapGraph& g = *slot;
+  slot.map_id = map_id;
+  if (!slot.graph) slot.graph = std::make_unique<MapGraph>();
+  MapGraph& g = *slot.graph;
 
   // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above). Loops are
   // read before scans: ingest stores a scan before its loops, so every loop read here finds its scans among the
@@ -192,7 +200,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map) {
 
   const auto solution = g.solve(options_, solved_through);
   GraphEvent event;
-  event.graph_version = store_.saveOptimised(map, g.poses(), g.frames(), g.lastLoop());
+  event.graph_version = store_.saveOptimised(map, map_id, g.poses(), g.frames(), g.lastLoop());
   event.loops = static_cast<std::int64_t>(g.loopCount());
   event.nodes = static_cast<std::int64_t>(g.nodeCount());
   event.rejected_loops = solution.rejected_loops;

@@ -97,9 +97,9 @@ class SqliteMapStore final : public MapStore {
   std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan) const override {
     return pose_graph_tables::nodes(core_, map, after_scan);
   }
-  std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
+  std::int64_t saveOptimised(const std::string& map, std::int64_t map_id, const std::vector<OptimisedPose>& poses,
                              const std::vector<SessionFrame>& frames, std::int64_t through_loop) override {
-    return pose_graph_tables::saveOptimised(core_, map, poses, frames, through_loop);
+    return pose_graph_tables::saveOptimised(core_, map, map_id, poses, frames, through_loop);
   }
   std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot,
                                             const std::string& session, std::int64_t after_scan,
@@ -136,13 +136,21 @@ MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
   }
   const auto& db = core_.writer();
   sql::Transaction tx(db);
-  sql::Stmt(db, "INSERT INTO maps(name, descriptor_dim, created_at) VALUES(?, ?, ?)")
+  // Ids are never reused (as AUTOINCREMENT would, which the table was made without): a map deleted and created
+  // again under its name is a new map, so work begun for the old one (a pose-graph solve) cannot land in it.
+  sql::Stmt(db,
+            "INSERT INTO maps(id, name, descriptor_dim, created_at) VALUES(1 + max("
+            "coalesce((SELECT max(id) FROM maps), 0),"
+            "coalesce((SELECT CAST(value AS INTEGER) FROM meta WHERE key = 'last_map_id'), 0)), ?, ?, ?)")
       .bind(1, name)
       .bind(2, static_cast<std::int64_t>(dim))
       .bind(3, nowSeconds())
       .run();
   MapState state;
   state.id = sqlite3_last_insert_rowid(db.get());
+  sql::Stmt(db, "INSERT OR REPLACE INTO meta(key, value) VALUES('last_map_id', ?)")
+      .bind(1, std::to_string(state.id))
+      .run();
   state.name = name;
   state.dim = dim;
   state.index = std::make_unique<DescriptorIndex>(dim, core_.options.index);

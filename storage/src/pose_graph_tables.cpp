@@ -109,14 +109,17 @@ std::vector<GraphNodeRecord> nodes(const StoreCore& core, const std::string& map
   return out;
 }
 
-std::int64_t saveOptimised(StoreCore& core, const std::string& map, const std::vector<OptimisedPose>& poses,
-                           const std::vector<SessionFrame>& frames, std::int64_t through_loop) {
+std::int64_t saveOptimised(StoreCore& core, const std::string& map, std::int64_t expected_map_id,
+                           const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames,
+                           std::int64_t through_loop) {
   for (const auto& p : poses)
     if (!p.pose.allFinite()) throw StorageError(Code::kInvalidArgument, "optimised pose is not finite");
   for (const auto& f : frames)
     if (!f.T_map_session.allFinite()) throw StorageError(Code::kInvalidArgument, "session frame is not finite");
   std::lock_guard write(core.write_mutex);
   const auto map_id = core.mapId(map);
+  if (map_id != expected_map_id)  // a solve of a deleted map whose name was created again: not this map's poses
+    throw StorageError(Code::kNotFound, "map '" + map + "' was deleted while its pose graph was being solved");
   const auto& db = core.writer();
   sql::Transaction tx(db);
   {

@@ -13,8 +13,9 @@ namespace sglc::storage::pose_graph_tables {
 std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& loop);
 std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std::int64_t after_id, std::int64_t limit);
 std::vector<GraphNodeRecord> nodes(const StoreCore& core, const std::string& map, std::int64_t after_scan);
-std::int64_t saveOptimised(StoreCore& core, const std::string& map, const std::vector<OptimisedPose>& poses,
-                           const std::vector<SessionFrame>& frames, std::int64_t through_loop);
+std::int64_t saveOptimised(StoreCore& core, const std::string& map, std::int64_t map_id,
+                           const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames,
+                           std::int64_t through_loop);
 std::vector<OptimisedPose> optimisedPoses(const StoreCore& core, const std::string& map, const std::string& robot,
                                           const std::string& session, std::int64_t after_scan, std::int64_t limit);
 std::vector<SessionFrame> sessionFrames(const StoreCore& core, const std::string& map);

@@ -298,6 +298,24 @@ TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
   graph.unsubscribe(id);
 }
 
+// A delete and a new map of the same name can both happen between two solves, before the optimiser hears of the
+// delete (mapDeleted comes after the store's delete): the next solve sees a new map id and starts a new graph.
+TEST(GraphOptimiser, AMapCreatedAgainUnderItsNameIsANewGraphEvenBeforeTheDeleteIsAnnounced) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  GraphOptimiser graph(*store, {.debounce = std::chrono::hours(1)});
+  drive(*store);
+  const auto first = graph.optimiseNow("m");
+  ASSERT_FALSE(first.failed) << first.error;
+  EXPECT_EQ(store->deleteMap("m"), 240);
+  drive(*store);
+  const auto again = graph.optimiseNow("m");
+  ASSERT_FALSE(again.failed) << again.error;
+  EXPECT_EQ(again.nodes, 240);  // not 480: the deleted map's nodes are not kept
+  EXPECT_EQ(again.loops, first.loops);
+  EXPECT_EQ(optimised(*store).size(), 240u);
+}
+
 // A database written before the server checked poses may hold scans whose odometry pose is no rigid motion
 // (the all-zero rotation that crashed the server in a loop) and loops with a damaged transform: the optimiser
 // leaves them out and solves the rest; it never aborts.

@@ -571,6 +571,7 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
   TempDir dir;
   const auto path = dir.file("map.db");
   std::vector<Stored> all;
+  std::int64_t old_id = 0, old_session = 0;
   {
     auto store = MapStore::open(options(path));
     store->createMap("other", DescriptorLayout{}.scanDim());
@@ -579,7 +580,9 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
     all = fill(*store, 2, 2, 3);  // map "m", the newest id: 12 scans
     store->addLoop("m", {0, all[2].id, all[0].id, rigid(0.1, 1, 2), 0.8, 0.9, 0.05, 12});
     const auto nodes = store->graphNodes("m");
-    store->saveOptimised("m", {{all[0].id, rigid(0.2, 1, 0)}}, {{nodes[0].session_id, "", "", Mat4d::Identity(), true}},
+    old_id = store->findMap("m")->id;
+    old_session = nodes[0].session_id;
+    store->saveOptimised("m", old_id, {{all[0].id, rigid(0.2, 1, 0)}}, {{old_session, "", "", Mat4d::Identity(), true}},
                          1);
     store->snapshot();  // both maps get an index snapshot
     EXPECT_EQ(store->deleteMap("m"), 12);
@@ -588,9 +591,10 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
     EXPECT_FALSE(store->findMap("m"));
     for (const auto& st : all) EXPECT_EQ(store->fingerprint(st.id), nullptr);
   }
-  // The same name again, in a session that writes no snapshot on close: it gets the deleted map's id (the
-  // newest) and as many scans as it had, so the next open must rebuild its index, not load the deleted map's
-  // snapshot of the same generation.
+  // The same name again, in a session that writes no snapshot on close, with as many scans as the deleted map
+  // had: the next open must rebuild its index, not load the deleted map's snapshot. It is a new map with a new id
+  // (the deleted one was the newest, which SQLite would hand out again), also after a reopen, so that poses
+  // solved for the deleted map are refused rather than written into it.
   std::vector<Fingerprint> fresh;
   for (int i = 0; i < 12; ++i) fresh.push_back(randomFingerprint(90000 + static_cast<std::uint64_t>(i)));
   std::vector<std::int64_t> fresh_ids;
@@ -605,11 +609,25 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
     EXPECT_TRUE(store->loops("m", 0, 100).empty());
     EXPECT_TRUE(store->graphNodes("m").empty());
     EXPECT_EQ(store->graphVersion("m"), 0);
+    EXPECT_GT(store->findMap("m")->id, old_id);
     for (int i = 0; i < 12; ++i)
       fresh_ids.push_back(
           store->addScan({.map = "m", .robot = "n", .session = "s", .seq = i, .fingerprint = &fresh[i]}));
   }
   auto store = MapStore::open(options(path));  // reopened: from the database and whatever snapshots remain
+  const auto nodes = store->graphNodes("m");
+  EXPECT_EQ(errorCode([&] {
+              store->saveOptimised("m", old_id, {{fresh_ids[0], rigid(0.2, 1, 0)}},
+                                   {{nodes[0].session_id, "", "", Mat4d::Identity(), true},
+                                    {old_session, "", "", Mat4d::Identity(), true}},
+                                   1);
+            }),
+            StorageError::Code::kNotFound);
+  EXPECT_EQ(store->graphVersion("m"), 0);
+  EXPECT_TRUE(store->optimisedPoses("m", "", "", 0, 100).empty());
+  EXPECT_TRUE(store->sessionFrames("m").empty());
+  store->createMap("later", DescriptorLayout{}.scanDim());  // after a reopen, too: past every id ever given
+  EXPECT_GT(store->findMap("later")->id, store->findMap("m")->id);
   const auto hits = ids(store->search({.map = "m", .descriptor = fresh[5].descriptor, .k = 20}));
   EXPECT_EQ(hits.size(), 12u);
   EXPECT_EQ(hits.front(), fresh_ids[5]);
@@ -656,9 +674,10 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
     EXPECT_EQ(nodes[3].seq, 0);
     std::vector<SessionFrame> frames{{nodes[0].session_id, "", "", Mat4d::Identity(), true},
                                      {nodes[3].session_id, "", "", rigid(0.5, 10, -4), true}};
-    EXPECT_EQ(store->saveOptimised("m", poses, frames, id_a), 1);
+    const auto map_id = store->findMap("m")->id;
+    EXPECT_EQ(store->saveOptimised("m", map_id, poses, frames, id_a), 1);
     EXPECT_EQ(store->optimisedThroughLoop("m"), id_a);
-    EXPECT_EQ(store->saveOptimised("m", poses, frames, id_a2), 2);
+    EXPECT_EQ(store->saveOptimised("m", map_id, poses, frames, id_a2), 2);
   }
   {
     auto store = MapStore::open(options(path));  // everything survives a reopen

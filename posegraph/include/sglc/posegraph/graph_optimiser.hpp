@@ -99,11 +99,12 @@ class GraphOptimiser {
  private:
   void run();
   GraphEvent optimise(const std::string& map);
-  GraphEvent solve(const std::string& map);
+  GraphEvent solve(const std::string& map, std::int64_t map_id);
   // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
   void continueIfUnconverged(const std::string& map, const MapGraph& graph);
   void publish(const std::string& map, const GraphEvent& event);
-  bool mapExists(const std::string& map) const;
+  // Whether `map` is still the map of id `map_id` (0: any map of that name); true when the database fails.
+  bool sameMap(const std::string& map, std::int64_t map_id) const;
 
   storage::MapStore& store_;
   GraphOptimiserOptions options_;
@@ -112,10 +113,14 @@ class GraphOptimiser {
   std::condition_variable changed_;                                   // watchers
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
-  std::set<std::string> stale_;                              // maps whose in-memory graph must be rebuilt
-  std::set<std::string> forget_;                             // deleted maps whose in-memory graph the worker drops
-  std::map<std::string, std::unique_ptr<MapGraph>> graphs_;  // only the worker / optimiseNow touch these
-  std::mutex optimise_mutex_;                                // one optimisation at a time
+  std::set<std::string> stale_;   // maps whose in-memory graph must be rebuilt
+  std::set<std::string> forget_;  // deleted maps whose in-memory graph the worker drops
+  struct Slot {
+    std::int64_t map_id = 0;  // the map (MapInfo::id) the graph was built from: a name created again is a new map
+    std::unique_ptr<MapGraph> graph;
+  };
+  std::map<std::string, Slot> graphs_;  // only the worker / optimiseNow touch these
+  std::mutex optimise_mutex_;           // one optimisation at a time
   bool stop_ = false;
   std::mutex listeners_mutex_;  // held while listeners run
   std::map<std::uint64_t, Listener> listeners_;

@@ -234,10 +234,13 @@ class MapStore {
   // Scans with id > after_scan, in id order.
   virtual std::vector<GraphNodeRecord> graphNodes(const std::string& map, std::int64_t after_scan = 0) const = 0;
   // Replaces the optimised poses of the given scans and the given sessions' frames in one transaction and
-  // bumps the map's graph version, which it returns. `through_loop` is the id of the last loop the poses
-  // account for (see optimisedThroughLoop). Scans or sessions deleted meanwhile are skipped.
-  virtual std::int64_t saveOptimised(const std::string& map, const std::vector<OptimisedPose>& poses,
-                                     const std::vector<SessionFrame>& frames, std::int64_t through_loop) = 0;
+  // bumps the map's graph version, which it returns. `map_id` is the MapInfo::id the poses were computed for:
+  // when the map was deleted meanwhile, or deleted and its name created again (ids are never reused), nothing
+  // is written (kNotFound). `through_loop` is the id of the last loop the poses account for (see
+  // optimisedThroughLoop). Scans or sessions deleted meanwhile are skipped.
+  virtual std::int64_t saveOptimised(const std::string& map, std::int64_t map_id,
+                                     const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames,
+                                     std::int64_t through_loop) = 0;
   // Optimised poses in scan-id order: of one robot (and session) or the whole map (empty names), scan ids
   // > after_scan, at most `limit`.
   virtual std::vector<OptimisedPose> optimisedPoses(const std::string& map, const std::string& robot,
