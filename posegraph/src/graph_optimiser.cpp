@@ -68,6 +68,10 @@ void GraphOptimiser::mapDeleted(const std::string& map) {
     forget_.insert(map);  // the worker frees the map's graph (it owns graphs_)
   }
   wake_.notify_all();
+  GraphEvent gone;
+  gone.deleted = true;
+  std::lock_guard lock(listeners_mutex_);
+  for (const auto& [id, listener] : listeners_) listener(map, gone);
 }
 
 std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map, std::int64_t after,

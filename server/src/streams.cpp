@@ -377,6 +377,10 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
  private:
   // A new event: the newest one waits while a write is in flight; otherwise it is written from the executor.
   void deliver(const GraphEvent& e) {
+    if (e.deleted) {  // ended from the executor: never inside the graph's publish (see OnDone)
+      post([this] { finish(grpc::Status(grpc::StatusCode::NOT_FOUND, "map '" + map_ + "' was deleted")); });
+      return;
+    }
     {
       std::lock_guard lock(mutex_);
       if (finishing_ || (!e.failed && e.graph_version <= after_)) return;

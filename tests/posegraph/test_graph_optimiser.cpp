@@ -277,10 +277,11 @@ TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
   const auto first = graph.optimiseNow("m");
   ASSERT_FALSE(first.failed) << first.error;
   EXPECT_EQ(first.nodes, 240);
-  std::atomic<int> events{0};
-  const auto id = graph.subscribe([&](const std::string&, const GraphEvent&) { ++events; });
+  std::atomic<int> events{0}, deleted{0};
+  const auto id = graph.subscribe([&](const std::string&, const GraphEvent& e) { ++(e.deleted ? deleted : events); });
   EXPECT_EQ(store->deleteMap("m"), 240);
   graph.mapDeleted("m");
+  EXPECT_EQ(deleted.load(), 1);  // listeners (watch streams) hear that the map is gone
   EXPECT_FALSE(graph.latest("m").has_value());
   // A solve of the deleted map (one already queued, or racing the delete) says so and publishes nothing.
   const auto gone = graph.optimiseNow("m");
@@ -295,6 +296,7 @@ TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
   EXPECT_EQ(fresh.nodes, 240);
   EXPECT_EQ(fresh.loops, first.loops);
   EXPECT_EQ(events.load(), 1);
+  EXPECT_EQ(deleted.load(), 1);
   graph.unsubscribe(id);
 }
 

@@ -613,6 +613,16 @@ def test_pose_graph(tmp):
         assert ev.nodes == n and ev.loops < loops, (ev.nodes, ev.loops)
         left = s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses
         assert len(left) == n and all(p.optimised for p in left), len(left)
+        # Deleting the map ends its watchers with NOT_FOUND (they would otherwise wait for a map that is gone).
+        events = s.graph.WatchMap(pb.WatchMapRequest(map="m"), timeout=60)
+        assert next(events).nodes == n  # the latest event: the watch is in place
+        s.admin.DeleteMap(pb.DeleteMapRequest(map="m"))
+        try:
+            for ev in events:
+                pass
+            raise AssertionError("the watch outlived its map")
+        except grpc.RpcError as e:
+            assert e.code() == grpc.StatusCode.NOT_FOUND and "was deleted" in e.details(), (e.code(), e.details())
     finally:
         assert s.stop() == 0
 

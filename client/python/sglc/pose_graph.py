@@ -78,7 +78,7 @@ class PoseGraphCalls:
 
     def watch(self, map: str, after_version: int = 0, timeout: Optional[float] = None) -> MapWatch:
         """A MapWatch yielding each new pose-graph solution above after_version. timeout: of the whole stream
-        (default none)."""
+        (default none). Deleting the map ends the watch with NotFoundError."""
         call = self._graph.WatchMap(pb2.WatchMapRequest(map=map, after_version=after_version), timeout=timeout,
                                     metadata=self._metadata)
         return MapWatch(call)

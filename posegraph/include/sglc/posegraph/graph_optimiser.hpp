@@ -44,6 +44,9 @@ struct GraphEvent {
   // `error` says what happened. The next successful solve clears it.
   bool failed = false;
   std::string error;
+  // The map was deleted: the last event listeners hear of it (never kept as latest()). A map created again under
+  // the name is a new map with events of its own.
+  bool deleted = false;
 };
 
 struct GraphOptimiserOptions {
@@ -75,8 +78,8 @@ class GraphOptimiser {
   void loopsAdded(const std::string& map);
   // Scans (and with them loops) of `map` were deleted: rebuild its graph from the database and optimise now.
   void scansRemoved(const std::string& map);
-  // `map` was deleted: drop its pending solve and its last event; a map created later under the name starts
-  // with a graph rebuilt from the database.
+  // `map` was deleted: drop its pending solve and its last event, and tell listeners (an event with `deleted`);
+  // a map created later under the name starts with a graph rebuilt from the database.
   void mapDeleted(const std::string& map);
   // The latest event of the map once its graph version exceeds `after`, waiting at most `timeout`; nullopt on
   // timeout or when stopping.
