@@ -3,11 +3,13 @@
 // and read the medians. Data: ../shared/data/semantickitti_scans (or $SGLC_DATA/semantickitti_scans).
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
 #include <map>
 
+#include "benchmark_main.hpp"
 #include "sglc/io.hpp"
 #include "sglc/labeller.hpp"
 #include "sglc/pipeline.hpp"
@@ -142,4 +144,5 @@ BENCHMARK(BM_Refine)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_RefineKnownLoopFromBackground)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Serialize)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Deserialize)->Unit(benchmark::kMillisecond);
-BENCHMARK_MAIN();
+
+int main(int argc, char** argv) { return sglc::bench::runBenchmarks("sglc-bench-core", argc, argv); }

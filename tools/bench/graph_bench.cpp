@@ -24,6 +24,7 @@
 #include "sglc/descriptors.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
+#include "sglc/version.hpp"
 #include "sim/ground_truth.hpp"
 #include "sim/simulator.hpp"
 
@@ -76,158 +77,206 @@ Mat4d disturbed(const Mat4d& T, std::mt19937_64& rng, double sigma_m, double sig
   return T * E;
 }
 
-}  // namespace
+// Loops' relative poses are disturbed by this much, and their information matrix says so.
+constexpr double kSigmaM = 0.01, kSigmaRad = 0.02 * 3.14159265358979 / 180.0;
 
-int main(int argc, char** argv) {
-  CLI::App app{"Pose-graph optimisation benchmark (JSON on stdout)."};
+struct Options {
   std::string dir = (fs::temp_directory_path() / "sglc-bench-graph").string();
   std::string data = "../shared/data";
   int scans = 5000, events = 50;
-  app.add_option("--dir", dir, "scratch directory (removed first)");
-  app.add_option("--data", data, "shared data directory (KITTI poses)");
-  app.add_option("--scans", scans, "scans in the map")->check(CLI::Range(200, 200000));
-  app.add_option("--events", events, "loop events timed on the full map")->check(CLI::Range(1, 10000));
-  CLI11_PARSE(app, argc, argv);
-  // The optimiser logs each event; stdout carries only the JSON.
-  spdlog::set_default_logger(spdlog::stderr_logger_st("bench"));
+};
 
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  sim::Trajectory traj;
+void addOptions(CLI::App& app, Options& o) {
+  app.add_option("--dir", o.dir, "scratch directory (removed first)")->capture_default_str();
+  app.add_option("--data", o.data, "shared data directory (KITTI poses)")->capture_default_str();
+  app.add_option("--scans", o.scans, "scans in the map")->capture_default_str()->check(CLI::Range(200, 200000));
+  app.add_option("--events", o.events, "loop events timed on the full map")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10000));
+}
+
+// KITTI 00's path when the shared data has it, else the built-in route.
+sim::Trajectory loadTrajectory(const std::string& data) {
   const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
   const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib))
-    traj = sim::loadKittiTrajectory(poses, calib);
-  else
-    traj = sim::loopRoute();
-  const int n0 = std::min(scans, static_cast<int>(traj.poses.size()));
-  const int n1 = std::min(scans - n0, n0);  // r1 repeats r0's start
+  if (fs::exists(poses) && fs::exists(calib)) return sim::loadKittiTrajectory(poses, calib);
+  return sim::loopRoute();
+}
 
-  // Ground truth and drifting odometry of both robots.
-  std::vector<Mat4d> gt0(traj.poses.begin(), traj.poses.begin() + n0), gt1(traj.poses.begin(), traj.poses.begin() + n1);
-  std::vector<int> src0(static_cast<std::size_t>(n0)), src1(static_cast<std::size_t>(n1));
-  for (int i = 0; i < n0; ++i) src0[static_cast<std::size_t>(i)] = i;
-  for (int i = 0; i < n1; ++i) src1[static_cast<std::size_t>(i)] = i;
+// Ground truth and drifting odometry of both robots: r0 drives the path, r1 repeats its start (n1 frames) in
+// an unrelated odometry frame.
+struct Robots {
+  int n0 = 0, n1 = 0;
+  std::vector<Mat4d> gt0, gt1, odom0, odom1;
+  std::vector<int> src0, src1;
+};
+
+Robots makeRobots(const sim::Trajectory& traj, int scans) {
+  Robots r;
+  r.n0 = std::min(scans, static_cast<int>(traj.poses.size()));
+  r.n1 = std::min(scans - r.n0, r.n0);  // r1 repeats r0's start
+  r.gt0.assign(traj.poses.begin(), traj.poses.begin() + r.n0);
+  r.gt1.assign(traj.poses.begin(), traj.poses.begin() + r.n1);
+  r.src0.resize(static_cast<std::size_t>(r.n0));
+  r.src1.resize(static_cast<std::size_t>(r.n1));
+  for (int i = 0; i < r.n0; ++i) r.src0[static_cast<std::size_t>(i)] = i;
+  for (int i = 0; i < r.n1; ++i) r.src1[static_cast<std::size_t>(i)] = i;
   const sim::OdometryNoise noise{0.01, 0.005};
-  const auto odom0 = sim::driftingOdometry(gt0, src0, noise, 11);
-  auto odom1 = n1 > 0 ? sim::driftingOdometry(gt1, src1, noise, 12) : std::vector<Mat4d>{};
+  r.odom0 = sim::driftingOdometry(r.gt0, r.src0, noise, 11);
+  r.odom1 = r.n1 > 0 ? sim::driftingOdometry(r.gt1, r.src1, noise, 12) : std::vector<Mat4d>{};
   Mat4d unrelated = Mat4d::Identity();
   unrelated.block<3, 3>(0, 0) = Eigen::AngleAxisd(1.0, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   unrelated.block<3, 1>(0, 3) = Eigen::Vector3d(50, -20, 3);
-  for (auto& T : odom1) T = unrelated * T;
+  for (auto& T : r.odom1) T = unrelated * T;
+  return r;
+}
 
+std::unique_ptr<storage::MapStore> openStore(const std::string& dir) {
   storage::StoreOptions so;
   so.path = dir + "/graph.db";
   so.sync = storage::StoreOptions::Sync::kNormal;
   auto store = storage::MapStore::open(so);
   store->createMap("m", DescriptorLayout{}.scanDim());
-  std::mt19937_64 rng(7);
-  std::vector<std::int64_t> id0, id1;
-  const auto t_fill = Clock::now();
-  for (int i = 0; i < n0; ++i) {
-    const auto fp = placeholder(rng);
-    id0.push_back(store->addScan({.map = "m",
-                                  .robot = "r0",
-                                  .session = "s",
-                                  .seq = i,
-                                  .odometry_pose = odom0[static_cast<std::size_t>(i)],
-                                  .fingerprint = &fp}));
-  }
-  for (int i = 0; i < n1; ++i) {
-    const auto fp = placeholder(rng);
-    id1.push_back(store->addScan({.map = "m",
-                                  .robot = "r1",
-                                  .session = "s",
-                                  .seq = i,
-                                  .odometry_pose = odom1[static_cast<std::size_t>(i)],
-                                  .fingerprint = &fp}));
-  }
-  const double fill_s = std::chrono::duration<double>(Clock::now() - t_fill).count();
+  return store;
+}
 
-  // Loops grouped by the query frame that finds them, in the order they would arrive.
-  const double sigma_m = 0.01, sigma_rad = 0.02 * 3.14159265358979 / 180.0;
+// Adds the first `count` odometry poses of `robot` as scans with placeholder fingerprints; their ids.
+std::vector<std::int64_t> addScans(storage::MapStore& store, const std::string& robot,
+                                   const std::vector<Mat4d>& odometry, int count, std::mt19937_64& rng) {
+  std::vector<std::int64_t> ids;
+  for (int i = 0; i < count; ++i) {
+    const auto fp = placeholder(rng);
+    ids.push_back(store.addScan({.map = "m",
+                                 .robot = robot,
+                                 .session = "s",
+                                 .seq = i,
+                                 .odometry_pose = odometry[static_cast<std::size_t>(i)],
+                                 .fingerprint = &fp}));
+  }
+  return ids;
+}
+
+storage::LoopRecord loopRecord(std::int64_t query, std::int64_t candidate, const Mat4d& T) {
+  storage::LoopRecord r{0, query, candidate, T, 0.5, 0.9, kSigmaM, 20};
   Mat6d info = Mat6d::Zero();
-  info.diagonal() << 1 / (sigma_m * sigma_m), 1 / (sigma_m * sigma_m), 1 / (sigma_m * sigma_m),
-      1 / (sigma_rad * sigma_rad), 1 / (sigma_rad * sigma_rad), 1 / (sigma_rad * sigma_rad);
-  std::vector<std::vector<storage::LoopRecord>> groups;
-  {
-    std::map<int, std::vector<sim::LoopPose>> by_query;
-    for (const auto& l : sim::loopPoses(gt0, src0, 3.0, 100)) by_query[l.second].push_back(l);
-    for (auto& [q, ls] : by_query) {
-      std::sort(ls.begin(), ls.end(), [](const sim::LoopPose& a, const sim::LoopPose& b) {
-        return a.T.topRightCorner<3, 1>().norm() < b.T.topRightCorner<3, 1>().norm();
-      });
-      std::vector<storage::LoopRecord> g;
-      for (std::size_t k = 0; k < std::min<std::size_t>(3, ls.size()); ++k) {
-        // loopPoses' T maps `first` (earlier, the candidate) into `second` (the query).
-        storage::LoopRecord r{0,
-                              id0[static_cast<std::size_t>(q)],
-                              id0[static_cast<std::size_t>(ls[k].first)],
-                              disturbed(ls[k].T, rng, sigma_m, sigma_rad),
-                              0.5,
-                              0.9,
-                              sigma_m,
-                              20};
-        r.information = info;
-        g.push_back(r);
-      }
-      groups.push_back(std::move(g));
-    }
-    for (int i = 0; i < n1; ++i) {  // r1 frame i is where r0's frame i was
-      storage::LoopRecord r{0,
-                            id1[static_cast<std::size_t>(i)],
-                            id0[static_cast<std::size_t>(i)],
-                            disturbed(Mat4d::Identity(), rng, sigma_m, sigma_rad),
-                            0.5,
-                            0.9,
-                            sigma_m,
-                            20};
-      r.information = info;
-      groups.push_back({r});
-    }
-  }
-  const int timed = std::min<int>(events, static_cast<int>(groups.size()) - 1);
-  std::size_t loops = 0;
-  for (std::size_t k = 0; k + static_cast<std::size_t>(timed) < groups.size(); ++k)
-    for (const auto& r : groups[k]) loops += store->addLoop("m", r) > 0;
+  info.diagonal() << 1 / (kSigmaM * kSigmaM), 1 / (kSigmaM * kSigmaM), 1 / (kSigmaM * kSigmaM),
+      1 / (kSigmaRad * kSigmaRad), 1 / (kSigmaRad * kSigmaRad), 1 / (kSigmaRad * kSigmaRad);
+  r.information = info;
+  return r;
+}
 
+using LoopGroups = std::vector<std::vector<storage::LoopRecord>>;
+
+// Loops grouped by the query frame that finds them, in the order they would arrive: r0's own loops (at most
+// 3 per query frame, the nearest), then each r1 frame with the r0 frame it repeats.
+LoopGroups loopGroups(const Robots& robots, const std::vector<std::int64_t>& id0, const std::vector<std::int64_t>& id1,
+                      std::mt19937_64& rng) {
+  LoopGroups groups;
+  std::map<int, std::vector<sim::LoopPose>> by_query;
+  for (const auto& l : sim::loopPoses(robots.gt0, robots.src0, 3.0, 100)) by_query[l.second].push_back(l);
+  for (auto& [q, ls] : by_query) {
+    std::sort(ls.begin(), ls.end(), [](const sim::LoopPose& a, const sim::LoopPose& b) {
+      return a.T.topRightCorner<3, 1>().norm() < b.T.topRightCorner<3, 1>().norm();
+    });
+    std::vector<storage::LoopRecord> g;
+    for (std::size_t k = 0; k < std::min<std::size_t>(3, ls.size()); ++k)
+      // loopPoses' T maps `first` (earlier, the candidate) into `second` (the query).
+      g.push_back(loopRecord(id0[static_cast<std::size_t>(q)], id0[static_cast<std::size_t>(ls[k].first)],
+                             disturbed(ls[k].T, rng, kSigmaM, kSigmaRad)));
+    groups.push_back(std::move(g));
+  }
+  for (int i = 0; i < robots.n1; ++i)  // r1 frame i is where r0's frame i was
+    groups.push_back({loopRecord(id1[static_cast<std::size_t>(i)], id0[static_cast<std::size_t>(i)],
+                                 disturbed(Mat4d::Identity(), rng, kSigmaM, kSigmaRad))});
+  return groups;
+}
+
+struct Timings {
+  std::size_t loops = 0;  // recorded in the map
+  double cold_ms = 0;
+  std::vector<double> event_ms;
+};
+
+// All but the last `events` groups go in first and are optimised cold; then each remaining group arrives as
+// one event and the map is optimised again, warm-started.
+Timings optimise(storage::MapStore& store, const LoopGroups& groups, int events) {
+  const int timed = std::min<int>(events, static_cast<int>(groups.size()) - 1);
+  Timings t;
+  for (std::size_t k = 0; k + static_cast<std::size_t>(timed) < groups.size(); ++k)
+    for (const auto& r : groups[k]) t.loops += store.addLoop("m", r) > 0;
   posegraph::GraphOptimiserOptions o;
   o.max_seconds = 60;
   o.max_continuations = 0;  // each timed optimiseNow is the only solve of its loops
   // Its worker's start-up solve of the map may run first; optimiseNow then returns that solve's event.
-  posegraph::GraphOptimiser graph(*store, o);
-  const auto cold = graph.optimiseNow("m");
-  std::vector<double> event_ms;
+  posegraph::GraphOptimiser graph(store, o);
+  t.cold_ms = graph.optimiseNow("m").optimise_ms;
   for (std::size_t k = groups.size() - static_cast<std::size_t>(timed); k < groups.size(); ++k) {
-    for (const auto& r : groups[k]) loops += store->addLoop("m", r) > 0;
-    event_ms.push_back(graph.optimiseNow("m").optimise_ms);
+    for (const auto& r : groups[k]) t.loops += store.addLoop("m", r) > 0;
+    t.event_ms.push_back(graph.optimiseNow("m").optimise_ms);
   }
   graph.stop();
+  return t;
+}
 
-  // Sanity: the optimised trajectory against the truth.
+// Sanity: r0's optimised trajectory against the truth, next to its odometry's.
+std::pair<double, double> ateOdometryAndOptimised(const storage::MapStore& store, const Robots& robots,
+                                                  const std::vector<std::int64_t>& id0) {
   std::map<std::int64_t, Mat4d> opt;
-  for (const auto& p : store->optimisedPoses("m", "", "", 0, std::numeric_limits<std::int64_t>::max()))
+  for (const auto& p : store.optimisedPoses("m", "", "", 0, std::numeric_limits<std::int64_t>::max()))
     opt[p.scan_id] = p.pose;
   std::vector<Mat4d> est, truth, odo;
-  for (int i = 0; i < n0; ++i) {
+  for (int i = 0; i < robots.n0; ++i) {
     est.push_back(opt.at(id0[static_cast<std::size_t>(i)]));
-    truth.push_back(gt0[static_cast<std::size_t>(i)]);
-    odo.push_back(odom0[static_cast<std::size_t>(i)]);
+    truth.push_back(robots.gt0[static_cast<std::size_t>(i)]);
+    odo.push_back(robots.odom0[static_cast<std::size_t>(i)]);
   }
+  return {ate(odo, truth), ate(est, truth)};
+}
+
+// Fills the map, times the optimisations and returns the report.
+nlohmann::ordered_json run(const sim::Trajectory& traj, const Robots& robots, storage::MapStore& store, int events) {
+  std::mt19937_64 rng(7);
+  const auto t_fill = Clock::now();
+  const auto id0 = addScans(store, "r0", robots.odom0, robots.n0, rng);
+  const auto id1 = addScans(store, "r1", robots.odom1, robots.n1, rng);
+  const double fill_s = std::chrono::duration<double>(Clock::now() - t_fill).count();
+  const auto timings = optimise(store, loopGroups(robots, id0, id1, rng), events);
+  const auto [ate_odometry, ate_optimised] = ateOdometryAndOptimised(store, robots, id0);
   nlohmann::ordered_json out;
   out["trajectory"] = traj.source;
-  out["scans"] = n0 + n1;
-  out["robots"] = n1 > 0 ? 2 : 1;
-  out["loops"] = loops;
+  out["scans"] = robots.n0 + robots.n1;
+  out["robots"] = robots.n1 > 0 ? 2 : 1;
+  out["loops"] = timings.loops;
   out["fill_s"] = fill_s;
-  out["cold_optimisation_ms"] = cold.optimise_ms;
-  out["loop_event_ms"] = {{"median", percentile(event_ms, 0.5)},
-                          {"p90", percentile(event_ms, 0.9)},
-                          {"max", percentile(event_ms, 1.0)},
-                          {"n", event_ms.size()}};
-  out["ate_odometry_r0_m"] = ate(odo, truth);
-  out["ate_optimised_r0_m"] = ate(est, truth);
-  std::cout << out.dump(2) << std::endl;
-  fs::remove_all(dir);
+  out["cold_optimisation_ms"] = timings.cold_ms;
+  out["loop_event_ms"] = {{"median", percentile(timings.event_ms, 0.5)},
+                          {"p90", percentile(timings.event_ms, 0.9)},
+                          {"max", percentile(timings.event_ms, 1.0)},
+                          {"n", timings.event_ms.size()}};
+  out["ate_odometry_r0_m"] = ate_odometry;
+  out["ate_optimised_r0_m"] = ate_optimised;
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Pose-graph optimisation benchmark (JSON on stdout)."};
+  app.set_version_flag("--version", std::string("sglc-bench-graph ") + sglc::kVersion);
+  Options options;
+  addOptions(app, options);
+  CLI11_PARSE(app, argc, argv);
+  // The optimiser logs each event; stdout carries only the JSON.
+  spdlog::set_default_logger(spdlog::stderr_logger_st("bench"));
+
+  fs::remove_all(options.dir);
+  fs::create_directories(options.dir);
+  const sim::Trajectory traj = loadTrajectory(options.data);
+  const Robots robots = makeRobots(traj, options.scans);
+  {
+    const auto store = openStore(options.dir);  // closed before its directory goes (it writes an index snapshot)
+    std::cout << run(traj, robots, *store, options.events).dump(2) << std::endl;
+  }
+  fs::remove_all(options.dir);
   return 0;
 }

@@ -12,12 +12,6 @@
 //                  resident memory (VmRSS) and peak (VmHWM) from /proc (only for a server started here).
 //
 //   build/bin/sglc-bench [--server ADDR] [--frames 120] [--seconds 20] [--robots 1,4,16] [--rss-scans 10000]
-#include <arpa/inet.h>
-#include <fcntl.h>
-#include <netinet/in.h>
-#include <signal.h>
-#include <sys/socket.h>
-#include <sys/wait.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 
@@ -25,78 +19,27 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
-#include <fstream>
 #include <iostream>
-#include <mutex>
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "server_process.hpp"
 #include "sglc/client/client.hpp"
 #include "sglc/elapsed.hpp"
+#include "sglc/version.hpp"
 #include "sim/simulator.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using namespace sglc;
+using bench::ServerProcess;
 using nlohmann::ordered_json;
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
   return v[static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
-int freePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t len = sizeof(addr);
-  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 ||
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0)
-    throw std::runtime_error("cannot find a free loopback port");
-  const int port = ntohs(addr.sin_port);
-  ::close(fd);
-  return port;
-}
-
-// A server child process on a scratch database; SIGTERM (graceful shutdown) on destruction.
-class ServerProcess {
- public:
-  ServerProcess(const std::string& binary, const std::string& db, const std::string& listen, const std::string& log) {
-    pid_ = ::fork();
-    if (pid_ < 0) throw std::runtime_error("fork failed");
-    if (pid_ == 0) {
-      const int out = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      if (out >= 0) {
-        ::dup2(out, 1);
-        ::dup2(out, 2);
-      }
-      ::execl(binary.c_str(), binary.c_str(), "--db", db.c_str(), "--listen", listen.c_str(),
-              static_cast<char*>(nullptr));
-      ::_exit(127);
-    }
-  }
-  ~ServerProcess() {
-    ::kill(pid_, SIGTERM);
-    int status = 0;
-    ::waitpid(pid_, &status, 0);
-  }
-  pid_t pid() const { return pid_; }
-  bool alive() const { return ::waitpid(pid_, nullptr, WNOHANG) == 0; }
-
- private:
-  pid_t pid_ = -1;
-};
-
-// kB figures of /proc/<pid>/status ("VmRSS", "VmHWM").
-long procStatusKb(pid_t pid, const std::string& field) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  std::string line;
-  while (std::getline(in, line))
-    if (line.rfind(field + ":", 0) == 0) return std::stol(line.substr(field.size() + 1));
-  return -1;
 }
 
 struct Keyframe {
@@ -119,34 +62,45 @@ v1::IngestRequest requestFor(const Keyframe& kf, const std::string& map, const s
   return r;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"SGLC service benchmark over loopback (JSON on stdout)."};
+struct Options {
   std::string server_addr;
   std::string dir = (fs::temp_directory_path() / "sglc-bench").string();
   int frames = 120;
   double seconds = 20;
   std::vector<int> robot_counts{1, 4, 16};
   std::int64_t rss_scans = 10000;
-  app.add_option("--server", server_addr, "use this running server instead of starting one");
-  app.add_option("--dir", dir, "scratch directory for a started server (removed first)");
-  app.add_option("--frames", frames, "keyframes rendered for the map (and as many for the visitor)")
-      ->check(CLI::Range(8, 2000));
-  app.add_option("--seconds", seconds, "duration of each throughput run")->check(CLI::Range(1.0, 3600.0));
-  app.add_option("--robots", robot_counts, "concurrent robots of the throughput runs")->delimiter(',');
-  app.add_option("--rss-scans", rss_scans, "map size at which server memory is read (0: skip)");
-  CLI11_PARSE(app, argc, argv);
+};
 
-  ordered_json out;
-  // ---- Keyframes (rendered and packed before any timing).
+void addOptions(CLI::App& app, Options& o) {
+  app.add_option("--server", o.server_addr, "use this running server instead of starting one");
+  app.add_option("--dir", o.dir, "scratch directory for a started server (removed first)")->capture_default_str();
+  app.add_option("--frames", o.frames, "keyframes rendered for the map (and as many for the visitor)")
+      ->capture_default_str()
+      ->check(CLI::Range(8, 2000));
+  app.add_option("--seconds", o.seconds, "duration of each throughput run")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 3600.0));
+  app.add_option("--robots", o.robot_counts, "concurrent robots of the throughput runs")
+      ->capture_default_str()
+      ->delimiter(',');
+  app.add_option("--rss-scans", o.rss_scans, "map size at which server memory is read (0: skip)")
+      ->capture_default_str();
+}
+
+struct Keyframes {
+  std::vector<Keyframe> map;      // every 4th frame of the route
+  std::vector<Keyframe> visitor;  // the frames half-way between them
+};
+
+// Renders and packs the keyframes (before any timing): `frames` of each kind, at most what the route holds.
+Keyframes renderKeyframes(int frames, ordered_json& out) {
   const auto route = sim::loopRoute();
   sim::SimConfig sc;
   sc.threads = 2;
   const sim::Simulator simulator(route, sc);
   const int stride = 4;
   frames = std::min(frames, (simulator.numFrames() - 3) / stride);
-  std::vector<Keyframe> map_frames, visitor_frames;
+  Keyframes keyframes;
   std::size_t total_points = 0;
   const auto t_render = Clock::now();
   for (int i = 0; i < frames; ++i)
@@ -156,157 +110,191 @@ int main(int argc, char** argv) {
       kf.request = client::makeIngestRequest(client::makeKey("", "", "", 0), frame.scan);
       kf.points = frame.scan.labels.size();
       total_points += kf.points;
-      (offset == 0 ? map_frames : visitor_frames).push_back(std::move(kf));
+      (offset == 0 ? keyframes.map : keyframes.visitor).push_back(std::move(kf));
     }
   out["keyframes"] = {{"source", route.source},
                       {"rendered", 2 * frames},
                       {"mean_points", static_cast<double>(total_points) / (2.0 * frames)},
                       {"render_s", msSince(t_render) / 1000.0}};
+  return keyframes;
+}
 
-  // ---- Server.
-  std::unique_ptr<ServerProcess> server;
-  if (server_addr.empty()) {
-    fs::remove_all(dir);
-    fs::create_directories(dir);
+struct Server {
+  std::unique_ptr<ServerProcess> process;  // none with --server
+  std::string address;
+};
+
+// The --server address, or a sglc-server (next to this binary) started on a free port and a scratch database.
+Server startServer(const Options& o) {
+  Server server{nullptr, o.server_addr};
+  if (server.address.empty()) {
+    fs::remove_all(o.dir);
+    fs::create_directories(o.dir);
     const auto binary = fs::canonical("/proc/self/exe").parent_path() / "sglc-server";
-    server_addr = "127.0.0.1:" + std::to_string(freePort());
-    server = std::make_unique<ServerProcess>(binary.string(), dir + "/bench.db", server_addr, dir + "/server.log");
+    server.address = "127.0.0.1:" + std::to_string(bench::freePort());
+    server.process =
+        std::make_unique<ServerProcess>(binary.string(), o.dir + "/bench.db", server.address, o.dir + "/server.log");
   }
-  client::ConnectOptions co;
-  co.default_deadline = std::chrono::milliseconds(60'000);
-  const auto cl = client::Client::connect(server_addr, co);
+  return server;
+}
+
+// Waits until the server serves (once its database is loaded); false, said on stderr, when it does not within
+// a minute or a server started here exits.
+bool waitUntilServing(const client::Client& cl, const Server& server) {
   const auto t_up = Clock::now();
-  for (;;) {  // serving once the database is loaded
+  for (;;) {
     try {
       cl.listMaps();
-      break;
+      return true;
     } catch (const client::RpcError& e) {
-      if (e.code() != grpc::StatusCode::UNAVAILABLE || msSince(t_up) > 60'000 || (server && !server->alive())) {
-        std::cerr << "sglc-bench: server at " << server_addr << " not serving: " << e.what() << "\n";
-        return 1;
+      if (e.code() != grpc::StatusCode::UNAVAILABLE || msSince(t_up) > 60'000 ||
+          (server.process && !server.process->alive())) {
+        std::cerr << "sglc-bench: server at " << server.address << " not serving: " << e.what() << "\n";
+        return false;
       }
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
     }
   }
+}
+
+// 1. The map: robot "map" stores its keyframes, no queries.
+ordered_json benchMapIngest(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames) {
+  const auto t0 = Clock::now();
+  std::vector<double> lat;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const auto t1 = Clock::now();
+    cl.ingest(requestFor(frames[i], map, "map", "run", static_cast<std::int64_t>(i), false));
+    lat.push_back(msSince(t1));
+  }
+  return {{"scans", frames.size()},
+          {"p50_ms", percentile(lat, 0.5)},
+          {"p99_ms", percentile(lat, 0.99)},
+          {"keyframes_per_s", 1000.0 * static_cast<double>(frames.size()) / msSince(t0)}};
+}
+
+// 2. Round trip: robot "visitor" ingests and queries (top-5 verified, verified ones refined).
+ordered_json benchRoundTrip(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames) {
+  std::vector<double> lat, server_total, fingerprint, search, verify, refine, store;
+  std::size_t with_loop = 0, refined = 0;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const auto t1 = Clock::now();
+    const auto r = cl.ingest(requestFor(frames[i], map, "visitor", "run", static_cast<std::int64_t>(i), true));
+    lat.push_back(msSince(t1));
+    server_total.push_back(r.timing().total_ms());
+    fingerprint.push_back(r.timing().fingerprint_ms());
+    search.push_back(r.timing().search_ms());
+    store.push_back(r.timing().store_ms());
+    verify.push_back(r.timing().verify_ms());
+    refine.push_back(r.timing().refine_ms());
+    bool any = false;
+    for (const auto& c : r.loops()) {
+      any = any || c.verified();
+      refined += c.refined();
+    }
+    with_loop += any;
+  }
+  return {{"scans", frames.size()},
+          {"top_k", 5},
+          {"p50_ms", percentile(lat, 0.5)},
+          {"p99_ms", percentile(lat, 0.99)},
+          {"server_total_p50_ms", percentile(server_total, 0.5)},
+          {"server_fingerprint_p50_ms", percentile(fingerprint, 0.5)},
+          {"server_search_p50_ms", percentile(search, 0.5)},
+          {"server_verify_p50_ms", percentile(verify, 0.5)},
+          {"server_refine_p50_ms", percentile(refine, 0.5)},
+          {"server_store_p50_ms", percentile(store, 0.5)},
+          {"queries_with_a_loop", with_loop},
+          {"refined_loops", refined}};
+}
+
+// 3. One throughput run: `n` robots at once (one thread each, synchronous Ingest + query) for `seconds`.
+ordered_json benchThroughputRun(const client::Client& cl, const std::string& map, const Keyframes& keyframes, int n,
+                                double seconds) {
+  std::atomic<std::int64_t> done{0}, failed{0};
+  std::vector<std::vector<double>> lats(static_cast<std::size_t>(n));
+  const auto deadline = Clock::now() + std::chrono::duration<double>(seconds);
+  const auto t0 = Clock::now();
+  std::vector<std::thread> threads;
+  for (int r = 0; r < n; ++r)
+    threads.emplace_back([&, r] {
+      const std::string robot = "c" + std::to_string(n) + "-r" + std::to_string(r);
+      const auto& frames_r = (r % 2 == 0) ? keyframes.visitor : keyframes.map;
+      std::size_t i = static_cast<std::size_t>(r) * frames_r.size() / static_cast<std::size_t>(n);
+      for (std::int64_t seq = 0; Clock::now() < deadline; ++seq, i = (i + 1) % frames_r.size()) {
+        const auto t1 = Clock::now();
+        try {
+          cl.ingest(requestFor(frames_r[i], map, robot, "run", seq, true));
+          lats[static_cast<std::size_t>(r)].push_back(msSince(t1));
+          ++done;
+        } catch (const std::exception& e) {
+          if (failed++ == 0) std::cerr << "sglc-bench: " << e.what() << "\n";
+        }
+      }
+    });
+  for (auto& t : threads) t.join();
+  const double wall = msSince(t0) / 1000.0;
+  std::vector<double> all;
+  for (const auto& l : lats) all.insert(all.end(), l.begin(), l.end());
+  return {{"robots", n},
+          {"keyframes", done.load()},
+          {"failed", failed.load()},
+          {"seconds", wall},
+          {"keyframes_per_s", static_cast<double>(done) / wall},
+          {"p50_ms", percentile(all, 0.5)},
+          {"p99_ms", percentile(all, 0.99)}};
+}
+
+// 4. Server memory: 4 robots add scans (no queries) until the map holds `rss_scans`.
+ordered_json benchMemory(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames,
+                         std::int64_t rss_scans, const ServerProcess& server) {
+  std::atomic<std::int64_t> next{cl.getStats(map).scans()};
+  const auto t0 = Clock::now();
+  std::vector<std::thread> threads;
+  for (int r = 0; r < 4; ++r)
+    threads.emplace_back([&, r] {
+      const std::string robot = "fill-r" + std::to_string(r);
+      for (std::int64_t k; (k = next++) < rss_scans;)
+        cl.ingest(requestFor(frames[static_cast<std::size_t>(k) % frames.size()], map, robot, "run", k, false));
+    });
+  for (auto& t : threads) t.join();
+  const auto stats = cl.getStats(map);
+  return {{"scans", stats.scans()},
+          {"fill_s", msSince(t0) / 1000.0},
+          {"server_rss_mb", static_cast<double>(bench::procStatusKb(server.pid(), "VmRSS")) / 1024.0},
+          {"server_peak_rss_mb", static_cast<double>(bench::procStatusKb(server.pid(), "VmHWM")) / 1024.0},
+          {"db_mb", static_cast<double>(stats.db_bytes()) / 1e6}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"SGLC service benchmark over loopback (JSON on stdout)."};
+  app.set_version_flag("--version", std::string("sglc-bench ") + sglc::kVersion);
+  Options options;
+  addOptions(app, options);
+  CLI11_PARSE(app, argc, argv);
+
+  ordered_json out;
+  const Keyframes keyframes = renderKeyframes(options.frames, out);
+  Server server = startServer(options);
+  client::ConnectOptions co;
+  co.default_deadline = std::chrono::milliseconds(60'000);
+  const auto cl = client::Client::connect(server.address, co);
+  if (!waitUntilServing(cl, server)) return 1;
   const std::string map = "bench-" + std::to_string(::getpid());
   cl.ensureMap(map);
-  out["server"] = {{"address", server_addr}, {"started_here", static_cast<bool>(server)}};
-
-  std::atomic<std::int64_t> stored{0};
-  // ---- 1. The map.
-  {
-    const auto t0 = Clock::now();
-    std::vector<double> lat;
-    for (std::size_t i = 0; i < map_frames.size(); ++i) {
-      const auto t1 = Clock::now();
-      cl.ingest(requestFor(map_frames[i], map, "map", "run", static_cast<std::int64_t>(i), false));
-      lat.push_back(msSince(t1));
-      ++stored;
-    }
-    out["map_ingest_only"] = {{"scans", map_frames.size()},
-                              {"p50_ms", percentile(lat, 0.5)},
-                              {"p99_ms", percentile(lat, 0.99)},
-                              {"keyframes_per_s", 1000.0 * static_cast<double>(map_frames.size()) / msSince(t0)}};
-  }
-  // ---- 2. Round trip: ingest + query (top-5 verified, verified ones refined).
-  {
-    std::vector<double> lat, server_total, fingerprint, search, verify, refine, store;
-    std::size_t with_loop = 0, refined = 0;
-    for (std::size_t i = 0; i < visitor_frames.size(); ++i) {
-      const auto t1 = Clock::now();
-      const auto r =
-          cl.ingest(requestFor(visitor_frames[i], map, "visitor", "run", static_cast<std::int64_t>(i), true));
-      lat.push_back(msSince(t1));
-      ++stored;
-      server_total.push_back(r.timing().total_ms());
-      fingerprint.push_back(r.timing().fingerprint_ms());
-      search.push_back(r.timing().search_ms());
-      store.push_back(r.timing().store_ms());
-      verify.push_back(r.timing().verify_ms());
-      refine.push_back(r.timing().refine_ms());
-      bool any = false;
-      for (const auto& c : r.loops()) {
-        any = any || c.verified();
-        refined += c.refined();
-      }
-      with_loop += any;
-    }
-    out["round_trip"] = {{"scans", visitor_frames.size()},
-                         {"top_k", 5},
-                         {"p50_ms", percentile(lat, 0.5)},
-                         {"p99_ms", percentile(lat, 0.99)},
-                         {"server_total_p50_ms", percentile(server_total, 0.5)},
-                         {"server_fingerprint_p50_ms", percentile(fingerprint, 0.5)},
-                         {"server_search_p50_ms", percentile(search, 0.5)},
-                         {"server_verify_p50_ms", percentile(verify, 0.5)},
-                         {"server_refine_p50_ms", percentile(refine, 0.5)},
-                         {"server_store_p50_ms", percentile(store, 0.5)},
-                         {"queries_with_a_loop", with_loop},
-                         {"refined_loops", refined}};
-  }
-  // ---- 3. Throughput with concurrent robots.
+  const bool started_here = static_cast<bool>(server.process);
+  out["server"] = {{"address", server.address}, {"started_here", started_here}};
+  out["map_ingest_only"] = benchMapIngest(cl, map, keyframes.map);
+  out["round_trip"] = benchRoundTrip(cl, map, keyframes.visitor);
   ordered_json runs = ordered_json::array();
-  for (const int n : robot_counts) {
-    if (n < 1) continue;
-    std::atomic<std::int64_t> done{0}, failed{0};
-    std::vector<std::vector<double>> lats(static_cast<std::size_t>(n));
-    const auto deadline = Clock::now() + std::chrono::duration<double>(seconds);
-    const auto t0 = Clock::now();
-    std::vector<std::thread> threads;
-    for (int r = 0; r < n; ++r)
-      threads.emplace_back([&, r] {
-        const std::string robot = "c" + std::to_string(n) + "-r" + std::to_string(r);
-        const auto& frames_r = (r % 2 == 0) ? visitor_frames : map_frames;
-        std::size_t i = static_cast<std::size_t>(r) * frames_r.size() / static_cast<std::size_t>(n);
-        for (std::int64_t seq = 0; Clock::now() < deadline; ++seq, i = (i + 1) % frames_r.size()) {
-          const auto t1 = Clock::now();
-          try {
-            cl.ingest(requestFor(frames_r[i], map, robot, "run", seq, true));
-            lats[static_cast<std::size_t>(r)].push_back(msSince(t1));
-            ++done;
-          } catch (const std::exception& e) {
-            if (failed++ == 0) std::cerr << "sglc-bench: " << e.what() << "\n";
-          }
-        }
-      });
-    for (auto& t : threads) t.join();
-    const double wall = msSince(t0) / 1000.0;
-    std::vector<double> all;
-    for (const auto& l : lats) all.insert(all.end(), l.begin(), l.end());
-    stored += done;
-    runs.push_back({{"robots", n},
-                    {"keyframes", done.load()},
-                    {"failed", failed.load()},
-                    {"seconds", wall},
-                    {"keyframes_per_s", static_cast<double>(done) / wall},
-                    {"p50_ms", percentile(all, 0.5)},
-                    {"p99_ms", percentile(all, 0.99)}});
-  }
+  for (const int n : options.robot_counts)
+    if (n >= 1) runs.push_back(benchThroughputRun(cl, map, keyframes, n, options.seconds));
   out["throughput"] = runs;
-  // ---- 4. Server memory with a large map.
-  if (rss_scans > 0 && server) {
-    const auto have = cl.getStats(map).scans();
-    std::atomic<std::int64_t> next{have};
-    const auto t0 = Clock::now();
-    std::vector<std::thread> threads;
-    for (int r = 0; r < 4; ++r)
-      threads.emplace_back([&, r] {
-        const std::string robot = "fill-r" + std::to_string(r);
-        for (std::int64_t k; (k = next++) < rss_scans;)
-          cl.ingest(
-              requestFor(map_frames[static_cast<std::size_t>(k) % map_frames.size()], map, robot, "run", k, false));
-      });
-    for (auto& t : threads) t.join();
-    const auto stats = cl.getStats(map);
-    out["memory"] = {{"scans", stats.scans()},
-                     {"fill_s", msSince(t0) / 1000.0},
-                     {"server_rss_mb", static_cast<double>(procStatusKb(server->pid(), "VmRSS")) / 1024.0},
-                     {"server_peak_rss_mb", static_cast<double>(procStatusKb(server->pid(), "VmHWM")) / 1024.0},
-                     {"db_mb", static_cast<double>(stats.db_bytes()) / 1e6}};
-  }
+  if (options.rss_scans > 0 && server.process)
+    out["memory"] = benchMemory(cl, map, keyframes.map, options.rss_scans, *server.process);
   std::cout << out.dump(2) << std::endl;
-  server.reset();
-  if (!out["server"]["started_here"].get<bool>()) return 0;
-  fs::remove_all(dir);
+  server.process.reset();
+  if (started_here) fs::remove_all(options.dir);
   return 0;
 }

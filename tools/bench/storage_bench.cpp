@@ -16,6 +16,7 @@
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
+#include "sglc/version.hpp"
 #include "sim/simulator.hpp"
 
 namespace {
@@ -65,38 +66,37 @@ void fill(storage::MapStore& store, const std::string& map, const std::vector<Fi
   }
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"Map database benchmark (JSON on stdout)."};
+struct Options {
   std::string dir = (fs::temp_directory_path() / "sglc-bench-storage").string();
   int frames = 300;
   std::int64_t scans = 100000;
   bool million = false;
   std::string data = "../shared/data";
-  app.add_option("--dir", dir, "scratch directory (removed first)");
-  app.add_option("--frames", frames, "simulated frames to fingerprint");
-  app.add_option("--scans", scans, "size of the exact-search map");
-  app.add_flag("--million", million, "also build a 1M-scan map with the approximate (IVF) index");
-  app.add_option("--data", data, "shared data directory (KITTI poses)");
   std::vector<int> nprobes{storage::IndexOptions{}.ivf_nprobe};
-  app.add_option("--ivf-nprobe", nprobes, "IVF cells visited per search (a list is measured value by value)")
+};
+
+void addOptions(CLI::App& app, Options& o) {
+  app.add_option("--dir", o.dir, "scratch directory (removed first)")->capture_default_str();
+  app.add_option("--frames", o.frames, "simulated frames to fingerprint")->capture_default_str();
+  app.add_option("--scans", o.scans, "size of the exact-search map")->capture_default_str();
+  app.add_flag("--million", o.million, "also build a 1M-scan map with the approximate (IVF) index");
+  app.add_option("--data", o.data, "shared data directory (KITTI poses)")->capture_default_str();
+  app.add_option("--ivf-nprobe", o.nprobes, "IVF cells visited per search (a list is measured value by value)")
+      ->capture_default_str()
       ->delimiter(',');
-  CLI11_PARSE(app, argc, argv);
+}
 
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  nlohmann::ordered_json out;
-  const Pipeline pipeline;
-
-  // 1. Realistic fingerprints from the simulator.
-  sim::Trajectory traj;
+// KITTI 00's path when the shared data has it, else the built-in route.
+sim::Trajectory loadTrajectory(const std::string& data) {
   const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
   const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib))
-    traj = sim::loadKittiTrajectory(poses, calib);
-  else
-    traj = sim::loopRoute();
+  if (fs::exists(poses) && fs::exists(calib)) return sim::loadKittiTrajectory(poses, calib);
+  return sim::loopRoute();
+}
+
+// 1. Realistic fingerprints: of up to `frames` simulated frames spread over the trajectory.
+std::vector<Fingerprint> simulatedFingerprints(const Pipeline& pipeline, const sim::Trajectory& traj, int frames,
+                                               nlohmann::ordered_json& out) {
   sim::SimConfig sc;
   sc.threads = 2;
   const sim::Simulator simulator(traj, sc);
@@ -110,148 +110,186 @@ int main(int argc, char** argv) {
   out["source"] = traj.source;
   out["fingerprints"] = base.size();
   out["fingerprint_bytes"] = {{"median", percentile(blob_bytes, 0.5)}, {"max", percentile(blob_bytes, 1.0)}};
+  return base;
+}
 
-  std::mt19937_64 rng(42);
-  const auto dim = base.front().layout.scanDim();
-  // 2. Store with synchronous=FULL, then fetches from the cache.
-  {
-    storage::StoreOptions o;
-    o.path = dir + "/full.db";
-    o.sync = storage::StoreOptions::Sync::kFull;
-    auto store = storage::MapStore::open(o);
-    store->createMap("m", dim);
-    std::vector<double> store_ms, fetch_ms, cold_ms;
-    std::vector<std::int64_t> ids;
-    for (std::size_t i = 0; i < base.size(); ++i) {
-      storage::NewScan ns{
-          .map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
-      const auto t0 = Clock::now();
-      ids.push_back(store->addScan(ns));
-      store_ms.push_back(ms(t0));
-    }
+// 2. Store with synchronous=FULL, then fetches from the database and from the cache.
+void benchStoreAndFetch(const std::string& dir, const std::vector<Fingerprint>& base, nlohmann::ordered_json& out) {
+  storage::StoreOptions o;
+  o.path = dir + "/full.db";
+  o.sync = storage::StoreOptions::Sync::kFull;
+  auto store = storage::MapStore::open(o);
+  store->createMap("m", base.front().layout.scanDim());
+  std::vector<double> store_ms, fetch_ms, cold_ms;
+  std::vector<std::int64_t> ids;
+  for (std::size_t i = 0; i < base.size(); ++i) {
+    storage::NewScan ns{
+        .map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
+    const auto t0 = Clock::now();
+    ids.push_back(store->addScan(ns));
+    store_ms.push_back(ms(t0));
+  }
+  for (auto id : ids) {
+    const auto t0 = Clock::now();
+    store->fingerprint(id);
+    cold_ms.push_back(ms(t0));
+  }
+  for (int rep = 0; rep < 5; ++rep)
     for (auto id : ids) {
       const auto t0 = Clock::now();
       store->fingerprint(id);
-      cold_ms.push_back(ms(t0));
+      fetch_ms.push_back(ms(t0));
     }
-    for (int rep = 0; rep < 5; ++rep)
-      for (auto id : ids) {
-        const auto t0 = Clock::now();
-        store->fingerprint(id);
-        fetch_ms.push_back(ms(t0));
-      }
-    out["store_full_sync"] = summary(store_ms);
-    out["fetch_from_db"] = summary(cold_ms);
-    out["fetch_from_cache"] = summary(fetch_ms);
-    const auto st = store->stats();
-    out["bytes_per_scan_db"] = static_cast<double>(st.db_bytes) / static_cast<double>(st.scans);
+  out["store_full_sync"] = summary(store_ms);
+  out["fetch_from_db"] = summary(cold_ms);
+  out["fetch_from_cache"] = summary(fetch_ms);
+  const auto st = store->stats();
+  out["bytes_per_scan_db"] = static_cast<double>(st.db_bytes) / static_cast<double>(st.scans);
+}
+
+// Top-50 exact searches near the kept descriptors, plain and with every filter.
+void benchExactSearch(const storage::MapStore& store, const std::vector<std::vector<float>>& queries,
+                      std::int64_t scans, std::mt19937_64& rng, nlohmann::ordered_json& out) {
+  std::vector<double> search_ms, filtered_ms;
+  for (const auto& q : queries) {
+    storage::SearchRequest req{.map = "m", .descriptor = perturb(q, rng, 0.005f), .k = 50};
+    auto t1 = Clock::now();
+    store.search(req);
+    search_ms.push_back(ms(t1));
+    req.exclude_robots = {"r1"};
+    req.self_robot = "r0";
+    req.self_session = "s0";
+    req.exclude_recent = 100;
+    t1 = Clock::now();
+    store.search(req);
+    filtered_ms.push_back(ms(t1));
   }
-  // 3. A large map, exact search, reopen.
+  out["search_top50_exact"] = summary(search_ms);
+  out["search_top50_exact"]["scans"] = scans;
+  out["search_top50_exact_filtered"] = summary(filtered_ms);
+}
+
+// 3. A large map, exact search, reopen (with the index snapshot, then rebuilding the index).
+void benchLargeMap(const std::string& dir, const std::vector<Fingerprint>& base, std::int64_t scans,
+                   std::mt19937_64& rng, nlohmann::ordered_json& out) {
+  storage::StoreOptions o;
+  o.path = dir + "/big.db";
+  o.sync = storage::StoreOptions::Sync::kOff;  // bulk fill; the timed store above is FULL
+  std::vector<std::vector<float>> queries;
+  auto t0 = Clock::now();
   {
-    storage::StoreOptions o;
-    o.path = dir + "/big.db";
-    o.sync = storage::StoreOptions::Sync::kOff;  // bulk fill; the timed store above is FULL
-    std::vector<std::vector<float>> queries;
-    auto t0 = Clock::now();
-    {
-      auto store = storage::MapStore::open(o);
-      store->createMap("m", dim);
-      fill(*store, "m", base, 0, scans, rng, &queries);
-      out["fill_s"] = ms(t0) / 1000.0;
-      std::vector<double> search_ms, filtered_ms;
-      for (const auto& q : queries) {
-        storage::SearchRequest req{.map = "m", .descriptor = perturb(q, rng, 0.005f), .k = 50};
-        auto t1 = Clock::now();
-        store->search(req);
-        search_ms.push_back(ms(t1));
-        req.exclude_robots = {"r1"};
-        req.self_robot = "r0";
-        req.self_session = "s0";
-        req.exclude_recent = 100;
-        t1 = Clock::now();
-        store->search(req);
-        filtered_ms.push_back(ms(t1));
-      }
-      out["search_top50_exact"] = summary(search_ms);
-      out["search_top50_exact"]["scans"] = scans;
-      out["search_top50_exact_filtered"] = summary(filtered_ms);
-      const auto st = store->stats();
-      out["big_map"] = {{"scans", st.scans},
-                        {"db_bytes", st.db_bytes},
-                        {"bytes_per_scan", static_cast<double>(st.db_bytes) / static_cast<double>(st.scans)}};
-    }
-    t0 = Clock::now();
-    { auto store = storage::MapStore::open(o); }
-    out["open_with_snapshot_s"] = ms(t0) / 1000.0;
-    fs::remove_all(o.path + ".index");
-    t0 = Clock::now();
-    { auto store = storage::MapStore::open(o); }
-    out["open_rebuild_s"] = ms(t0) / 1000.0;
+    auto store = storage::MapStore::open(o);
+    store->createMap("m", base.front().layout.scanDim());
+    fill(*store, "m", base, 0, scans, rng, &queries);
+    out["fill_s"] = ms(t0) / 1000.0;
+    benchExactSearch(*store, queries, scans, rng, out);
+    const auto st = store->stats();
+    out["big_map"] = {{"scans", st.scans},
+                      {"db_bytes", st.db_bytes},
+                      {"bytes_per_scan", static_cast<double>(st.db_bytes) / static_cast<double>(st.scans)}};
   }
-  // 4. One million scans with the approximate index, recall against exact search.
-  if (million) {
-    std::vector<Fingerprint> small;  // nodes and descriptor only: the index is what is measured here
-    for (const auto& fp : base) {
-      Fingerprint s;
-      s.layout = fp.layout;
-      s.d_max = fp.d_max;
-      s.d_i = fp.d_i;
-      s.background_cell = fp.background_cell;
-      s.plane_voxel = fp.plane_voxel;
-      s.descriptor = fp.descriptor;
-      s.instance_offsets = {0};
-      small.push_back(std::move(s));
-    }
-    storage::StoreOptions o;
-    o.path = dir + "/million.db";
-    o.sync = storage::StoreOptions::Sync::kOff;
-    std::vector<std::vector<float>> queries;
-    auto t0 = Clock::now();
-    {
-      auto store = storage::MapStore::open(o);
-      store->createMap("m", dim);
-      fill(*store, "m", small, 0, 1000000, rng, &queries);
-    }
-    out["million_fill_s"] = ms(t0) / 1000.0;
-    queries.resize(std::min<std::size_t>(queries.size(), 200));
-    auto exact = storage::MapStore::open(o);
-    std::vector<std::vector<storage::SearchHit>> truth;
-    std::vector<storage::SearchRequest> requests;
-    std::vector<double> exact_ms;
-    for (const auto& q0 : queries) {
-      requests.push_back({.map = "m", .descriptor = perturb(q0, rng, 0.005f), .k = 50});
-      const auto t1 = Clock::now();
-      truth.push_back(exact->search(requests.back()));
-      exact_ms.push_back(ms(t1));
-    }
-    exact.reset();
-    out["million_search_top50_exact"] = summary(exact_ms);
-    nlohmann::ordered_json ivf_runs = nlohmann::ordered_json::array();
-    for (const int nprobe : nprobes) {
-      o.index.type = storage::IndexOptions::Type::kIvf;
-      o.index.ivf_nprobe = nprobe;
-      t0 = Clock::now();
-      auto approx = storage::MapStore::open(o);
-      const double open_s = ms(t0) / 1000.0;
-      std::vector<double> approx_ms;
-      std::size_t hit = 0, total = 0;
-      for (std::size_t qi = 0; qi < requests.size(); ++qi) {
-        const auto t1 = Clock::now();
-        const auto a = approx->search(requests[qi]);
-        approx_ms.push_back(ms(t1));
-        for (const auto& h : truth[qi])
-          hit += std::any_of(a.begin(), a.end(), [&](const storage::SearchHit& x) { return x.scan_id == h.scan_id; });
-        total += truth[qi].size();
-      }
-      auto run = summary(approx_ms);
-      run["nprobe"] = nprobe;
-      run["open_s"] = open_s;
-      run["recall_at_50"] = static_cast<double>(hit) / static_cast<double>(std::max<std::size_t>(total, 1));
-      ivf_runs.push_back(run);
-    }
-    out["million_search_top50_ivf"] = ivf_runs;
+  t0 = Clock::now();
+  { auto store = storage::MapStore::open(o); }
+  out["open_with_snapshot_s"] = ms(t0) / 1000.0;
+  fs::remove_all(o.path + ".index");
+  t0 = Clock::now();
+  { auto store = storage::MapStore::open(o); }
+  out["open_rebuild_s"] = ms(t0) / 1000.0;
+}
+
+// Fingerprints of `base` reduced to what the index needs: nodes and descriptor only.
+std::vector<Fingerprint> descriptorOnly(const std::vector<Fingerprint>& base) {
+  std::vector<Fingerprint> small;
+  for (const auto& fp : base) {
+    Fingerprint s;
+    s.layout = fp.layout;
+    s.d_max = fp.d_max;
+    s.d_i = fp.d_i;
+    s.background_cell = fp.background_cell;
+    s.plane_voxel = fp.plane_voxel;
+    s.descriptor = fp.descriptor;
+    s.instance_offsets = {0};
+    small.push_back(std::move(s));
   }
+  return small;
+}
+
+// One IVF search run with `nprobe` cells: latency, open time and recall@50 against the exact hits.
+nlohmann::ordered_json ivfRun(storage::StoreOptions o, int nprobe, const std::vector<storage::SearchRequest>& requests,
+                              const std::vector<std::vector<storage::SearchHit>>& truth) {
+  o.index.type = storage::IndexOptions::Type::kIvf;
+  o.index.ivf_nprobe = nprobe;
+  const auto t0 = Clock::now();
+  auto approx = storage::MapStore::open(o);
+  const double open_s = ms(t0) / 1000.0;
+  std::vector<double> approx_ms;
+  std::size_t hit = 0, total = 0;
+  for (std::size_t qi = 0; qi < requests.size(); ++qi) {
+    const auto t1 = Clock::now();
+    const auto a = approx->search(requests[qi]);
+    approx_ms.push_back(ms(t1));
+    for (const auto& h : truth[qi])
+      hit += std::any_of(a.begin(), a.end(), [&](const storage::SearchHit& x) { return x.scan_id == h.scan_id; });
+    total += truth[qi].size();
+  }
+  auto run = summary(approx_ms);
+  run["nprobe"] = nprobe;
+  run["open_s"] = open_s;
+  run["recall_at_50"] = static_cast<double>(hit) / static_cast<double>(std::max<std::size_t>(total, 1));
+  return run;
+}
+
+// 4. One million scans with the approximate index, recall against exact search.
+void benchMillion(const std::string& dir, const std::vector<Fingerprint>& base, const std::vector<int>& nprobes,
+                  std::mt19937_64& rng, nlohmann::ordered_json& out) {
+  storage::StoreOptions o;
+  o.path = dir + "/million.db";
+  o.sync = storage::StoreOptions::Sync::kOff;
+  std::vector<std::vector<float>> queries;
+  const auto t0 = Clock::now();
+  {
+    auto store = storage::MapStore::open(o);
+    store->createMap("m", base.front().layout.scanDim());
+    fill(*store, "m", descriptorOnly(base), 0, 1000000, rng, &queries);
+  }
+  out["million_fill_s"] = ms(t0) / 1000.0;
+  queries.resize(std::min<std::size_t>(queries.size(), 200));
+  auto exact = storage::MapStore::open(o);
+  std::vector<std::vector<storage::SearchHit>> truth;
+  std::vector<storage::SearchRequest> requests;
+  std::vector<double> exact_ms;
+  for (const auto& q0 : queries) {
+    requests.push_back({.map = "m", .descriptor = perturb(q0, rng, 0.005f), .k = 50});
+    const auto t1 = Clock::now();
+    truth.push_back(exact->search(requests.back()));
+    exact_ms.push_back(ms(t1));
+  }
+  exact.reset();
+  out["million_search_top50_exact"] = summary(exact_ms);
+  nlohmann::ordered_json ivf_runs = nlohmann::ordered_json::array();
+  for (const int nprobe : nprobes) ivf_runs.push_back(ivfRun(o, nprobe, requests, truth));
+  out["million_search_top50_ivf"] = ivf_runs;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Map database benchmark (JSON on stdout)."};
+  app.set_version_flag("--version", std::string("sglc-bench-storage ") + sglc::kVersion);
+  Options options;
+  addOptions(app, options);
+  CLI11_PARSE(app, argc, argv);
+
+  fs::remove_all(options.dir);
+  fs::create_directories(options.dir);
+  nlohmann::ordered_json out;
+  const Pipeline pipeline;
+  const auto base = simulatedFingerprints(pipeline, loadTrajectory(options.data), options.frames, out);
+  std::mt19937_64 rng(42);
+  benchStoreAndFetch(options.dir, base, out);
+  benchLargeMap(options.dir, base, options.scans, rng, out);
+  if (options.million) benchMillion(options.dir, base, options.nprobes, rng, out);
   std::cout << out.dump(2) << std::endl;
-  fs::remove_all(dir);
+  fs::remove_all(options.dir);
   return 0;
 }

@@ -7,13 +7,16 @@
 //   BM_RenderFrames/B/T        T frames at once, one thread each (what sglc-sim does), frames/s overall
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <thread>
 
+#include "bench/benchmark_main.hpp"
 #include "sim/simulator.hpp"
 
 namespace {
@@ -122,4 +125,4 @@ BENCHMARK_CAPTURE(BM_Render, kitti00, true)->Args({64, 1})->Args({64, 2})->Unit(
 BENCHMARK_CAPTURE(BM_RenderFrames, loop, false)->Args({64, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_RenderFrames, kitti00, true)->Args({64, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) { return sglc::bench::runBenchmarks("sglc-bench-sim", argc, argv); }

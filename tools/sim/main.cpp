@@ -8,12 +8,13 @@
 #include <thread>
 
 #include "sglc/frame_selection.hpp"
+#include "sglc/version.hpp"
 #include "sim/sequence.hpp"
 
-int main(int argc, char** argv) {
-  CLI::App app{
-      "Labelled LiDAR simulator: drives a virtual spinning LiDAR through a procedural, seeded urban world built "
-      "around a trajectory, and writes velodyne/*.bin, labels/*.label, poses.txt, calib.txt and loop ground truth."};
+namespace {
+
+// The command line. Negative (and 1e9 for the field of view) means "not given": the preset's value applies.
+struct Options {
   std::string poses_path, calib_path, route, frames_spec, out_dir;
   std::uint64_t seed = 7;
   double label_noise = 0.0, label_confusion = -1, label_bleed = -1, label_miss = -1;
@@ -22,143 +23,206 @@ int main(int argc, char** argv) {
   double fov_up = 1e9, fov_down = 1e9;
   bool noise_free = false, no_moving = false, quiet = false, overwrite = false;
   sglc::sim::PairListConfig pairs;
-  app.add_option("--poses", poses_path, "KITTI ground-truth poses file (camera frame, 12 numbers per line)");
-  app.add_option("--calib", calib_path, "calib.txt whose Tr line converts the poses to the LiDAR frame");
-  app.add_option("--route", route, "Built-in route instead of --poses")->check(CLI::IsMember({"loop"}));
-  app.add_option("--frames", frames_spec, "Frames: comma-separated a:b (b exclusive) or a:b:s ranges; default all");
-  app.add_option("--seed", seed, "World and noise seed")->capture_default_str();
-  app.add_option("--out", out_dir, "Output directory (SemanticKITTI sequence layout)");
-  app.add_option("--label-noise", label_noise, "Network-like label noise rate (0 = ground-truth labels)")
+};
+
+void addInputOptions(CLI::App& app, Options& o) {
+  app.add_option("--poses", o.poses_path, "KITTI ground-truth poses file (camera frame, 12 numbers per line)");
+  app.add_option("--calib", o.calib_path, "calib.txt whose Tr line converts the poses to the LiDAR frame");
+  app.add_option("--route", o.route, "Built-in route instead of --poses")->check(CLI::IsMember({"loop"}));
+  app.add_option("--frames", o.frames_spec, "Frames: comma-separated a:b (b exclusive) or a:b:s ranges; default all");
+  app.add_option("--seed", o.seed, "World and noise seed")->capture_default_str();
+  app.add_option("--out", o.out_dir, "Output directory (SemanticKITTI sequence layout)");
+}
+
+void addLabelNoiseOptions(CLI::App& app, Options& o) {
+  app.add_option("--label-noise", o.label_noise, "Network-like label noise rate (0 = ground-truth labels)")
+      ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-confusion", label_confusion, "Override: class confusion rate")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-bleed", label_bleed, "Override: boundary bleed probability")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-miss", label_miss, "Override: chance to miss a small object")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--beams", beams, "64 (HDL-64E-like), 32, 128, or any count spread over +2..-24.8 deg")
+  app.add_option("--label-confusion", o.label_confusion, "Override: class confusion rate")->check(CLI::Range(0.0, 1.0));
+  app.add_option("--label-bleed", o.label_bleed, "Override: boundary bleed probability")->check(CLI::Range(0.0, 1.0));
+  app.add_option("--label-miss", o.label_miss, "Override: chance to miss a small object")->check(CLI::Range(0.0, 1.0));
+}
+
+void addSensorOptions(CLI::App& app, Options& o) {
+  app.add_option("--beams", o.beams, "64 (HDL-64E-like), 32, 128, or any count spread over +2..-24.8 deg")
       ->capture_default_str();
-  app.add_option("--columns", columns, "Azimuth steps per revolution (default: the preset's)")
+  app.add_option("--columns", o.columns, "Azimuth steps per revolution (default: the preset's)")
       ->check(CLI::Range(8, 65535));
-  app.add_option("--fov-up", fov_up, "Elevation of the top beam in deg (with --fov-down: beams spread evenly)")
+  app.add_option("--fov-up", o.fov_up, "Elevation of the top beam in deg (with --fov-down: beams spread evenly)")
       ->check(CLI::Range(-90.0, 90.0));
-  app.add_option("--fov-down", fov_down, "Elevation of the bottom beam in deg")->check(CLI::Range(-90.0, 90.0));
-  app.add_option("--range", max_range, "Maximum range in m (default: the preset's)")->check(CLI::PositiveNumber);
-  app.add_option("--range-noise", range_noise, "Range noise sigma in m (default 0.02)")->check(CLI::Range(0.0, 10.0));
-  app.add_flag("--noise-free", noise_free, "No range noise, dropouts or intensity noise");
-  app.add_flag("--no-moving", no_moving, "No moving vehicles or pedestrians");
-  app.add_option("--odom-noise", odom_noise,
+  app.add_option("--fov-down", o.fov_down, "Elevation of the bottom beam in deg")->check(CLI::Range(-90.0, 90.0));
+  app.add_option("--range", o.max_range, "Maximum range in m (default: the preset's)")->check(CLI::PositiveNumber);
+  app.add_option("--range-noise", o.range_noise, "Range noise sigma in m (default 0.02)")->check(CLI::Range(0.0, 10.0));
+  app.add_flag("--noise-free", o.noise_free, "No range noise, dropouts or intensity noise");
+  app.add_flag("--no-moving", o.no_moving, "No moving vehicles or pedestrians");
+}
+
+void addOutputOptions(CLI::App& app, Options& o) {
+  app.add_option("--odom-noise", o.odom_noise,
                  "Write odometry.txt with drift: translation sigma as a fraction of distance (e.g. 0.01)")
+      ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--odom-rot-noise", odom_rot, "Odometry yaw sigma in deg per m (default 0.5 * --odom-noise)")
+  app.add_option("--odom-rot-noise", o.odom_rot, "Odometry yaw sigma in deg per m (default 0.5 * --odom-noise)")
       ->check(CLI::Range(0.0, 10.0));
-  app.add_option("--min-gap", pairs.min_gap, "Loop pairs need trajectory frames more than this apart")
+  app.add_option("--min-gap", o.pairs.min_gap, "Loop pairs need trajectory frames more than this apart")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
-  app.add_option("--neg-ratio", pairs.negatives_per_positive, "Sampled negatives per positive in pairs_distance.txt")
+  app.add_option("--neg-ratio", o.pairs.negatives_per_positive, "Sampled negatives per positive in pairs_distance.txt")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
-  app.add_option("--threads", threads, "Frames rendered in parallel (output does not depend on it)")
+  app.add_option("--threads", o.threads, "Frames rendered in parallel (output does not depend on it)")
       ->capture_default_str()
       ->check(CLI::Range(1, 256));
-  app.add_flag("--overwrite", overwrite, "Replace the scans of an earlier run in --out (refused otherwise)");
-  app.add_flag("--quiet", quiet, "No progress lines");
+  app.add_flag("--overwrite", o.overwrite, "Replace the scans of an earlier run in --out (refused otherwise)");
+  app.add_flag("--quiet", o.quiet, "No progress lines");
+}
+
+void addOptions(CLI::App& app, Options& o) {
+  addInputOptions(app, o);
+  addLabelNoiseOptions(app, o);
+  addSensorOptions(app, o);
+  addOutputOptions(app, o);
+}
+
+// What is wrong with a parsed command line, or "" when nothing is.
+std::string validate(const Options& o) {
+  if (o.poses_path.empty() == o.route.empty()) return "give either --poses (with --calib) or --route loop";
+  if (!o.poses_path.empty() && o.calib_path.empty())
+    return "--calib is required with --poses (KITTI poses are in the camera frame; its Tr converts them)";
+  if (!o.route.empty() && !o.calib_path.empty()) return "--calib applies to --poses only, not to --route";
+  if ((o.fov_up < 1e9) != (o.fov_down < 1e9)) return "--fov-up and --fov-down go together";
+  if (o.fov_up < 1e9 && o.fov_up <= o.fov_down) return "--fov-up must be above --fov-down";
+  if (o.out_dir.empty()) return "--out is required";
+  return "";
+}
+
+sglc::sim::SequenceOptions sequenceOptions(const Options& o, const sglc::sim::Trajectory& traj) {
+  sglc::sim::SequenceOptions opt;
+  opt.frames = sglc::FrameSelection::parse(o.frames_spec).frames(static_cast<int>(traj.poses.size()));
+  opt.selection_spec = o.frames_spec;
+  opt.out_dir = o.out_dir;
+  opt.threads = o.threads;
+  opt.overwrite = o.overwrite;
+  opt.pairs = o.pairs;
+  opt.pairs.seed = o.seed;
+  opt.odometry.translation = o.odom_noise;
+  opt.odometry.rotation_deg_per_m = o.odom_rot >= 0 ? o.odom_rot : 0.5 * o.odom_noise;
+  return opt;
+}
+
+sglc::sim::SensorConfig sensorConfig(const Options& o) {
+  auto sensor = sglc::sim::SensorConfig::preset(o.beams);
+  if (o.columns > 0) sensor.columns = o.columns;
+  if (o.fov_up < 1e9) {
+    const int n = sensor.beams();
+    sensor.name += "-fov";
+    for (int k = 0; k < n; ++k)
+      sensor.elevation_deg[k] =
+          n == 1 ? 0.5 * (o.fov_up + o.fov_down) : o.fov_up - k * (o.fov_up - o.fov_down) / (n - 1);
+  }
+  if (o.max_range > 0) sensor.max_range = o.max_range;
+  if (o.noise_free) sensor.noiseFree();
+  if (o.range_noise >= 0) sensor.range_noise = o.range_noise;
+  return sensor;
+}
+
+sglc::sim::SimConfig simConfig(const Options& o) {
+  sglc::sim::SimConfig cfg;
+  cfg.seed = o.seed;
+  cfg.sensor = sensorConfig(o);
+  cfg.world.moving_objects = !o.no_moving;
+  cfg.label_noise = sglc::sim::LabelNoise::fromRate(o.label_noise);
+  if (o.label_confusion >= 0) cfg.label_noise.confusion = o.label_confusion;
+  if (o.label_bleed >= 0) cfg.label_noise.bleed = o.label_bleed;
+  if (o.label_miss >= 0) cfg.label_noise.miss = o.label_miss;
+  return cfg;
+}
+
+// A progress line on stderr at most every 2 s, and one at the end.
+std::function<void(int, int, double)> progressPrinter() {
+  return [last = -10.0](int done, int total, double secs) mutable {
+    if (secs - last < 2.0 && done < total) return;
+    last = secs;
+    char buf[160];
+    const double fps = done / std::max(secs, 1e-9);
+    std::snprintf(buf, sizeof buf, "sglc-sim: %d/%d frames (%.0f%%), %.1f frames/s, %.0f s left", done, total,
+                  100.0 * done / total, fps, fps > 0 ? (total - done) / fps : 0.0);
+    std::cerr << buf << std::endl;
+  };
+}
+
+// The summary on stdout.
+void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::sim::SequenceSummary& s) {
+  rusage usage_info{};
+  getrusage(RUSAGE_SELF, &usage_info);
+  const auto& sc = sim.config().sensor;
+  const auto& noise = sim.config().label_noise;
+  const auto& ws = sim.world().stats();
+  char buf[512];
+  std::printf("sglc-sim: wrote %d frames to %s\n", s.frames, o.out_dir.c_str());
+  std::printf("  trajectory:   %s, %d frames, selection '%s'\n", sim.trajectory().source.c_str(), sim.numFrames(),
+              o.frames_spec.empty() ? "all" : o.frames_spec.c_str());
+  std::printf("  sensor:       %s, %d beams x %d columns, %.0f m; label noise: confusion %.3f, bleed %.3f, miss %.3f\n",
+              sc.name.c_str(), sc.beams(), sc.columns, sc.max_range, noise.confusion, noise.bleed, noise.miss);
+  std::snprintf(buf, sizeof buf,
+                "  world:        seed %llu, %.0f m of street, %zu primitives (%zu buildings, %zu trees, %zu poles, "
+                "%zu signs, %zu parked vehicles, %zu moving agents), %.1f MB, built in %.2f s\n",
+                static_cast<unsigned long long>(o.seed), ws.path_length_m, ws.primitives, ws.buildings, ws.trees,
+                ws.poles, ws.signs, ws.parked_vehicles, ws.moving_agents, ws.memory_bytes / 1e6, ws.build_seconds);
+  std::fputs(buf, stdout);
+  std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
+              s.bytes / 1e6);
+  std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n", s.frames_per_second,
+              o.threads, s.seconds);
+  std::printf(
+      "  ground truth: %zu loop pairs + %zu negatives in pairs_distance.txt; %zu loop_distance4 rows (%zu reverse)\n",
+      s.positives, s.negatives, s.loop_rows, s.reverse_loop_rows);
+  std::printf("  peak memory:  %.0f MB\n", usage_info.ru_maxrss / 1024.0);
+}
+
+// Builds the world, renders and writes the sequence, prints the summary.
+void run(const Options& o) {
+  sglc::sim::Trajectory traj =
+      o.route.empty() ? sglc::sim::loadKittiTrajectory(o.poses_path, o.calib_path) : sglc::sim::loopRoute();
+  sglc::sim::SequenceOptions opt = sequenceOptions(o, traj);
+  const sglc::sim::SimConfig cfg = simConfig(o);
+  if (!o.quiet)
+    std::cerr << "sglc-sim: building the world around " << traj.poses.size() << " poses (" << traj.source << ")"
+              << std::endl;
+  const sglc::sim::Simulator sim(std::move(traj), cfg);
+  if (!o.quiet)
+    std::cerr << "sglc-sim: world ready in " << sim.world().stats().build_seconds << " s; rendering "
+              << opt.frames.size() << " frames with " << o.threads << " threads" << std::endl;
+  if (!o.quiet) opt.progress = progressPrinter();
+  const auto summary = sglc::sim::writeSequence(sim, opt);
+  printReport(o, sim, summary);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "Labelled LiDAR simulator: drives a virtual spinning LiDAR through a procedural, seeded urban world built "
+      "around a trajectory, and writes velodyne/*.bin, labels/*.label, poses.txt, calib.txt and loop ground truth."};
+  app.set_version_flag("--version", std::string("sglc-sim ") + sglc::kVersion);
+  Options options;
+  addOptions(app, options);
   try {
     app.parse(argc, argv);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::cerr << "sglc-sim: error: " << e.what() << " (see --help)" << std::endl;
     return 2;
   }
-  auto usage = [](const std::string& msg) {
-    std::cerr << "sglc-sim: error: " << msg << " (see --help)" << std::endl;
+  if (const std::string problem = validate(options); !problem.empty()) {
+    std::cerr << "sglc-sim: error: " << problem << " (see --help)" << std::endl;
     return 2;
-  };
-  if (poses_path.empty() == route.empty()) return usage("give either --poses (with --calib) or --route loop");
-  if (!poses_path.empty() && calib_path.empty())
-    return usage("--calib is required with --poses (KITTI poses are in the camera frame; its Tr converts them)");
-  if (!route.empty() && !calib_path.empty()) return usage("--calib applies to --poses only, not to --route");
-  if ((fov_up < 1e9) != (fov_down < 1e9)) return usage("--fov-up and --fov-down go together");
-  if (fov_up < 1e9 && fov_up <= fov_down) return usage("--fov-up must be above --fov-down");
-  if (out_dir.empty()) return usage("--out is required");
-
+  }
   try {
-    sglc::sim::Trajectory traj =
-        route.empty() ? sglc::sim::loadKittiTrajectory(poses_path, calib_path) : sglc::sim::loopRoute();
-    sglc::sim::SequenceOptions opt;
-    opt.frames = sglc::FrameSelection::parse(frames_spec).frames(static_cast<int>(traj.poses.size()));
-    opt.selection_spec = frames_spec;
-    opt.out_dir = out_dir;
-    opt.threads = threads;
-    opt.overwrite = overwrite;
-    pairs.seed = seed;
-    opt.pairs = pairs;
-    opt.odometry.translation = odom_noise;
-    opt.odometry.rotation_deg_per_m = odom_rot >= 0 ? odom_rot : 0.5 * odom_noise;
-
-    sglc::sim::SimConfig cfg;
-    cfg.seed = seed;
-    cfg.sensor = sglc::sim::SensorConfig::preset(beams);
-    if (columns > 0) cfg.sensor.columns = columns;
-    if (fov_up < 1e9) {
-      const int n = cfg.sensor.beams();
-      cfg.sensor.name += "-fov";
-      for (int k = 0; k < n; ++k)
-        cfg.sensor.elevation_deg[k] = n == 1 ? 0.5 * (fov_up + fov_down) : fov_up - k * (fov_up - fov_down) / (n - 1);
-    }
-    if (max_range > 0) cfg.sensor.max_range = max_range;
-    if (noise_free) cfg.sensor.noiseFree();
-    if (range_noise >= 0) cfg.sensor.range_noise = range_noise;
-    cfg.world.moving_objects = !no_moving;
-    cfg.label_noise = sglc::sim::LabelNoise::fromRate(label_noise);
-    if (label_confusion >= 0) cfg.label_noise.confusion = label_confusion;
-    if (label_bleed >= 0) cfg.label_noise.bleed = label_bleed;
-    if (label_miss >= 0) cfg.label_noise.miss = label_miss;
-
-    if (!quiet)
-      std::cerr << "sglc-sim: building the world around " << traj.poses.size() << " poses (" << traj.source << ")"
-                << std::endl;
-    const sglc::sim::Simulator sim(std::move(traj), cfg);
-    const auto& ws = sim.world().stats();
-    if (!quiet)
-      std::cerr << "sglc-sim: world ready in " << ws.build_seconds << " s; rendering " << opt.frames.size()
-                << " frames with " << threads << " threads" << std::endl;
-    double last = -10.0;
-    if (!quiet)
-      opt.progress = [&](int done, int total, double secs) {
-        if (secs - last < 2.0 && done < total) return;
-        last = secs;
-        char buf[160];
-        const double fps = done / std::max(secs, 1e-9);
-        std::snprintf(buf, sizeof buf, "sglc-sim: %d/%d frames (%.0f%%), %.1f frames/s, %.0f s left", done, total,
-                      100.0 * done / total, fps, fps > 0 ? (total - done) / fps : 0.0);
-        std::cerr << buf << std::endl;
-      };
-    const auto s = sglc::sim::writeSequence(sim, opt);
-
-    rusage usage_info{};
-    getrusage(RUSAGE_SELF, &usage_info);
-    const auto& sc = sim.config().sensor;
-    char buf[512];
-    std::printf("sglc-sim: wrote %d frames to %s\n", s.frames, out_dir.c_str());
-    std::printf("  trajectory:   %s, %d frames, selection '%s'\n", sim.trajectory().source.c_str(), sim.numFrames(),
-                frames_spec.empty() ? "all" : frames_spec.c_str());
-    std::printf(
-        "  sensor:       %s, %d beams x %d columns, %.0f m; label noise: confusion %.3f, bleed %.3f, miss %.3f\n",
-        sc.name.c_str(), sc.beams(), sc.columns, sc.max_range, cfg.label_noise.confusion, cfg.label_noise.bleed,
-        cfg.label_noise.miss);
-    std::snprintf(buf, sizeof buf,
-                  "  world:        seed %llu, %.0f m of street, %zu primitives (%zu buildings, %zu trees, %zu poles, "
-                  "%zu signs, %zu parked vehicles, %zu moving agents), %.1f MB, built in %.2f s\n",
-                  static_cast<unsigned long long>(seed), ws.path_length_m, ws.primitives, ws.buildings, ws.trees,
-                  ws.poles, ws.signs, ws.parked_vehicles, ws.moving_agents, ws.memory_bytes / 1e6, ws.build_seconds);
-    std::fputs(buf, stdout);
-    std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
-                s.bytes / 1e6);
-    std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n",
-                s.frames_per_second, threads, s.seconds);
-    std::printf(
-        "  ground truth: %zu loop pairs + %zu negatives in pairs_distance.txt; %zu loop_distance4 rows (%zu reverse)\n",
-        s.positives, s.negatives, s.loop_rows, s.reverse_loop_rows);
-    std::printf("  peak memory:  %.0f MB\n", usage_info.ru_maxrss / 1024.0);
+    run(options);
     return 0;
   } catch (const std::exception& e) {
     std::cerr << "sglc-sim: error: " << e.what() << std::endl;
