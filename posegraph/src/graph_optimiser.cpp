@@ -59,9 +59,10 @@ void GraphOptimiser::scansRemoved(const std::string& map) {
   wake_.notify_all();
 }
 
-void GraphOptimiser::mapDeleted(const std::string& map) {
+void GraphOptimiser::mapDeleted(const std::string& map, std::int64_t map_id) {
   {
     std::lock_guard lock(mutex_);
+    ++deletions_[map];  // solves begun before now publish nothing
     due_.erase(map);
     latest_.erase(map);
     stale_.insert(map);
@@ -70,6 +71,7 @@ void GraphOptimiser::mapDeleted(const std::string& map) {
   wake_.notify_all();
   GraphEvent gone;
   gone.deleted = true;
+  gone.map_id = map_id;
   std::lock_guard lock(listeners_mutex_);
   for (const auto& [id, listener] : listeners_) listener(map, gone);
 }
@@ -131,12 +133,22 @@ GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise
 
 GraphEvent GraphOptimiser::optimise(const std::string& map) {
   std::lock_guard one(optimise_mutex_);
+  std::uint64_t gen = 0;
+  {
+    std::lock_guard lock(mutex_);
+    gen = generation(map);
+  }
   std::int64_t map_id = 0;
   try {
     const auto info = store_.findMap(map);
-    if (!info) throw storage::StorageError(storage::StorageError::Code::kNotFound, "no map '" + map + "'");
+    if (!info) {  // deleted before the solve began: nothing to report about a map that is gone
+      GraphEvent event;
+      event.failed = true;
+      event.error = "the map was deleted";
+      return event;
+    }
     map_id = info->id;
-    return solve(map, map_id);
+    return solve(map, map_id, gen);
   } catch (const std::exception& e) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
     graphs_.erase(map);
@@ -156,16 +168,17 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
     event.failed = true;
     event.converged = false;
     event.error = e.what();
+    event.map_id = map_id;
     spdlog::error(
         "{}",
         logging::logLine(
             {{"event", "optimise_failed"}, {"map", map}, {"version", event.graph_version}, {"error", event.error}}));
-    publish(map, event);
+    publish(map, event, gen);
     return event;
   }
 }
 
-GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id) {
+GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, std::uint64_t generation) {
   const auto t0 = Clock::now();
   auto& slot = graphs_[map];
   {
@@ -210,8 +223,9 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id) {
   event.rejected_loops = solution.rejected_loops;
   event.optimise_ms = msSince(t0);
   event.converged = solution.converged;
+  event.map_id = map_id;
   g.countSolve(changed);  // new rows: a new problem
-  continueIfUnconverged(map, g);
+  continueIfUnconverged(map, g, generation);
   spdlog::info("{}", logging::logLine({{"event", "optimised"},
                                        {"map", map},
                                        {"version", event.graph_version},
@@ -221,28 +235,37 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id) {
                                        {"iterations", solution.iterations},
                                        {"converged", event.converged},
                                        {"ms", std::round(event.optimise_ms * 10) / 10}}));
-  publish(map, event);
+  publish(map, event, generation);
   return event;
 }
 
 // Stopped at a bound: carry on from here soon (the worker; optimiseNow callers see converged = false), but not
 // forever on a graph that never meets Ceres' tolerances.
-void GraphOptimiser::continueIfUnconverged(const std::string& map, const MapGraph& g) {
+void GraphOptimiser::continueIfUnconverged(const std::string& map, const MapGraph& g, std::uint64_t generation) {
   if (g.converged() || g.continuations() >= options_.max_continuations) return;
   {
     std::lock_guard lock(mutex_);
+    if (this->generation(map) != generation) return;  // deleted meanwhile
     if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
   }
   wake_.notify_all();
 }
 
-void GraphOptimiser::publish(const std::string& map, const GraphEvent& event) {
+std::uint64_t GraphOptimiser::generation(const std::string& map) const {
+  const auto it = deletions_.find(map);
+  return it == deletions_.end() ? 0 : it->second;
+}
+
+// Listeners hear events in the order they happen: the check against a deletion and the calls happen under
+// listeners_mutex_, which mapDeleted takes (after counting the deletion) to announce it.
+void GraphOptimiser::publish(const std::string& map, const GraphEvent& event, std::uint64_t generation) {
+  std::lock_guard order(listeners_mutex_);
   {
     std::lock_guard lock(mutex_);
+    if (this->generation(map) != generation) return;  // the map was deleted since the solve began
     latest_[map] = event;
   }
   changed_.notify_all();
-  std::lock_guard lock(listeners_mutex_);
   for (const auto& [id, listener] : listeners_) listener(map, event);
 }
 

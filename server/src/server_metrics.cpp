@@ -163,6 +163,7 @@ void observeStages(Metrics& m, const v1::Timing& t) {
 }
 
 void observeSolve(Metrics& m, const posegraph::GraphEvent& event) {
+  if (event.deleted) return;  // a deletion, not a solve
   const char* result = event.failed ? "failed" : event.converged ? "converged" : "bounded";
   m.observe(kSolveSeconds, {{"result", result}}, event.optimise_ms / 1000);
 }

@@ -334,6 +334,7 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
       after_ = req.after_version();
       log_.map = map_;
       requireMap(state_, ctx_, map_);
+      map_id_ = mapId();
       graph_ = state_.graph();
       if (!graph_ || graph_->stopping())
         throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is shutting down");
@@ -345,6 +346,17 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
     subscription_ = graph_->subscribe([this](const std::string& map, const GraphEvent& e) {
       if (map == map_) deliver(e);
     });
+    // Deleted between the check above and the subscription: no deletion event will come.
+    std::int64_t now = map_id_;
+    try {
+      now = mapId();
+    } catch (const std::exception&) {
+      // the database failed: watch on (a deletion still ends the watch)
+    }
+    if (now != map_id_) {
+      post([this] { finish(deletedStatus()); });
+      return;
+    }
     if (const auto e = graph_->latest(map_)) deliver(*e);
   }
 
@@ -378,8 +390,8 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
   // A new event: the newest one waits while a write is in flight; otherwise it is written from the executor.
   void deliver(const GraphEvent& e) {
     if (e.deleted) {  // ended from the executor: never inside the graph's publish (see OnDone)
-      post([this] { finish(grpc::Status(grpc::StatusCode::NOT_FOUND, "map '" + map_ + "' was deleted")); });
-      return;
+      if (e.map_id == map_id_) post([this] { finish(deletedStatus()); });
+      return;  // another map of the name (deleted before this one was made)
     }
     {
       std::lock_guard lock(mutex_);
@@ -408,7 +420,17 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
     return true;
   }
 
+  // The id of the map named map_ now (0: none). Throws when the database fails.
+  std::int64_t mapId() const {
+    const auto info = state_.store().findMap(map_);
+    return info ? info->id : 0;
+  }
+  grpc::Status deletedStatus() const {
+    return grpc::Status(grpc::StatusCode::NOT_FOUND, "map '" + map_ + "' was deleted");
+  }
+
   std::string map_;
+  std::int64_t map_id_ = 0;
   std::int64_t after_ = 0;
   GraphOptimiser* graph_ = nullptr;
   std::uint64_t subscription_ = 0;

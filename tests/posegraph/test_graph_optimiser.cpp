@@ -279,8 +279,9 @@ TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
   EXPECT_EQ(first.nodes, 240);
   std::atomic<int> events{0}, deleted{0};
   const auto id = graph.subscribe([&](const std::string&, const GraphEvent& e) { ++(e.deleted ? deleted : events); });
+  const auto map_id = store->findMap("m")->id;
   EXPECT_EQ(store->deleteMap("m"), 240);
-  graph.mapDeleted("m");
+  graph.mapDeleted("m", map_id);
   EXPECT_EQ(deleted.load(), 1);  // listeners (watch streams) hear that the map is gone
   EXPECT_FALSE(graph.latest("m").has_value());
   // A solve of the deleted map (one already queued, or racing the delete) says so and publishes nothing.

@@ -61,6 +61,10 @@ def scrape(url):
 def test_scrape_counts_calls_stages_and_sizes(metrics_server, kitti):
     address, url = metrics_server
     with sglc.Client(address, timeout=120) as c:
+        c.create_map("gone")
+        c.delete_map("gone")  # a deletion is no pose-graph solve
+        before, _ = scrape(url)
+        assert not any(v for (n, _), v in before.items() if n == "sglc_pose_graph_solve_seconds_count"), before
         c.create_map("m")
         c.ingest("m", "a", "s", 52, *kitti("000052"), odometry_pose=[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
         r = c.ingest("m", "b", "s", 4501, *kitti("004501"), query=True, scope="other",

@@ -47,6 +47,7 @@ struct GraphEvent {
   // The map was deleted: the last event listeners hear of it (never kept as latest()). A map created again under
   // the name is a new map with events of its own.
   bool deleted = false;
+  std::int64_t map_id = 0;  // the map (storage::MapInfo::id) the event is about
 };
 
 struct GraphOptimiserOptions {
@@ -78,9 +79,10 @@ class GraphOptimiser {
   void loopsAdded(const std::string& map);
   // Scans (and with them loops) of `map` were deleted: rebuild its graph from the database and optimise now.
   void scansRemoved(const std::string& map);
-  // `map` was deleted: drop its pending solve and its last event, and tell listeners (an event with `deleted`);
-  // a map created later under the name starts with a graph rebuilt from the database.
-  void mapDeleted(const std::string& map);
+  // `map` (of id map_id) was deleted: drop its pending solve and its last event, and tell listeners (an event
+  // with `deleted`). A solve of it still running publishes nothing; a map created later under the name starts
+  // with a graph rebuilt from the database.
+  void mapDeleted(const std::string& map, std::int64_t map_id);
   // The latest event of the map once its graph version exceeds `after`, waiting at most `timeout`; nullopt on
   // timeout or when stopping.
   std::optional<GraphEvent> waitForVersion(const std::string& map, std::int64_t after,
@@ -90,8 +92,9 @@ class GraphOptimiser {
   GraphEvent optimiseNow(const std::string& map);
   // The map's last event (failed or not), if any.
   std::optional<GraphEvent> latest(const std::string& map) const;
-  // Listeners get every new event (a new graph version, or a failure) of every map, on the thread that made
-  // it. They must not block. After unsubscribe() returns, the listener is never called again.
+  // Listeners get every new event (a new graph version, a failure, or the map's deletion) of every map, on the
+  // thread that made it, in order. They must not block. After unsubscribe() returns, the listener is never called
+  // again.
   using Listener = std::function<void(const std::string& map, const GraphEvent& event)>;
   std::uint64_t subscribe(Listener listener);
   void unsubscribe(std::uint64_t id);
@@ -102,10 +105,12 @@ class GraphOptimiser {
  private:
   void run();
   GraphEvent optimise(const std::string& map);
-  GraphEvent solve(const std::string& map, std::int64_t map_id);
+  GraphEvent solve(const std::string& map, std::int64_t map_id, std::uint64_t generation);
   // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
-  void continueIfUnconverged(const std::string& map, const MapGraph& graph);
-  void publish(const std::string& map, const GraphEvent& event);
+  void continueIfUnconverged(const std::string& map, const MapGraph& graph, std::uint64_t generation);
+  // Publishes the event of a solve begun at `generation` of the name, unless the map was deleted since.
+  void publish(const std::string& map, const GraphEvent& event, std::uint64_t generation);
+  std::uint64_t generation(const std::string& map) const;  // mutex_ held
   // Whether `map` is still the map of id `map_id` (0: any map of that name); true when the database fails.
   bool sameMap(const std::string& map, std::int64_t map_id) const;
 
@@ -116,8 +121,9 @@ class GraphOptimiser {
   std::condition_variable changed_;                                   // watchers
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
-  std::set<std::string> stale_;   // maps whose in-memory graph must be rebuilt
-  std::set<std::string> forget_;  // deleted maps whose in-memory graph the worker drops
+  std::set<std::string> stale_;                     // maps whose in-memory graph must be rebuilt
+  std::set<std::string> forget_;                    // deleted maps whose in-memory graph the worker drops
+  std::map<std::string, std::uint64_t> deletions_;  // per name: how often a map of it was deleted
   struct Slot {
     std::int64_t map_id = 0;  // the map (MapInfo::id) the graph was built from: a name created again is a new map
     std::unique_ptr<MapGraph> graph;
