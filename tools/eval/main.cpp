@@ -121,7 +121,9 @@ void validate(const Options& o) {
     throw InputError("--protocol all needs --pose-pairs FILE (with --sim, the simulator's truth is used)");
   if (o.query.exclude_recent < 0 || o.query.candidates < 1 || o.query.candidates > 100)
     throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
-  if (!(o.negative_m >= o.positive_m)) throw InputError("--negative-m must be >= --positive-m");
+  const bool derived_pairs = o.sim && o.pairs.empty() && (o.protocol == "pairs" || o.protocol == "all");
+  if ((o.protocol == "sequence" || o.protocol == "all" || derived_pairs) && !(o.negative_m >= o.positive_m))
+    throw InputError("--negative-m must be >= --positive-m");
 }
 
 std::unique_ptr<FrameSource> makeSource(const Options& o) {
