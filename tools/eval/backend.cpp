@@ -69,6 +69,24 @@ class InProcess final : public Backend {
     return out;
   }
 
+  std::vector<Candidate> query(const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
+    const auto t0 = Clock::now();
+    const auto fp = pipeline_.fingerprint(scan);
+    t->fingerprint = msSince(t0);
+    // What the server does with a QueryRequest carrying a scan and no robot (Remote::query).
+    closing::QueryOptions o;
+    o.top_k = static_cast<std::uint32_t>(q.candidates);
+    o.candidates = static_cast<std::uint32_t>(q.candidates);
+    o.include_rejected = true;
+    o.refine = q.refine;
+    o.exclude_recent = 0;
+    closing::QueryTiming qt;
+    const auto found = finder_.find(fp, {kMap, "", "", 0, std::nullopt, 0}, o, {}, &qt);
+    times(qt, t);
+    t->total = msSince(t0);
+    return convert(found);
+  }
+
   std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {
     const auto t0 = Clock::now();
     const auto fp = store_->fingerprint(idOf(query));
@@ -160,6 +178,16 @@ class Remote final : public Backend {
     record(frame, r.scan_id());
     times(r.timing(), t);
     return convert(r.loops());
+  }
+
+  std::vector<Candidate> query(const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
+    auto o = options(q.refine ? Refine::verified : Refine::none, q.candidates);
+    o.set_scope(v1::SCOPE_WHOLE_MAP);
+    o.set_exclude_recent(0);
+    o.set_candidates(static_cast<std::uint32_t>(q.candidates));
+    const auto r = client_.queryScan(map_, scan, o);
+    times(r.timing(), t);
+    return convert(r.candidates());
   }
 
   std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {

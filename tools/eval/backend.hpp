@@ -51,6 +51,8 @@ class Backend {
   // the service orders them: verified first, then by score (descending), then by storage order.
   virtual std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& query,
                                               StageTimes* times) = 0;
+  // Looks for the places of a scan that is not stored (relocalization: no exclusions), refining verified ones.
+  virtual std::vector<Candidate> query(const LabelledScan& scan, const LoopQuery& query, StageTimes* times) = 0;
   // Verifies stored frame `query` against each stored frame of `candidates`, refining as asked; returns one
   // Candidate per requested frame, in the service's order.
   virtual std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine,

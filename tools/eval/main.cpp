@@ -42,7 +42,8 @@ constexpr int kSimPairMinGap = 50;
 constexpr double kSimPoseMaxM = 4.0;
 
 struct Options {
-  std::string protocol, data, poses, calib, frames, pairs, pose_pairs, server, token, out, config_path, gt_list, title;
+  std::string protocol, data, map_data, poses, calib, frames, pairs, pose_pairs, server, token, out, config_path,
+      gt_list, title;
   bool sim = false, no_plots = false, gt_from_file = false, no_labels = false, keep_maps = false;
   int beams = 64;
   std::uint64_t seed = 7;
@@ -56,6 +57,8 @@ void addSourceOptions(CLI::App& app, Options& o) {
   app.add_option("--data", o.data,
                  "SemanticKITTI-layout sequence directory (velodyne/, labels/, poses.txt, calib.txt)");
   app.add_flag("--sim", o.sim, "render a simulated sequence in memory");
+  app.add_option("--map-data", o.map_data,
+                 "relocalization: the drive the map is built from (SemanticKITTI layout, poses in --data's world)");
   app.add_option("--poses", o.poses, "with --sim: KITTI poses file to follow (default: the built-in route)");
   app.add_option("--calib", o.calib, "with --sim --poses: KITTI calib.txt (Tr)");
   app.add_option("--seed", o.seed, "with --sim: world and sensor seed (also samples the derived negative pairs)")
@@ -113,22 +116,35 @@ void validate(const Options& o) {
   if (!o.sim && (!o.poses.empty() || !o.calib.empty() || o.label_noise > 0 || o.beams != 64))
     throw InputError("--poses, --calib, --label-noise and --beams belong to --sim");
   if (o.no_labels && o.label_noise > 0) throw InputError("--label-noise has no effect with --no-labels");
+  if ((o.protocol == "relocalization") != !o.map_data.empty())
+    throw InputError("--protocol relocalization and --map-data DIR go together");
+  if (o.protocol == "relocalization" && o.sim)
+    throw InputError("--protocol relocalization reads two drives: give --map-data DIR and --data DIR");
   if (o.protocol == "slam" && o.server.empty())
     throw InputError("--protocol slam measures a server's pose graph: give --server ADDR");
-  if (!o.sim && o.protocol != "sequence" && o.protocol != "slam" && o.pairs.empty())
+  if (!o.sim && (o.protocol == "pairs" || o.protocol == "pose" || o.protocol == "all") && o.pairs.empty())
     throw InputError("--protocol " + o.protocol + " needs --pairs FILE (with --sim, the simulator's truth is used)");
   if (!o.sim && o.protocol == "all" && o.pose_pairs.empty())
     throw InputError("--protocol all needs --pose-pairs FILE (with --sim, the simulator's truth is used)");
   if (o.query.exclude_recent < 0 || o.query.candidates < 1 || o.query.candidates > 100)
     throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
   const bool derived_pairs = o.sim && o.pairs.empty() && (o.protocol == "pairs" || o.protocol == "all");
-  if ((o.protocol == "sequence" || o.protocol == "all" || derived_pairs) && !(o.negative_m >= o.positive_m))
+  if ((o.protocol == "sequence" || o.protocol == "all" || o.protocol == "relocalization" || derived_pairs) &&
+      !(o.negative_m >= o.positive_m))
     throw InputError("--negative-m must be >= --positive-m");
 }
 
 std::unique_ptr<FrameSource> makeSource(const Options& o) {
   auto source = o.sim ? simulatedSource({o.poses, o.calib, o.frames, o.seed, o.label_noise, o.beams})
                       : directorySource(o.data, o.frames);
+  if (o.no_labels) source = withoutLabels(std::move(source));
+  return source;
+}
+
+// The relocalization protocol's map drive (every frame), or none.
+std::unique_ptr<FrameSource> makeMapSource(const Options& o) {
+  if (o.map_data.empty()) return nullptr;
+  auto source = directorySource(o.map_data, "");
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }
@@ -166,6 +182,7 @@ void describe(Run& run, const Options& o, const std::string& name, const std::st
     s["server_map_kept"] = o.keep_maps;
   }
   s["frames"] = run.source.frames().size();
+  if (name == "relocalization") s["candidates"] = o.query.candidates;
   if (name != "sequence") return;
   s["exclude_recent"] = o.query.exclude_recent;
   s["candidates"] = o.query.candidates;
@@ -177,8 +194,11 @@ void describe(Run& run, const Options& o, const std::string& name, const std::st
   }
 }
 
-void runProtocol(Run& run, const Options& o, const std::string& name, const std::string& map_name) {
-  if (name == "slam") {
+void runProtocol(Run& run, const Options& o, const std::string& name, const std::string& map_name,
+                 const FrameSource* map_source) {
+  if (name == "relocalization") {
+    relocalizationProtocol(run, *map_source, o.query, {o.positive_m, o.negative_m, nullptr});
+  } else if (name == "slam") {
     SlamOptions slam = o.slam;
     slam.server = o.server;
     slam.token = o.token;
@@ -223,8 +243,10 @@ int evaluate(Options& o) {
     throw InputError("--no-labels needs the labeller: labeller.mode is off in --config");
   fs::create_directories(o.out);
   const auto source = makeSource(o);
-  if (o.protocol == "sequence" || o.protocol == "all") {
-    const auto n = static_cast<int>(std::ceil(0.01 * static_cast<double>(source->frames().size())));
+  const auto map_source = makeMapSource(o);
+  if (o.protocol == "sequence" || o.protocol == "all" || map_source) {  // at least 1 % of the frames searched
+    const auto searched = (map_source ? map_source : source)->frames().size();
+    const auto n = static_cast<int>(std::ceil(0.01 * static_cast<double>(searched)));
     o.query.candidates = std::min(100, std::max(o.query.candidates, n));
   }
   const std::string map_name = "eval-" + std::to_string(std::time(nullptr)) + "-" + std::to_string(::getpid());
@@ -243,7 +265,7 @@ int evaluate(Options& o) {
     Run run{*source, *backend, o.threads, stored, {}, {}, dir};
     describe(run, o, name, map_name, config);
     const auto t0 = std::chrono::steady_clock::now();
-    runProtocol(run, o, name, map_name);
+    runProtocol(run, o, name, map_name, map_source.get());
     run.summary["wall_s"] = secondsSince(t0);
     run.summary["timings"] = run.timings.json();
     if (!writeOutputs(run, o, dir)) status = 3;
@@ -265,9 +287,10 @@ int main(int argc, char** argv) {
   app.set_version_flag("--version", std::string("sglc-eval ") + sglc::kVersion);
   Options o;
   app.add_option("--protocol", o.protocol,
-                 "pairs, sequence, pose, all (sequence, then pairs and pose on the same frames), or slam")
+                 "pairs, sequence, pose, all (sequence, then pairs and pose on the same frames), slam, or "
+                 "relocalization (--data's frames query a map of --map-data's)")
       ->required()
-      ->check(CLI::IsMember({"pairs", "sequence", "pose", "all", "slam"}));
+      ->check(CLI::IsMember({"pairs", "sequence", "pose", "all", "slam", "relocalization"}));
   addSourceOptions(app, o);
   addProtocolOptions(app, o);
   addRunOptions(app, o);

@@ -9,24 +9,6 @@
 namespace sglc::eval {
 namespace {
 
-// Stores the given frames that are not stored yet, in order (loading ahead).
-void storeFrames(Run& run, const std::vector<int>& wanted) {
-  std::vector<int> frames;
-  for (int f : wanted)
-    if (run.stored.insert(f).second) frames.push_back(f);
-  if (frames.empty()) return;
-  Prefetch pre(run.source, frames, run.threads);
-  Progress bar("store", frames.size());
-  std::size_t n = 0;
-  while (!pre.done()) {
-    auto [f, scan] = pre.next();
-    StageTimes t;
-    run.backend.add(f, scan, &t);
-    run.timings.add(t);
-    bar.step(++n);
-  }
-}
-
 std::vector<PairRow> usablePairs(Run& run, const std::vector<PairRow>& rows, bool need_pose) {
   const std::set<int> selected(run.source.frames().begin(), run.source.frames().end());
   std::vector<PairRow> out;
@@ -59,9 +41,26 @@ Mat4d groundTruth(const Run& run, const PairRow& r, bool gt_from_file) {
 
 }  // namespace
 
+void storeFrames(Run& run, const FrameSource& source, const std::vector<int>& wanted) {
+  std::vector<int> frames;
+  for (int f : wanted)
+    if (run.stored.insert(f).second) frames.push_back(f);
+  if (frames.empty()) return;
+  Prefetch pre(source, frames, run.threads);
+  Progress bar("store", frames.size());
+  std::size_t n = 0;
+  while (!pre.done()) {
+    auto [f, scan] = pre.next();
+    StageTimes t;
+    run.backend.add(f, scan, &t);
+    run.timings.add(t);
+    bar.step(++n);
+  }
+}
+
 void pairProtocol(Run& run, const std::vector<PairRow>& file_rows) {
   const auto rows = usablePairs(run, file_rows, false);
-  storeFrames(run, framesOf(rows));
+  storeFrames(run, run.source, framesOf(rows));
   std::map<int, std::vector<std::size_t>> by_query;
   for (std::size_t k = 0; k < rows.size(); ++k) by_query[rows[k].i].push_back(k);
   std::vector<Decision> decisions(rows.size());
@@ -97,7 +96,7 @@ void poseProtocol(Run& run, const std::vector<PairRow>& file_rows, bool gt_from_
   for (const auto& r : file_rows)
     if (r.label == 1) positives.push_back(r);
   const auto rows = usablePairs(run, positives, true);
-  storeFrames(run, framesOf(rows));
+  storeFrames(run, run.source, framesOf(rows));
   std::vector<RegistrationResult> results;
   std::ofstream csv(run.out + "/pose_errors.csv");
   csv << "i,j,registered,verified,rte_m,rre_deg\n" << std::setprecision(9);

@@ -24,6 +24,9 @@ struct Run {
   std::string out;  // directory of this protocol's files
 };
 
+// Stores the given frames of `source` that are not stored yet (Run::stored), in order, loading ahead.
+void storeFrames(Run& run, const FrameSource& source, const std::vector<int>& frames);
+
 // Pairs: each listed pair verified (no refinement); PR curve over the pair labels.
 void pairProtocol(Run& run, const std::vector<PairRow>& rows);
 
@@ -40,6 +43,12 @@ struct SequenceOptions {
   const std::vector<PairRow>* gt_list = nullptr;
 };
 void sequenceProtocol(Run& run, const LoopQuery& query, const SequenceOptions& options);
+
+// Relocalization: every frame of `map` is stored, then every frame of the run's source (another drive in the
+// same world frame: another time, another sensor) asks where it is, without being stored. A query has a true
+// place when a map frame lies within positive_m; a verified top-1 candidate is true within positive_m, false
+// beyond negative_m, and in between neither (counted in top1_in_band).
+void relocalizationProtocol(Run& run, const FrameSource& map, const LoopQuery& query, const SequenceOptions& options);
 
 // SLAM: the frames go to a running server as one or two robots with drifting odometry and loop queries; the
 // server's pose graph corrects them. Two robots: the first drives the first 60 % of the frames, the second the
