@@ -54,16 +54,7 @@ class InProcess final : public Backend {
     const auto fp = pipeline_.fingerprint(scan);
     t->fingerprint = msSince(t0);
     // What the server back-end asks for (Remote::queryThenAdd), through the same use case.
-    closing::QueryOptions o;
-    o.top_k = static_cast<std::uint32_t>(q.candidates);
-    o.candidates = static_cast<std::uint32_t>(q.candidates);
-    o.include_rejected = true;
-    o.refine = q.refine;
-    o.exclude_recent = q.exclude_recent;
-    closing::QueryTiming qt;
-    const auto found = finder_.find(fp, {kMap, kRobot, kSession, frame, std::nullopt, 0}, o, {}, &qt);
-    times(qt, t);
-    auto out = convert(found);
+    auto out = find(fp, q, {kMap, kRobot, kSession, frame, std::nullopt, 0}, t);
     store(frame, fp, t);
     t->total = msSince(t0);
     return out;
@@ -73,18 +64,10 @@ class InProcess final : public Backend {
     const auto t0 = Clock::now();
     const auto fp = pipeline_.fingerprint(scan);
     t->fingerprint = msSince(t0);
-    // What the server does with a QueryRequest carrying a scan and no robot (Remote::query).
-    closing::QueryOptions o;
-    o.top_k = static_cast<std::uint32_t>(q.candidates);
-    o.candidates = static_cast<std::uint32_t>(q.candidates);
-    o.include_rejected = true;
-    o.refine = q.refine;
-    o.exclude_recent = 0;
-    closing::QueryTiming qt;
-    const auto found = finder_.find(fp, {kMap, "", "", 0, std::nullopt, 0}, o, {}, &qt);
-    times(qt, t);
+    // What the server does with a QueryRequest carrying a scan and no robot (Remote::query): nothing excluded.
+    auto out = find(fp, q, {kMap, "", "", 0, std::nullopt, 0}, t);
     t->total = msSince(t0);
-    return convert(found);
+    return out;
   }
 
   std::vector<Candidate> verify(int query, const std::vector<int>& candidates, Refine refine, StageTimes* t) override {
@@ -107,6 +90,20 @@ class InProcess final : public Backend {
   }
 
  private:
+  // Searches, verifies and refines as the service does for `origin` (its robot's recent scans are excluded).
+  std::vector<Candidate> find(const Fingerprint& fp, const LoopQuery& q, const closing::QueryOrigin& origin,
+                              StageTimes* t) const {
+    closing::QueryOptions o;
+    o.top_k = static_cast<std::uint32_t>(q.candidates);
+    o.candidates = static_cast<std::uint32_t>(q.candidates);
+    o.include_rejected = true;
+    o.refine = q.refine;
+    o.exclude_recent = q.exclude_recent;
+    closing::QueryTiming qt;
+    const auto found = finder_.find(fp, origin, o, {}, &qt);
+    times(qt, t);
+    return convert(found);
+  }
   std::int64_t idOf(int frame) const {
     const auto it = ids_.find(frame);
     if (it == ids_.end()) throw std::logic_error("frame " + std::to_string(frame) + " is not stored");
@@ -170,10 +167,7 @@ class Remote final : public Backend {
   std::vector<Candidate> queryThenAdd(int frame, const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
     client::IngestOptions io;
     io.query = true;
-    io.query_options = options(q.refine ? Refine::verified : Refine::none, q.candidates);
-    io.query_options.set_scope(v1::SCOPE_WHOLE_MAP);
-    io.query_options.set_exclude_recent(q.exclude_recent);
-    io.query_options.set_candidates(static_cast<std::uint32_t>(q.candidates));
+    io.query_options = searchOptions(q);
     const auto r = client_.ingest(client::makeKey(map_, kRobot, kSession, frame), scan, io);
     record(frame, r.scan_id());
     times(r.timing(), t);
@@ -181,11 +175,8 @@ class Remote final : public Backend {
   }
 
   std::vector<Candidate> query(const LabelledScan& scan, const LoopQuery& q, StageTimes* t) override {
-    auto o = options(q.refine ? Refine::verified : Refine::none, q.candidates);
-    o.set_scope(v1::SCOPE_WHOLE_MAP);
-    o.set_exclude_recent(0);
-    o.set_candidates(static_cast<std::uint32_t>(q.candidates));
-    const auto r = client_.queryScan(map_, scan, o);
+    // No robot in the request: no scan is excluded.
+    const auto r = client_.queryScan(map_, scan, searchOptions(q));
     times(r.timing(), t);
     return convert(r.candidates());
   }
@@ -219,6 +210,14 @@ class Remote final : public Backend {
     o.set_refine(refine != Refine::none);
     o.set_refine_set(true);
     o.set_known_loops(refine == Refine::known_loops);
+    return o;
+  }
+  // A search of the whole map, as InProcess::find runs it.
+  static v1::QueryOptions searchOptions(const LoopQuery& q) {
+    auto o = options(q.refine ? Refine::verified : Refine::none, q.candidates);
+    o.set_scope(v1::SCOPE_WHOLE_MAP);
+    o.set_exclude_recent(q.exclude_recent);
+    o.set_candidates(static_cast<std::uint32_t>(q.candidates));
     return o;
   }
   static void times(const v1::Timing& in, StageTimes* t) {
