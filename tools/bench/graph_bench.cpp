@@ -22,6 +22,7 @@
 #include <random>
 
 #include "sglc/descriptors.hpp"
+#include "sglc/elapsed.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
 #include "sglc/version.hpp"
@@ -33,12 +34,6 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using namespace sglc;
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
 
 // Positions' RMSE after the best rigid alignment.
 double ate(const std::vector<Mat4d>& est, const std::vector<Mat4d>& gt) {

@@ -36,12 +36,6 @@ using namespace sglc;
 using bench::ServerProcess;
 using nlohmann::ordered_json;
 
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
 struct Keyframe {
   v1::IngestRequest request;  // packed scan; key and options are set per call
   std::size_t points = 0;

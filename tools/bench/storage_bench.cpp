@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
@@ -24,14 +25,6 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using namespace sglc;
-
-double ms(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(p * (v.size() - 1) + 0.5)];
-}
 
 nlohmann::ordered_json summary(const std::vector<double>& v) {
   return {{"median_ms", percentile(v, 0.5)}, {"p90_ms", percentile(v, 0.9)}, {"n", v.size()}};
@@ -127,18 +120,18 @@ void benchStoreAndFetch(const std::string& dir, const std::vector<Fingerprint>& 
         .map = "m", .robot = "r", .session = "s", .seq = static_cast<std::int64_t>(i), .fingerprint = &base[i]};
     const auto t0 = Clock::now();
     ids.push_back(store->addScan(ns));
-    store_ms.push_back(ms(t0));
+    store_ms.push_back(msSince(t0));
   }
   for (auto id : ids) {
     const auto t0 = Clock::now();
     store->fingerprint(id);
-    cold_ms.push_back(ms(t0));
+    cold_ms.push_back(msSince(t0));
   }
   for (int rep = 0; rep < 5; ++rep)
     for (auto id : ids) {
       const auto t0 = Clock::now();
       store->fingerprint(id);
-      fetch_ms.push_back(ms(t0));
+      fetch_ms.push_back(msSince(t0));
     }
   out["store_full_sync"] = summary(store_ms);
   out["fetch_from_db"] = summary(cold_ms);
@@ -155,14 +148,14 @@ void benchExactSearch(const storage::MapStore& store, const std::vector<std::vec
     storage::SearchRequest req{.map = "m", .descriptor = perturb(q, rng, 0.005f), .k = 50};
     auto t1 = Clock::now();
     store.search(req);
-    search_ms.push_back(ms(t1));
+    search_ms.push_back(msSince(t1));
     req.exclude_robots = {"r1"};
     req.self_robot = "r0";
     req.self_session = "s0";
     req.exclude_recent = 100;
     t1 = Clock::now();
     store.search(req);
-    filtered_ms.push_back(ms(t1));
+    filtered_ms.push_back(msSince(t1));
   }
   out["search_top50_exact"] = summary(search_ms);
   out["search_top50_exact"]["scans"] = scans;
@@ -181,7 +174,7 @@ void benchLargeMap(const std::string& dir, const std::vector<Fingerprint>& base,
     auto store = storage::MapStore::open(o);
     store->createMap("m", base.front().layout.scanDim());
     fill(*store, "m", base, 0, scans, rng, &queries);
-    out["fill_s"] = ms(t0) / 1000.0;
+    out["fill_s"] = msSince(t0) / 1000.0;
     benchExactSearch(*store, queries, scans, rng, out);
     const auto st = store->stats();
     out["big_map"] = {{"scans", st.scans},
@@ -190,11 +183,11 @@ void benchLargeMap(const std::string& dir, const std::vector<Fingerprint>& base,
   }
   t0 = Clock::now();
   { auto store = storage::MapStore::open(o); }
-  out["open_with_snapshot_s"] = ms(t0) / 1000.0;
+  out["open_with_snapshot_s"] = msSince(t0) / 1000.0;
   fs::remove_all(o.path + ".index");
   t0 = Clock::now();
   { auto store = storage::MapStore::open(o); }
-  out["open_rebuild_s"] = ms(t0) / 1000.0;
+  out["open_rebuild_s"] = msSince(t0) / 1000.0;
 }
 
 // Fingerprints of `base` reduced to what the index needs: nodes and descriptor only.
@@ -221,13 +214,13 @@ nlohmann::ordered_json ivfRun(storage::StoreOptions o, int nprobe, const std::ve
   o.index.ivf_nprobe = nprobe;
   const auto t0 = Clock::now();
   auto approx = storage::MapStore::open(o);
-  const double open_s = ms(t0) / 1000.0;
+  const double open_s = msSince(t0) / 1000.0;
   std::vector<double> approx_ms;
   std::size_t hit = 0, total = 0;
   for (std::size_t qi = 0; qi < requests.size(); ++qi) {
     const auto t1 = Clock::now();
     const auto a = approx->search(requests[qi]);
-    approx_ms.push_back(ms(t1));
+    approx_ms.push_back(msSince(t1));
     for (const auto& h : truth[qi])
       hit += std::any_of(a.begin(), a.end(), [&](const storage::SearchHit& x) { return x.scan_id == h.scan_id; });
     total += truth[qi].size();
@@ -252,7 +245,7 @@ void benchMillion(const std::string& dir, const std::vector<Fingerprint>& base, 
     store->createMap("m", base.front().layout.scanDim());
     fill(*store, "m", descriptorOnly(base), 0, 1000000, rng, &queries);
   }
-  out["million_fill_s"] = ms(t0) / 1000.0;
+  out["million_fill_s"] = msSince(t0) / 1000.0;
   queries.resize(std::min<std::size_t>(queries.size(), 200));
   auto exact = storage::MapStore::open(o);
   std::vector<std::vector<storage::SearchHit>> truth;
@@ -262,7 +255,7 @@ void benchMillion(const std::string& dir, const std::vector<Fingerprint>& base, 
     requests.push_back({.map = "m", .descriptor = perturb(q0, rng, 0.005f), .k = 50});
     const auto t1 = Clock::now();
     truth.push_back(exact->search(requests.back()));
-    exact_ms.push_back(ms(t1));
+    exact_ms.push_back(msSince(t1));
   }
   exact.reset();
   out["million_search_top50_exact"] = summary(exact_ms);

@@ -1,4 +1,5 @@
 #include "report.hpp"
+#include "sglc/elapsed.hpp"
 
 #include <algorithm>
 #include <fstream>
@@ -6,16 +7,6 @@
 #include <stdexcept>
 
 namespace sglc::eval {
-namespace {
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[static_cast<std::size_t>(p * static_cast<double>(v.size() - 1) + 0.5)];
-}
-
-}  // namespace
-
 void Timings::add(const StageTimes& t) {
   for (const auto& [name, v] : {std::pair{"fingerprint", t.fingerprint},
                                 {"search", t.search},
