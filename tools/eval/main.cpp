@@ -128,6 +128,8 @@ void validate(const Options& o) {
     throw InputError("--protocol all needs --pose-pairs FILE (with --sim, the simulator's truth is used)");
   if (o.query.exclude_recent < 0 || o.query.candidates < 1 || o.query.candidates > 100)
     throw InputError("--exclude-recent must be >= 0 and --candidates 1..100");
+  if (!(o.positive_m > 0) || !std::isfinite(o.negative_m))
+    throw InputError("--positive-m must be a positive distance and --negative-m a finite one (m)");
   const bool derived_pairs = o.sim && o.pairs.empty() && (o.protocol == "pairs" || o.protocol == "all");
   if ((o.protocol == "sequence" || o.protocol == "all" || o.protocol == "relocalization" || derived_pairs) &&
       !(o.negative_m >= o.positive_m))

@@ -206,6 +206,7 @@ def main():
             (["--protocol", "sequence", "--data", os.path.join(tmp, "nodir"), "--out", tmp], "nodir"),
             (["--protocol", "sequence", "--sim", "--frames", "5:1", "--out", tmp], "5:1"),
             (["--protocol", "relocalization", "--data", tmp, "--out", tmp], "--map-data DIR go together"),
+            (["--protocol", "sequence", "--sim", "--positive-m", "nan", "--out", tmp], "positive distance"),
             (["--protocol", "sequence", "--map-data", tmp, "--data", tmp, "--out", tmp], "go together"),
         ]
         for args, words in cases:
