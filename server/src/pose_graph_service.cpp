@@ -56,10 +56,12 @@ std::int64_t pageSize(std::uint32_t requested) {
 
 }  // namespace
 
-void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
+storage::MapInfo requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map) {
   wire::checkName("map", map);
   TokenTable::require(state.tokens().authenticate(*ctx), map);
-  if (!state.store().findMap(map)) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
+  auto info = state.store().findMap(map);
+  if (!info) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + map + "'");
+  return *std::move(info);
 }
 
 void checkFilterName(const std::string& what, const std::string& name) {

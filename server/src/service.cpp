@@ -308,11 +308,9 @@ grpc::Status MapAdminService::DeleteRobot(grpc::ServerContext* ctx, const v1::De
 grpc::Status MapAdminService::DeleteMap(grpc::ServerContext* ctx, const v1::DeleteMapRequest* req,
                                         v1::DeleteResponse* resp) {
   return run(ctx, {"DeleteMap", req->map(), ""}, [&](CallLog&) {
-    requireMap(state_, ctx, req->map());
-    const auto map = state_.store().findMap(req->map());
-    if (!map) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");  // deleted just now
+    const auto map = requireMap(state_, ctx, req->map());
     resp->set_scans_removed(state_.store().deleteMap(req->map()));
-    if (auto* graph = state_.graph()) graph->mapDeleted(req->map(), map->id);
+    if (auto* graph = state_.graph()) graph->mapDeleted(req->map(), map.id);
     spdlog::info("{}",
                  logging::logLine({{"event", "map_deleted"}, {"map", req->map()}, {"scans", resp->scans_removed()}}));
   });

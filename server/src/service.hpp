@@ -143,8 +143,8 @@ class PoseGraphService final : public PoseGraphBase {
 void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, const TokenTable::Grant& grant,
                 const v1::IngestRequest& req, const std::string& points, const std::string& labels,
                 v1::IngestResponse* resp, MemoryBudget::Lease* held = nullptr);
-// Checks the map name and the caller's access, and that the map exists (NOT_FOUND).
-void requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map);
+// Checks the map name and the caller's access, and that the map exists (NOT_FOUND); returns the map.
+storage::MapInfo requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map);
 // A robot or session name given as a filter: empty, or a valid name (INVALID_ARGUMENT otherwise, before it is
 // echoed in any message).
 void checkFilterName(const std::string& what, const std::string& name);

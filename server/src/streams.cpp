@@ -333,8 +333,7 @@ class WatchMapReactor final : public StreamReactor<grpc::ServerWriteReactor<Byte
       map_ = req.map();
       after_ = req.after_version();
       log_.map = map_;
-      requireMap(state_, ctx_, map_);
-      map_id_ = mapId();
+      map_id_ = requireMap(state_, ctx_, map_).id;
       graph_ = state_.graph();
       if (!graph_ || graph_->stopping())
         throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is shutting down");
