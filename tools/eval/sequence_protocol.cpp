@@ -54,6 +54,7 @@ struct Outcome {
   std::vector<Candidate> top;             // the detection of each query (frame -1: none)
   std::vector<RegistrationResult> poses;  // pose errors of the true detections
   std::size_t in_band = 0;
+  std::size_t verified_true = 0, verified_false = 0;  // verified top-1 candidates outside the band
 };
 
 // Every query's verified top-1 candidate, whatever its score, goes to top1.csv: where false loops come from.
@@ -79,6 +80,7 @@ void judge(Outcome& o, const Run& run, const LoopTruth& truth, int f, bool has_t
   if (!cands.empty() && cands[0].verified) {
     o.in_band += truth.inBand(f, cands[0].frame);
     if (!truth.inBand(f, cands[0].frame)) {
+      ++(r[0] ? o.verified_true : o.verified_false);
       top = cands[0];
       d.score = top.score;
       d.predicted_true = r[0];
@@ -151,6 +153,14 @@ void sequenceProtocol(Run& run, const LoopQuery& query, const SequenceOptions& o
   run.summary["queries"] = frames.size();
   run.summary["queries_with_true_loop"] = std::count(has_true.begin(), has_true.end(), true);
   run.summary["top1_in_band"] = o.in_band;
+  // What a pose graph would receive if it took every verified answer, whatever its score: false loops wreck it.
+  const std::size_t verified = o.verified_true + o.verified_false;
+  run.summary["verified_true"] = o.verified_true;
+  run.summary["verified_false"] = o.verified_false;
+  if (verified)
+    run.summary["precision_all_verified"] = static_cast<double>(o.verified_true) / static_cast<double>(verified);
+  else
+    run.summary["precision_all_verified"] = nullptr;  // no verified answer: undefined
   registrationSummary(run.summary, o.poses);
   run.summary["rr_note"] = "pose errors of the true top-1 detections (any score)";
   writeTrajectory(run, o, has_true, curve);

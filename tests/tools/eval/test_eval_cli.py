@@ -19,7 +19,8 @@ import time
 EVAL, SERVER = sys.argv[1], sys.argv[2]
 FRAMES = "::6"
 METRICS = ["f1max", "f1max_threshold", "ep", "auc", "recall_at_1", "recall_at_1pct", "queries_with_true_loop",
-           "top1_in_band", "rr", "registered", "rte_mean", "rre_mean", "at_f1max"]
+           "top1_in_band", "rr", "registered", "rte_mean", "rre_mean", "at_f1max", "verified_true", "verified_false",
+           "precision_all_verified"]
 
 
 def run(args, expect=0):
@@ -57,6 +58,10 @@ def main():
         # threshold): "verified" must mean right, not just "above the F1max threshold".
         lowest = next(csv.DictReader(open(os.path.join(local, "pr.csv"))))
         assert float(lowest["precision"]) >= 0.98, lowest
+        assert s["precision_all_verified"] >= 0.98, s
+        rows = list(csv.DictReader(open(os.path.join(local, "top1.csv"))))
+        assert sum(r["outcome"] == "true" for r in rows) == s["verified_true"] > 100, (s, rows[:3])
+        assert sum(r["outcome"] == "false" for r in rows) == s["verified_false"], s
         assert s["rr"] == 1.0 and s["registered"] >= 100, s
         assert s["rte_mean"] < 0.01 and s["rre_mean"] < 0.05, s
         for stage in ("fingerprint", "search", "verify", "refine", "total"):
