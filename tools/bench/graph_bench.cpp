@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "bench/kitti_path.hpp"
 #include "sglc/descriptors.hpp"
 #include "sglc/elapsed.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
@@ -91,13 +92,6 @@ void addOptions(CLI::App& app, Options& o) {
 }
 
 // KITTI 00's path when the shared data has it, else the built-in route.
-sim::Trajectory loadTrajectory(const std::string& data) {
-  const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
-  const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib)) return sim::loadKittiTrajectory(poses, calib);
-  return sim::loopRoute();
-}
-
 // Ground truth and drifting odometry of both robots: r0 drives the path, r1 repeats its start (n1 frames) in
 // an unrelated odometry frame.
 struct Robots {
@@ -266,7 +260,7 @@ int main(int argc, char** argv) {
 
   fs::remove_all(options.dir);
   fs::create_directories(options.dir);
-  const sim::Trajectory traj = loadTrajectory(options.data);
+  const sim::Trajectory traj = bench::kitti00OrLoopRoute(options.data);
   const Robots robots = makeRobots(traj, options.scans);
   {
     const auto store = openStore(options.dir);  // closed before its directory goes (it writes an index snapshot)

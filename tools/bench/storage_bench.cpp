@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "bench/kitti_path.hpp"
 #include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
@@ -80,13 +81,6 @@ void addOptions(CLI::App& app, Options& o) {
 }
 
 // KITTI 00's path when the shared data has it, else the built-in route.
-sim::Trajectory loadTrajectory(const std::string& data) {
-  const auto poses = data + "/kitti_odometry_gt_poses/poses/00.txt";
-  const auto calib = data + "/semantickitti_scans/sequences/00/calib.txt";
-  if (fs::exists(poses) && fs::exists(calib)) return sim::loadKittiTrajectory(poses, calib);
-  return sim::loopRoute();
-}
-
 // 1. Realistic fingerprints: of up to `frames` simulated frames spread over the trajectory.
 std::vector<Fingerprint> simulatedFingerprints(const Pipeline& pipeline, const sim::Trajectory& traj, int frames,
                                                nlohmann::ordered_json& out) {
@@ -277,7 +271,7 @@ int main(int argc, char** argv) {
   fs::create_directories(options.dir);
   nlohmann::ordered_json out;
   const Pipeline pipeline;
-  const auto base = simulatedFingerprints(pipeline, loadTrajectory(options.data), options.frames, out);
+  const auto base = simulatedFingerprints(pipeline, bench::kitti00OrLoopRoute(options.data), options.frames, out);
   std::mt19937_64 rng(42);
   benchStoreAndFetch(options.dir, base, out);
   benchLargeMap(options.dir, base, options.scans, rng, out);
