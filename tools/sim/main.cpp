@@ -9,19 +9,22 @@
 
 #include "sglc/frame_selection.hpp"
 #include "sglc/version.hpp"
+#include "sim/sensor.hpp"
 #include "sim/sequence.hpp"
 
 namespace {
 
 // The command line. Negative (and 1e9 for the field of view) means "not given": the preset's value applies.
 struct Options {
-  std::string poses_path, calib_path, route, frames_spec, out_dir;
+  std::string poses_path, calib_path, route, frames_spec, out_dir, sensor;
   std::uint64_t seed = 7;
   double label_noise = 0.0, label_confusion = -1, label_bleed = -1, label_miss = -1;
-  int beams = 64, columns = 0, threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  int beams = -1, columns = 0, threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   double max_range = 0.0, range_noise = -1.0, odom_noise = 0.0, odom_rot = -1.0;
   double fov_up = 1e9, fov_down = 1e9;
   bool noise_free = false, no_moving = false, quiet = false, overwrite = false;
+  bool laser_offsets = false, motion_distortion = false;
+  double mixed_pixels = 0.0;
   sglc::sim::PairListConfig pairs;
 };
 
@@ -44,8 +47,9 @@ void addLabelNoiseOptions(CLI::App& app, Options& o) {
 }
 
 void addSensorOptions(CLI::App& app, Options& o) {
-  app.add_option("--beams", o.beams, "64 (HDL-64E-like), 32, 128, or any count spread over +2..-24.8 deg")
-      ->capture_default_str();
+  app.add_option("--sensor", o.sensor, "Sensor preset: vlp16, hdl32, hdl64 (default), os1-128 or rosette (Livox-like)")
+      ->check(CLI::IsMember(sglc::sim::sensorPresetNames()));
+  app.add_option("--beams", o.beams, "64 (HDL-64E-like, default), 32, 128, or any count spread over +2..-24.8 deg");
   app.add_option("--columns", o.columns, "Azimuth steps per revolution (default: the preset's)")
       ->check(CLI::Range(8, 65535));
   app.add_option("--fov-up", o.fov_up, "Elevation of the top beam in deg (with --fov-down: beams spread evenly)")
@@ -55,6 +59,17 @@ void addSensorOptions(CLI::App& app, Options& o) {
   app.add_option("--range-noise", o.range_noise, "Range noise sigma in m (default 0.02)")->check(CLI::Range(0.0, 10.0));
   app.add_flag("--noise-free", o.noise_free, "No range noise, dropouts or intensity noise");
   app.add_flag("--no-moving", o.no_moving, "No moving vehicles or pedestrians");
+}
+
+void addRealismOptions(CLI::App& app, Options& o) {
+  app.add_flag("--laser-offsets", o.laser_offsets,
+               "Per-laser calibration errors (elevation, azimuth, range bias) drawn from the seed");
+  app.add_option("--mixed-pixels", o.mixed_pixels,
+                 "Chance that a return beside a > 1 m depth edge blends the two ranges (0 = off; try 0.5)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_flag("--motion-distortion", o.motion_distortion,
+               "Cast each column / ray from the pose at its own time in the sweep (raw, not de-skewed scans)");
 }
 
 void addOutputOptions(CLI::App& app, Options& o) {
@@ -81,6 +96,7 @@ void addOptions(CLI::App& app, Options& o) {
   addInputOptions(app, o);
   addLabelNoiseOptions(app, o);
   addSensorOptions(app, o);
+  addRealismOptions(app, o);
   addOutputOptions(app, o);
 }
 
@@ -92,6 +108,10 @@ std::string validate(const Options& o) {
   if (!o.route.empty() && !o.calib_path.empty()) return "--calib applies to --poses only, not to --route";
   if ((o.fov_up < 1e9) != (o.fov_down < 1e9)) return "--fov-up and --fov-down go together";
   if (o.fov_up < 1e9 && o.fov_up <= o.fov_down) return "--fov-up must be above --fov-down";
+  if (!o.sensor.empty() && o.beams >= 0)
+    return "--sensor and --beams are mutually exclusive (--sensor picks the beam layout; give one of them)";
+  if (o.sensor == "rosette" && (o.columns > 0 || o.fov_up < 1e9))
+    return "--columns, --fov-up and --fov-down do not apply to --sensor rosette (it has no columns or beams)";
   if (o.out_dir.empty()) return "--out is required";
   return "";
 }
@@ -111,7 +131,8 @@ sglc::sim::SequenceOptions sequenceOptions(const Options& o, const sglc::sim::Tr
 }
 
 sglc::sim::SensorConfig sensorConfig(const Options& o) {
-  auto sensor = sglc::sim::SensorConfig::preset(o.beams);
+  auto sensor = !o.sensor.empty() ? sglc::sim::sensorPreset(o.sensor)
+                                  : sglc::sim::SensorConfig::preset(o.beams >= 0 ? o.beams : 64);
   if (o.columns > 0) sensor.columns = o.columns;
   if (o.fov_up < 1e9) {
     const int n = sensor.beams();
@@ -123,6 +144,9 @@ sglc::sim::SensorConfig sensorConfig(const Options& o) {
   if (o.max_range > 0) sensor.max_range = o.max_range;
   if (o.noise_free) sensor.noiseFree();
   if (o.range_noise >= 0) sensor.range_noise = o.range_noise;
+  sensor.laser_offsets = o.laser_offsets;
+  sensor.mixed_pixel_rate = o.mixed_pixels;
+  sensor.motion_distortion = o.motion_distortion;
   return sensor;
 }
 
@@ -162,8 +186,15 @@ void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::
   std::printf("sglc-sim: wrote %d frames to %s\n", s.frames, o.out_dir.c_str());
   std::printf("  trajectory:   %s, %d frames, selection '%s'\n", sim.trajectory().source.c_str(), sim.numFrames(),
               o.frames_spec.empty() ? "all" : o.frames_spec.c_str());
-  std::printf("  sensor:       %s, %d beams x %d columns, %.0f m; label noise: confusion %.3f, bleed %.3f, miss %.3f\n",
-              sc.name.c_str(), sc.beams(), sc.columns, sc.max_range, noise.confusion, noise.bleed, noise.miss);
+  if (sc.isRosette())
+    std::printf("  sensor:       %s, %d rays per frame (%d x %d pseudo image), %.0f m", sc.name.c_str(),
+                sc.rosette_rays, sc.beams(), sc.columns, sc.max_range);
+  else
+    std::printf("  sensor:       %s, %d beams x %d columns, %.0f m", sc.name.c_str(), sc.beams(), sc.columns,
+                sc.max_range);
+  std::printf("%s%s%s; label noise: confusion %.3f, bleed %.3f, miss %.3f\n", sc.laser_offsets ? ", laser offsets" : "",
+              sc.mixed_pixel_rate > 0 ? ", mixed pixels" : "", sc.motion_distortion ? ", motion distortion" : "",
+              noise.confusion, noise.bleed, noise.miss);
   std::snprintf(buf, sizeof buf,
                 "  world:        seed %llu, %.0f m of street, %zu primitives (%zu buildings, %zu trees, %zu poles, "
                 "%zu signs, %zu parked vehicles, %zu moving agents), %.1f MB, built in %.2f s\n",

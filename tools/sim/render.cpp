@@ -9,9 +9,11 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <thread>
 
 #include "sim/rng.hpp"
+#include "sim/sensor.hpp"
 #include "sim/simulator.hpp"
 
 namespace sglc::sim {
@@ -211,7 +213,176 @@ inline float fastAtan2(float y, float x) {
   return y < 0.0f ? -r : r;
 }
 
+// The rear of the ego vehicle (roof end, tailgate) as a sensor-frame box: in KITTI scans the ground within
+// about 5.3 m straight behind the car is hidden, elsewhere the lowest beam reaches it at about 4 m.
+bool hitsEgoVehicle(const float d[3], float sensor_height) {
+  const float ground = -sensor_height;
+  const float lo[3] = {-2.7f, -0.9f, ground + 0.25f}, hi[3] = {-0.5f, 0.9f, ground + 0.85f};
+  float tmin = 0.0f, tmax = 1e9f;
+  for (int k = 0; k < 3; ++k) {
+    if (std::abs(d[k]) < 1e-9f) {
+      if (!(lo[k] <= 0.0f && 0.0f <= hi[k])) return false;
+      continue;
+    }
+    float a = lo[k] / d[k], bb = hi[k] / d[k];
+    if (a > bb) std::swap(a, bb);
+    tmin = std::max(tmin, a);
+    tmax = std::min(tmax, bb);
+    if (tmin > tmax) return false;
+  }
+  return true;
+}
+
+// What every ray of a frame shares: the primitives around the sensor by azimuth sector, and the ground.
+struct Scene {
+  std::vector<LocalPrim> prims;
+  std::vector<int> sector_start, sector_items;
+  GroundPatch ground;
+  double ground_max = 0.0;
+  float max_range = 0.0f;
+};
+
 }  // namespace
+
+// Where a ray starts: the frame's sensor position, or (motion distortion) the sensor's position when it fires.
+struct RayOrigin {
+  Vec3d o = Vec3d::Zero();      // world
+  double f0 = 0.0;              // height above the ground
+  Vec3f shift = Vec3f::Zero();  // o minus the frame's sensor position (the scene's centre)
+  float shift_h = 0.0f;         // horizontal length of shift
+  Eigen::Matrix3f R;            // sensor -> world rotation
+};
+
+namespace {
+
+struct RayHit {
+  float t = kInf;
+  int prim = -1;  // -1 none, -2 ground, >= 0 index into Scene::prims
+  Span span;
+};
+
+// The primitive as seen from a sensor moved by s.
+inline LocalPrim shiftedPrim(const LocalPrim& p, const Vec3f& s) {
+  LocalPrim q = p;
+  if (p.shape == Shape::kBox) {
+    q.ox += p.c * s.x() + p.s * s.y();
+    q.oy += -p.s * s.x() + p.c * s.y();
+  } else {
+    q.ox += s.x();
+    q.oy += s.y();
+  }
+  q.z0 -= s.z();
+  q.z1 -= s.z();
+  return q;
+}
+
+// Nearest hit along the unit direction d (world axes) from ro. kShifted: ro is not the scene's centre.
+template <bool kShifted>
+RayHit castRay(const Scene& sc, const RayOrigin& ro, const Vec3f& d, std::uint64_t ray_key) {
+  RayHit r;
+  const double tg = groundHit(sc.ground, ro.o, d.cast<double>(), sc.ground_max, ro.f0);
+  if (tg > 0.0) {
+    r.t = static_cast<float>(tg);
+    r.prim = -2;
+  }
+  const float sector_w = 2.0f * kPi / kSectors;
+  const float h = std::sqrt(d.x() * d.x() + d.y() * d.y());
+  const float slope = h > 1e-6f ? d.z() / h : (d.z() > 0 ? kInf : -kInf);
+  const float az = fastAtan2(d.y(), d.x());
+  const int sector = std::clamp(static_cast<int>((az + kPi) / sector_w), 0, kSectors - 1);
+  const float limit = std::min(r.t, sc.max_range + 1.0f);
+  float cutoff = limit * h;  // a primitive whose near distance exceeds best * h cannot be hit earlier
+  for (int q = sc.sector_start[sector]; q < sc.sector_start[sector + 1]; ++q) {
+    const LocalPrim& p0 = sc.prims[sc.sector_items[q]];
+    // Moved by shift_h, the sensor is at least near - shift_h from the primitive (and the order stays).
+    const float near = kShifted ? std::max(0.0f, p0.near - ro.shift_h) : p0.near;
+    if ((kShifted ? p0.near - ro.shift_h : p0.near) >= cutoff) break;
+    LocalPrim moved;
+    if constexpr (kShifted) moved = shiftedPrim(p0, ro.shift);
+    const LocalPrim& p = kShifted ? moved : p0;
+    const float z_near = slope * near;
+    if ((d.z() > 0.0f && z_near > p.z1) || (d.z() < 0.0f && z_near < p.z0)) continue;
+    Span span;
+    if (!intersect(p, d.x(), d.y(), d.z(), span)) continue;
+    if (span.t0 >= r.t) continue;
+    float t = span.t0;
+    if (p.pass || p.jitter > 0.0f) {
+      const std::uint64_t hsh = mix64(ray_key ^ p.id);
+      if ((hsh & 0xFFu) < p.pass) continue;  // slipped through foliage / a mesh fence
+      if (p.jitter > 0.0f)
+        t += static_cast<float>(unitFromBits(hsh)) * std::min(p.jitter, std::max(0.0f, span.t1 - span.t0));
+      if (t >= r.t) continue;
+    }
+    r.t = t;
+    r.prim = sc.sector_items[q];
+    r.span = span;
+    cutoff = r.t * h;
+  }
+  return r;
+}
+
+struct Return {
+  float range, intensity;
+  std::uint32_t label;
+};
+
+// The sensor model for a hit: label, incidence, dropout, range noise (plus a laser's range bias), intensity.
+// False when there is no return.
+template <bool kShifted>
+bool sensorReturn(const Scene& sc, const World& world, const SensorConfig& sensor, const RayOrigin& ro, const Vec3f& d,
+                  const RayHit& hit, float bias, std::uint64_t ray_key, Return& out) {
+  const float best = hit.t, max_range = sc.max_range;
+  if (hit.prim == -1 || best > max_range || best < sensor.min_range) return false;
+  float refl, cos_inc;
+  bool glass = false;
+  if (hit.prim == -2) {
+    const double gx = ro.o.x() + best * d.x(), gy = ro.o.y() + best * d.y();
+    out.label = world.groundLabelAt(gx, gy, sc.ground.distance(gx, gy));
+    refl = groundReflectivity(out.label);
+    cos_inc = std::abs(d.z());
+  } else {
+    const LocalPrim& p0 = sc.prims[hit.prim];
+    LocalPrim moved;
+    if constexpr (kShifted) moved = shiftedPrim(p0, ro.shift);
+    const LocalPrim& p = kShifted ? moved : p0;
+    out.label = p.label;
+    refl = p.reflectivity;
+    cos_inc = std::abs(normalAt(p, d, hit.span, best).dot(d));
+    glass = (p.flags & kGlass) || ((p.flags & kWindows) && inWindow(p, d, hit.span, best));
+  }
+  const float rr = best / max_range;
+  float p_drop = static_cast<float>(sensor.dropout + sensor.far_dropout * rr * rr);
+  if (cos_inc < 0.2f) p_drop += static_cast<float>(sensor.grazing_dropout) * (1.0f - cos_inc / 0.2f);
+  if (glass) p_drop += static_cast<float>(sensor.glass_dropout);
+  if (p_drop > 0.0f && unitFromBits(mix64(ray_key ^ 0x0D50ULL)) < p_drop) return false;
+  float range = best;
+  if (bias != 0.0f) range += bias;
+  if (sensor.range_noise > 0)
+    range += static_cast<float>(sensor.range_noise) * approxNormalFromBits(mix64(ray_key ^ 0x4A7CULL));
+  if (range < sensor.min_range || range > max_range) return false;
+  float intensity = refl * (0.75f + 0.25f * cos_inc);
+  if (sensor.intensity_noise) intensity += 0.03f * approxNormalFromBits(mix64(ray_key ^ 0x1E7ULL));
+  out.range = range;
+  out.intensity = std::clamp(intensity, 0.0f, 0.99f);
+  return true;
+}
+
+}  // namespace
+
+// Per-frame inputs of the ray loops.
+struct Simulator::FrameRays {
+  const Scene& scene;
+  std::uint64_t frame_key;
+  RayOrigin start;                  // the sensor at the sweep's start (the frame's pose)
+  std::vector<RayOrigin> sweep;     // motion distortion: the sensor per column / rosette ray; else empty
+  std::vector<RosetteRay> rosette;  // rosette: this frame's rays; else empty
+};
+
+struct Simulator::RayImage {
+  std::vector<float> range, intensity;
+  std::vector<std::uint32_t> label;
+  std::vector<Vec3f> point;
+};
 
 Simulator::Simulator(Trajectory trajectory, SimConfig config)
     : trajectory_(std::move(trajectory)),
@@ -240,35 +411,25 @@ Simulator::Simulator(Trajectory trajectory, SimConfig config)
     cos_az_.push_back(static_cast<float>(std::cos(az)));
   }
   ego_blocked_.assign(static_cast<std::size_t>(s.columns) * s.beams(), 0);
-  if (s.ego_vehicle) {
-    // Sensor-frame box of the ego vehicle's rear (roof end, tailgate): in KITTI scans the ground within about
-    // 5.3 m straight behind the car is hidden, elsewhere the lowest beam reaches it at about 4 m.
-    struct Box {
-      float x0, x1, y0, y1, z0, z1;
-    };
-    const float ground = -static_cast<float>(config_.world.sensor_height);
-    const Box boxes[1] = {{-2.7f, -0.5f, -0.9f, 0.9f, ground + 0.25f, ground + 0.85f}};
+  if (s.ego_vehicle && !s.isRosette()) {
+    const float height = static_cast<float>(config_.world.sensor_height);
     for (int c = 0; c < s.columns; ++c)
       for (int b = 0; b < s.beams(); ++b) {
         const float d[3] = {cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]};
-        for (const Box& box : boxes) {
-          float tmin = 0.0f, tmax = 1e9f;
-          const float lo[3] = {box.x0, box.y0, box.z0}, hi[3] = {box.x1, box.y1, box.z1};
-          bool hit = true;
-          for (int k = 0; k < 3 && hit; ++k) {
-            if (std::abs(d[k]) < 1e-9f) {
-              hit = lo[k] <= 0.0f && 0.0f <= hi[k];
-              continue;
-            }
-            float a = lo[k] / d[k], bb = hi[k] / d[k];
-            if (a > bb) std::swap(a, bb);
-            tmin = std::max(tmin, a);
-            tmax = std::min(tmax, bb);
-            hit = tmin <= tmax;
-          }
-          if (hit) ego_blocked_[static_cast<std::size_t>(c) * s.beams() + b] = 1;
-        }
+        if (hitsEgoVehicle(d, height)) ego_blocked_[static_cast<std::size_t>(c) * s.beams() + b] = 1;
       }
+  }
+  if (s.isRosette() && (s.rosette_rays > 4'000'000 || s.rosette_fov_h_deg <= 0 || s.rosette_fov_h_deg >= 180 ||
+                        s.rosette_fov_v_deg <= 0 || s.rosette_fov_v_deg >= 180))
+    throw InputError("sensor: rosette needs 1..4000000 rays and fields of view in (0, 180) deg");
+  if (s.mixed_pixel_rate < 0 || s.mixed_pixel_rate > 1) throw InputError("sensor: mixed_pixel_rate must be in 0..1");
+  if (s.laser_offsets) {
+    // The lasers' true directions (what the ray is cast along) and range biases; points are still reported
+    // along the nominal tables, as an uncorrected sensor would.
+    const LaserOffsets off = laserOffsets(s.isRosette() ? std::max(1, s.rosette_channels) : s.beams(), config_.seed);
+    laser_el_ = off.elevation_rad;
+    laser_az_ = off.azimuth_rad;
+    laser_bias_ = off.range_bias_m;
   }
 }
 
@@ -290,14 +451,20 @@ void Simulator::render(int index, Frame& out, int threads) const {
   const double time = index * trajectory_.frame_dt;
   const std::uint64_t frame_key = hashKeys(config_.seed, 0xF4A3E5ULL, static_cast<std::uint64_t>(index));
   const float max_range = static_cast<float>(sensor.max_range);
+  // With motion distortion the sensor moves up to `margin` from o during the sweep: gather and bucket with it.
+  const std::optional<SweepMotion> sweep =
+      sensor.motion_distortion ? std::optional<SweepMotion>(std::in_place, trajectory_.poses, index) : std::nullopt;
+  const double margin = sweep ? (sweep->at(1.0).topRightCorner<3, 1>() - o).norm() + 0.01 : 0.0;
+  const double reach = sensor.max_range + margin;
 
   // ---- gather and bucket the primitives around the sensor
   std::vector<int> ids;
-  world_.staticsNear(o.x(), o.y(), sensor.max_range, ids);
+  world_.staticsNear(o.x(), o.y(), reach, ids);
   std::vector<Primitive> moving;
-  world_.movingNear(time, o.x(), o.y(), sensor.max_range, moving);
+  world_.movingNear(time, o.x(), o.y(), reach, moving);
   const auto& statics = world_.statics();
-  std::vector<LocalPrim> prims;
+  Scene scene;
+  std::vector<LocalPrim>& prims = scene.prims;
   prims.reserve(ids.size() + moving.size());
   auto local = [&](const Primitive& p, std::uint32_t id) {
     LocalPrim q;
@@ -323,7 +490,7 @@ void Simulator::render(int index, Frame& out, int threads) const {
       q.oy = static_cast<float>(-ry);
     }
     q.near = static_cast<float>(std::max(0.0, std::hypot(rx, ry) - p.radius));
-    if (q.near < max_range) prims.push_back(q);
+    if (q.near < static_cast<float>(reach)) prims.push_back(q);
   };
   for (int id : ids) local(statics[id], static_cast<std::uint32_t>(id));
   for (std::size_t k = 0; k < moving.size(); ++k) local(moving[k], static_cast<std::uint32_t>(statics.size() + k));
@@ -332,7 +499,9 @@ void Simulator::render(int index, Frame& out, int threads) const {
 
   // Sector lists (CSR), nearest first because prims are already sorted.
   const float sector_w = 2.0f * kPi / kSectors;
-  std::vector<int> sector_start(kSectors + 1, 0), first(prims.size()), last(prims.size());
+  std::vector<int>& sector_start = scene.sector_start;
+  sector_start.assign(kSectors + 1, 0);
+  std::vector<int> first(prims.size()), last(prims.size());
   for (std::size_t i = 0; i < prims.size(); ++i) {
     const LocalPrim& q = prims[i];
     // Centre relative to the sensor, from the stored local origin.
@@ -344,8 +513,8 @@ void Simulator::render(int index, Frame& out, int threads) const {
       cx = -q.ox;
       cy = -q.oy;
     }
-    const float dist = std::hypot(cx, cy), radius = dist - q.near;
-    if (q.near <= 0.0f || dist <= radius * 1.0001f) {
+    const float dist = std::hypot(cx, cy), radius = dist - q.near + static_cast<float>(margin);
+    if (q.near <= static_cast<float>(margin) || dist <= radius * 1.0001f) {
       first[i] = 0;
       last[i] = kSectors - 1;
     } else {
@@ -362,7 +531,8 @@ void Simulator::render(int index, Frame& out, int threads) const {
     for (int k = first[i]; k <= last[i]; ++k) ++sector_start[((k % kSectors) + kSectors) % kSectors + 1];
   }
   for (int k = 0; k < kSectors; ++k) sector_start[k + 1] += sector_start[k];
-  std::vector<int> sector_items(sector_start[kSectors]);
+  std::vector<int>& sector_items = scene.sector_items;
+  sector_items.resize(sector_start[kSectors]);
   {
     std::vector<int> fill(sector_start.begin(), sector_start.end() - 1);
     for (std::size_t i = 0; i < prims.size(); ++i)
@@ -370,113 +540,132 @@ void Simulator::render(int index, Frame& out, int threads) const {
         sector_items[fill[((k % kSectors) + kSectors) % kSectors]++] = static_cast<int>(i);
   }
 
-  // ---- cast: results in a column-major image (pixel = column * beams + beam)
-  const std::size_t N = static_cast<std::size_t>(B) * C;
-  std::vector<float> img_range(N, -1.0f), img_intensity(N, 0.0f);
-  std::vector<std::uint32_t> img_label(N, 0);
-  std::vector<Vec3f> img_point(N);
-  const double ground_max = sensor.max_range + 1.0;
-  GroundPatch ground;
-  world_.groundPatch(o.x(), o.y(), ground_max + 2.0, ground);
-  const double ground_f0 = o.z() - ground.height(o.x(), o.y());
-
-  auto castColumns = [&](int c_begin, int c_end) {
-    for (int c = c_begin; c < c_end; ++c) {
-      for (int b = 0; b < B; ++b) {
-        if (ego_blocked_[static_cast<std::size_t>(c) * B + b]) continue;
-        const std::uint32_t ray =
-            static_cast<std::uint32_t>(c) * static_cast<std::uint32_t>(B) + static_cast<std::uint32_t>(b);
-        const std::uint64_t ray_key = mix64(frame_key ^ (static_cast<std::uint64_t>(ray) << 20));
-        const Vec3f ds(cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]);
-        const Vec3f d = R * ds;
-        float best = kInf;
-        int hit = -1;  // -1 none, -2 ground, >= 0 prim
-        Span hit_span;
-        const double tg = groundHit(ground, o, d.cast<double>(), ground_max, ground_f0);
-        if (tg > 0.0) {
-          best = static_cast<float>(tg);
-          hit = -2;
-        }
-        const float h = std::sqrt(d.x() * d.x() + d.y() * d.y());
-        const float slope = h > 1e-6f ? d.z() / h : (d.z() > 0 ? kInf : -kInf);
-        const float az = fastAtan2(d.y(), d.x());
-        const int sector = std::clamp(static_cast<int>((az + kPi) / sector_w), 0, kSectors - 1);
-        const float limit = std::min(best, max_range + 1.0f);
-        float cutoff = limit * h;  // a primitive whose near distance exceeds best * h cannot be hit earlier
-        for (int q = sector_start[sector]; q < sector_start[sector + 1]; ++q) {
-          const LocalPrim& p = prims[sector_items[q]];
-          if (p.near >= cutoff) break;
-          const float z_near = slope * p.near;
-          if ((d.z() > 0.0f && z_near > p.z1) || (d.z() < 0.0f && z_near < p.z0)) continue;
-          Span span;
-          if (!intersect(p, d.x(), d.y(), d.z(), span)) continue;
-          if (span.t0 >= best) continue;
-          float t = span.t0;
-          if (p.pass || p.jitter > 0.0f) {
-            const std::uint64_t hsh = mix64(ray_key ^ p.id);
-            if ((hsh & 0xFFu) < p.pass) continue;  // slipped through foliage / a mesh fence
-            if (p.jitter > 0.0f)
-              t += static_cast<float>(unitFromBits(hsh)) * std::min(p.jitter, std::max(0.0f, span.t1 - span.t0));
-            if (t >= best) continue;
-          }
-          best = t;
-          hit = sector_items[q];
-          hit_span = span;
-          cutoff = best * h;
-        }
-        if (hit == -1 || best > max_range || best < sensor.min_range) continue;
-
-        // ---- sensor model: label, incidence, dropout, range noise, intensity
-        std::uint32_t lab;
-        float refl, cos_inc;
-        bool glass = false;
-        if (hit == -2) {
-          const double gx = o.x() + best * d.x(), gy = o.y() + best * d.y();
-          lab = world_.groundLabelAt(gx, gy, ground.distance(gx, gy));
-          refl = groundReflectivity(lab);
-          cos_inc = std::abs(d.z());
-        } else {
-          const LocalPrim& p = prims[hit];
-          lab = p.label;
-          refl = p.reflectivity;
-          cos_inc = std::abs(normalAt(p, d, hit_span, best).dot(d));
-          glass = (p.flags & kGlass) || ((p.flags & kWindows) && inWindow(p, d, hit_span, best));
-        }
-        const float rr = best / max_range;
-        float p_drop = static_cast<float>(sensor.dropout + sensor.far_dropout * rr * rr);
-        if (cos_inc < 0.2f) p_drop += static_cast<float>(sensor.grazing_dropout) * (1.0f - cos_inc / 0.2f);
-        if (glass) p_drop += static_cast<float>(sensor.glass_dropout);
-        if (p_drop > 0.0f && unitFromBits(mix64(ray_key ^ 0x0D50ULL)) < p_drop) continue;
-        float range = best;
-        if (sensor.range_noise > 0)
-          range += static_cast<float>(sensor.range_noise) * approxNormalFromBits(mix64(ray_key ^ 0x4A7CULL));
-        if (range < sensor.min_range || range > max_range) continue;
-        float intensity = refl * (0.75f + 0.25f * cos_inc);
-        if (sensor.intensity_noise) intensity += 0.03f * approxNormalFromBits(mix64(ray_key ^ 0x1E7ULL));
-        const std::size_t px = static_cast<std::size_t>(c) * B + b;
-        img_range[px] = range;
-        img_point[px] = ds * range;
-        img_label[px] = lab;
-        img_intensity[px] = std::clamp(intensity, 0.0f, 0.99f);
-      }
+  // ---- cast into an image: spinning column-major (pixel = column * beams + beam), rosette in firing order
+  scene.ground_max = sensor.max_range + 1.0;
+  scene.max_range = max_range;
+  world_.groundPatch(o.x(), o.y(), scene.ground_max + 2.0 + margin, scene.ground);
+  FrameRays fr{scene, frame_key, {}, {}, {}};
+  fr.start.o = o;
+  fr.start.f0 = o.z() - scene.ground.height(o.x(), o.y());
+  fr.start.R = R;
+  if (sensor.isRosette()) rosetteRays(sensor, config_.seed, index, fr.rosette);
+  const int units = sensor.isRosette() ? sensor.rosette_rays : C;  // what threads split: columns or rays
+  if (sweep) {
+    // One pose per column (spinning) or per ray (rosette), at its time within the sweep.
+    fr.sweep.resize(static_cast<std::size_t>(units));
+    for (int k = 0; k < units; ++k) {
+      const Mat4d Pk = sweep->at(static_cast<double>(k) / units);
+      RayOrigin& ro = fr.sweep[k];
+      ro.o = Pk.topRightCorner<3, 1>();
+      ro.f0 = ro.o.z() - scene.ground.height(ro.o.x(), ro.o.y());
+      ro.shift = (ro.o - o).cast<float>();
+      ro.shift_h = std::hypot(ro.shift.x(), ro.shift.y());
+      ro.R = Pk.topLeftCorner<3, 3>().cast<float>();
     }
+  }
+  const std::size_t N = sensor.isRosette() ? static_cast<std::size_t>(units) : static_cast<std::size_t>(B) * C;
+  RayImage img;
+  img.range.assign(N, -1.0f);
+  img.intensity.assign(N, 0.0f);
+  img.label.assign(N, 0);
+  img.point.resize(N);
+  auto cast = [&](int begin, int end) {
+    if (sensor.isRosette())
+      castRosette(fr, img, begin, end);
+    else
+      castSpinning(fr, img, begin, end);
   };
-  threads = std::clamp(threads, 1, C);
+  threads = std::clamp(threads, 1, units);
   if (threads == 1) {
-    castColumns(0, C);
+    cast(0, units);
   } else {
     std::vector<std::thread> pool;
     for (int k = 1; k < threads; ++k)
-      pool.emplace_back(castColumns, static_cast<int>(static_cast<long>(C) * k / threads),
-                        static_cast<int>(static_cast<long>(C) * (k + 1) / threads));
-    castColumns(0, C / threads);
+      pool.emplace_back(cast, static_cast<int>(static_cast<long>(units) * k / threads),
+                        static_cast<int>(static_cast<long>(units) * (k + 1) / threads));
+    cast(0, units / threads);
     for (auto& t : pool) t.join();
   }
+  // Neighbours across a depth edge: the next column on the same beam, or the next rosette ray.
+  out.mixed_points = applyMixedPixels(img.range, img.point, img.label, img.intensity,
+                                      sensor.isRosette() ? 1 : static_cast<std::size_t>(B), !sensor.isRosette(),
+                                      sensor.mixed_pixel_rate, frame_key);
 
-  // ---- compact, column by column (each column top beam first)
   out.index = index;
   out.time = time;
   out.pose = P;
+  compact(fr, img, out);
+  if (config_.label_noise.any()) applyLabelNoise(out, config_.label_noise, config_.seed, B, C);
+}
+
+// Spinning sensor: columns [c_begin, c_end), every beam.
+void Simulator::castSpinning(const FrameRays& fr, RayImage& img, int c_begin, int c_end) const {
+  const int B = config_.sensor.beams();
+  const bool offsets = !laser_el_.empty();
+  for (int c = c_begin; c < c_end; ++c) {
+    const RayOrigin& ro = fr.sweep.empty() ? fr.start : fr.sweep[c];
+    for (int b = 0; b < B; ++b) {
+      if (ego_blocked_[static_cast<std::size_t>(c) * B + b]) continue;
+      const std::uint32_t ray =
+          static_cast<std::uint32_t>(c) * static_cast<std::uint32_t>(B) + static_cast<std::uint32_t>(b);
+      const Vec3f ds(cos_el_[b] * cos_az_[c], cos_el_[b] * sin_az_[c], sin_el_[b]);
+      if (!offsets) {
+        castOne(fr, ro, ray, ds, ds, 0.0f, static_cast<std::size_t>(c) * B + b, img);
+        continue;
+      }
+      // The laser's true direction: its elevation and azimuth offsets added to the nominal angles.
+      const float se = std::sin(std::asin(sin_el_[b]) + laser_el_[b]), ce = std::sqrt(1.0f - se * se);
+      const float ca = std::cos(laser_az_[b]), sa = std::sin(laser_az_[b]);
+      const Vec3f dt(ce * (cos_az_[c] * ca - sin_az_[c] * sa), ce * (sin_az_[c] * ca + cos_az_[c] * sa), se);
+      castOne(fr, ro, ray, ds, dt, laser_bias_[b], static_cast<std::size_t>(c) * B + b, img);
+    }
+  }
+}
+
+// Rosette: rays [k_begin, k_end) in firing order.
+void Simulator::castRosette(const FrameRays& fr, RayImage& img, int k_begin, int k_end) const {
+  const bool offsets = !laser_el_.empty();
+  const float height = static_cast<float>(config_.world.sensor_height);
+  for (int k = k_begin; k < k_end; ++k) {
+    const RosetteRay& r = fr.rosette[k];
+    const Vec3f ds(std::cos(r.elevation) * std::cos(r.azimuth), std::cos(r.elevation) * std::sin(r.azimuth),
+                   std::sin(r.elevation));
+    Vec3f dt = ds;
+    float bias = 0.0f;
+    if (offsets) {
+      const float el = r.elevation + laser_el_[r.channel], az = r.azimuth + laser_az_[r.channel];
+      dt = Vec3f(std::cos(el) * std::cos(az), std::cos(el) * std::sin(az), std::sin(el));
+      bias = laser_bias_[r.channel];
+    }
+    const float d[3] = {dt.x(), dt.y(), dt.z()};
+    if (config_.sensor.ego_vehicle && hitsEgoVehicle(d, height)) continue;
+    castOne(fr, fr.sweep.empty() ? fr.start : fr.sweep[k], static_cast<std::uint32_t>(k), ds, dt, bias,
+            static_cast<std::size_t>(k), img);
+  }
+}
+
+// One ray: cast along the true direction dt, report along the nominal direction ds.
+void Simulator::castOne(const FrameRays& fr, const RayOrigin& ro, std::uint32_t ray, const Vec3f& ds, const Vec3f& dt,
+                        float bias, std::size_t px, RayImage& img) const {
+  const std::uint64_t ray_key = mix64(fr.frame_key ^ (static_cast<std::uint64_t>(ray) << 20));
+  const Vec3f d = ro.R * dt;
+  Return ret;
+  if (fr.sweep.empty()) {
+    const RayHit hit = castRay<false>(fr.scene, ro, d, ray_key);
+    if (!sensorReturn<false>(fr.scene, world_, config_.sensor, ro, d, hit, bias, ray_key, ret)) return;
+  } else {
+    const RayHit hit = castRay<true>(fr.scene, ro, d, ray_key);
+    if (!sensorReturn<true>(fr.scene, world_, config_.sensor, ro, d, hit, bias, ray_key, ret)) return;
+  }
+  img.range[px] = ret.range;
+  img.point[px] = ds * ret.range;
+  img.label[px] = ret.label;
+  img.intensity[px] = ret.intensity;
+}
+
+// The image's returns as the frame's points: spinning column by column (each column top beam first), rosette
+// in firing order with its pseudo-image cell as beam / column.
+void Simulator::compact(const FrameRays& fr, const RayImage& img, Frame& out) const {
   out.scan.points.clear();
   out.scan.labels.clear();
   out.intensity.clear();
@@ -484,77 +673,26 @@ void Simulator::render(int index, Frame& out, int threads) const {
   out.beam.clear();
   out.column.clear();
   std::size_t count = 0;
-  for (float r : img_range) count += r > 0.0f;
+  for (float r : img.range) count += r > 0.0f;
   out.scan.points.reserve(count);
   out.scan.labels.reserve(count);
   out.intensity.reserve(count);
   out.beam.reserve(count);
   out.column.reserve(count);
-  for (int c = 0; c < C; ++c)
-    for (int b = 0; b < B; ++b) {
-      const std::size_t px = static_cast<std::size_t>(c) * B + b;
-      if (img_range[px] <= 0.0f) continue;
-      out.scan.points.push_back(img_point[px]);
-      out.scan.labels.push_back(img_label[px]);
-      out.intensity.push_back(img_intensity[px]);
-      out.beam.push_back(static_cast<std::uint16_t>(b));
-      out.column.push_back(static_cast<std::uint16_t>(c));
+  const int B = config_.sensor.beams();
+  for (std::size_t px = 0; px < img.range.size(); ++px) {
+    if (img.range[px] <= 0.0f) continue;
+    out.scan.points.push_back(img.point[px]);
+    out.scan.labels.push_back(img.label[px]);
+    out.intensity.push_back(img.intensity[px]);
+    if (fr.rosette.empty()) {
+      out.beam.push_back(static_cast<std::uint16_t>(px % B));
+      out.column.push_back(static_cast<std::uint16_t>(px / B));
+    } else {
+      out.beam.push_back(fr.rosette[px].row);
+      out.column.push_back(fr.rosette[px].column);
     }
-  if (config_.label_noise.any()) applyLabelNoise(out, config_.label_noise, config_.seed, B, C);
-}
-
-// ---- sensor presets
-
-SensorConfig SensorConfig::hdl64() {
-  SensorConfig s;
-  s.name = "hdl64";
-  // Upper block: 32 lasers from +2 deg down at 1/3 deg; lower block: 32 lasers from -8.83 to -24.8 deg.
-  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(2.0 - k / 3.0);
-  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(-8.83 - k * (24.8 - 8.83) / 31.0);
-  s.columns = 2083;
-  s.max_range = 80.0;
-  return s;
-}
-
-SensorConfig SensorConfig::hdl32() {
-  SensorConfig s;
-  s.name = "hdl32";
-  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(10.67 - k * (10.67 + 30.67) / 31.0);
-  s.columns = 1800;
-  s.max_range = 100.0;
-  return s;
-}
-
-SensorConfig SensorConfig::beams128() {
-  SensorConfig s;
-  s.name = "beams128";
-  for (int k = 0; k < 128; ++k) s.elevation_deg.push_back(15.0 - k * 40.0 / 127.0);
-  s.columns = 1800;
-  s.max_range = 120.0;
-  return s;
-}
-
-SensorConfig SensorConfig::preset(int beams) {
-  if (beams == 64) return hdl64();
-  if (beams == 32) return hdl32();
-  if (beams == 128) return beams128();
-  if (beams < 1 || beams > 1024)
-    throw InputError("sensor: beams must be between 1 and 1024, got " + std::to_string(beams));
-  SensorConfig s = hdl64();
-  s.name = "uniform" + std::to_string(beams);
-  s.elevation_deg.clear();
-  for (int k = 0; k < beams; ++k) s.elevation_deg.push_back(beams == 1 ? -8.0 : 2.0 - k * 26.8 / (beams - 1));
-  return s;
-}
-
-SensorConfig& SensorConfig::noiseFree() {
-  range_noise = 0.0;
-  dropout = 0.0;
-  far_dropout = 0.0;
-  grazing_dropout = 0.0;
-  glass_dropout = 0.0;
-  intensity_noise = false;
-  return *this;
+  }
 }
 
 }  // namespace sglc::sim

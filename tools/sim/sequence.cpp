@@ -217,6 +217,13 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
                     {"grazing_dropout", s.grazing_dropout},
                     {"glass_dropout", s.glass_dropout},
                     {"intensity_noise", s.intensity_noise}};
+  // Realism knobs (render.cpp, sensor.hpp); a rosette's beams x columns are its pseudo range image.
+  info["sensor"]["laser_offsets"] = s.laser_offsets;
+  info["sensor"]["mixed_pixel_rate"] = s.mixed_pixel_rate;
+  info["sensor"]["motion_distortion"] = s.motion_distortion;
+  if (s.isRosette())
+    info["sensor"]["rosette"] = {
+        {"rays", s.rosette_rays}, {"fov_h_deg", s.rosette_fov_h_deg}, {"fov_v_deg", s.rosette_fov_v_deg}};
   const auto& st = world.style();
   const auto& ws = world.stats();
   info["world"] = {{"sensor_height", cfg.world.sensor_height},

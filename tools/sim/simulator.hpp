@@ -53,6 +53,16 @@ struct SensorConfig {
   // The ego vehicle's rear (a box 0.85 m above ground from 0.5 to 2.7 m behind the sensor, 1.8 m wide) hides
   // the ground straight behind, as in KITTI scans: rays hitting it give no return.
   bool ego_vehicle = true;
+  // Non-repetitive rosette scanner (Livox-Avia-like) when rosette_rays > 0: that many rays per frame follow a
+  // rose curve over a forward field of view of rosette_fov_h_deg x rosette_fov_v_deg. Points are then binned
+  // into a pseudo range image of beams() rows (elevation_deg: row centres) x columns over that field of view.
+  int rosette_rays = 0;
+  double rosette_fov_h_deg = 70.4, rosette_fov_v_deg = 77.2;
+  int rosette_channels = 6;  // lasers (for laser_offsets): ray k belongs to channel k % rosette_channels
+  // Realism knobs, all off by default (sensor.hpp and tools/sim/README.md give the numbers):
+  bool laser_offsets = false;      // per-laser elevation / azimuth / range calibration errors, seeded
+  double mixed_pixel_rate = 0.0;   // chance that a return beside a > 1 m depth edge blends the two ranges
+  bool motion_distortion = false;  // each ray cast from the pose at its own time in the sweep (not de-skewed)
 
   // Velodyne HDL-64E-like: 64 beams over +2 .. -24.8 deg (upper block of 32 at 1/3 deg, lower 32 at
   // ~1/2 deg), 2083 columns (0.173 deg), 80 m.
@@ -63,6 +73,13 @@ struct SensorConfig {
   static SensorConfig beams128();
   // 32, 64 and 128 give the presets above; other counts spread uniformly over the HDL-64's +2 .. -24.8 deg.
   static SensorConfig preset(int beams);
+  // Velodyne VLP-16-like: 16 beams +15 .. -15 deg, 1800 columns (0.2 deg), 100 m.
+  static SensorConfig vlp16();
+  // Ouster OS1-128-like: 128 beams +22.5 .. -22.5 deg, 1024 columns, 120 m.
+  static SensorConfig os1_128();
+  // Livox-Avia-like rosette: 24000 rays per 100 ms frame over 70.4 x 77.2 deg, 150 m, 128 x 128 pseudo image.
+  static SensorConfig rosette();
+  bool isRosette() const { return rosette_rays > 0; }
   int beams() const { return static_cast<int>(elevation_deg.size()); }
   // No range noise, no dropouts, no intensity noise.
   SensorConfig& noiseFree();
@@ -82,6 +99,8 @@ struct LabelNoise {
 
 // ---- Simulator ----------------------------------------------------------------------------------------
 
+struct RayOrigin;  // render.cpp
+
 struct SimConfig {
   std::uint64_t seed = 7;
   SensorConfig sensor = SensorConfig::hdl64();
@@ -99,6 +118,7 @@ struct Frame {
   std::vector<std::uint32_t> clean_labels;  // labels before label noise (filled only when label noise is on)
   std::vector<std::uint16_t> beam;          // beam (row) of each point, 0 = top
   std::vector<std::uint16_t> column;        // azimuth column of each point
+  std::size_t mixed_points = 0;             // points whose range was blended across a depth edge
 };
 
 class Simulator {
@@ -123,6 +143,17 @@ class Simulator {
   // Per-beam and per-column direction tables, and the rays blocked by the ego vehicle (column-major).
   std::vector<float> sin_el_, cos_el_, sin_az_, cos_az_;
   std::vector<std::uint8_t> ego_blocked_;
+  // Per-laser calibration errors (empty unless sensor.laser_offsets): radians, radians, metres.
+  std::vector<float> laser_el_, laser_az_, laser_bias_;
+
+  // render() in parts (render.cpp).
+  struct FrameRays;
+  struct RayImage;
+  void castSpinning(const FrameRays& fr, RayImage& img, int c_begin, int c_end) const;
+  void castRosette(const FrameRays& fr, RayImage& img, int k_begin, int k_end) const;
+  void castOne(const FrameRays& fr, const RayOrigin& ro, std::uint32_t ray, const Vec3f& ds, const Vec3f& dt,
+               float bias, std::size_t px, RayImage& img) const;
+  void compact(const FrameRays& fr, const RayImage& img, Frame& out) const;
 };
 
 // Applies label noise to a rendered frame in place (fills clean_labels). Exposed for tests; render()
