@@ -93,6 +93,21 @@ with tempfile.TemporaryDirectory() as tmp:
     check(p.returncode == 0 and len(elevation) == 8 and elevation[0] == 10 and elevation[-1] == -10,
           f"--fov-up/--fov-down spread the beams ({elevation})")
 
+    # Sensor presets and realism options.
+    g = os.path.join(tmp, "g")
+    p = run("--route", "loop", "--frames", "100:102", "--out", g, "--sensor", "rosette", "--laser-offsets",
+            "--mixed-pixels", "0.5", "--motion-distortion", "--quiet")
+    with open(os.path.join(g, "sim_info.json")) as fh:
+        sensor = json.load(fh)["sensor"]
+    check(p.returncode == 0 and sensor["name"] == "rosette" and sensor["rosette"]["rays"] == 24000 and
+          sensor["laser_offsets"] and sensor["motion_distortion"] and sensor["mixed_pixel_rate"] == 0.5,
+          f"--sensor rosette with the realism options runs ({p.stderr.strip()})")
+    check("24000 rays" in p.stdout, "the summary names the rosette's rays")
+    p = run("--route", "loop", "--frames", "0:1", "--out", g, "--sensor", "vlp16", "--overwrite", "--quiet")
+    with open(os.path.join(g, "sim_info.json")) as fh:
+        sensor = json.load(fh)["sensor"]
+    check(p.returncode == 0 and sensor["beams"] == 16 and sensor["columns"] == 1800, "--sensor vlp16: 16 x 1800")
+
     # KITTI trajectory (needs the shared data).
     poses = os.path.join(data, "kitti_odometry_gt_poses", "poses", "00.txt")
     calib = os.path.join(data, "semantickitti_scans", "sequences", "00", "calib.txt")
@@ -122,6 +137,12 @@ with tempfile.TemporaryDirectory() as tmp:
         (["--route", "loop", "--label-noise", "2", "--out", os.path.join(tmp, "e")], 2, "label-noise"),
         (["--route", "loop", "--calib", "c.txt", "--out", os.path.join(tmp, "e")], 2, "--calib"),
         (["--route", "loop", "--fov-up", "3", "--out", os.path.join(tmp, "e")], 2, "--fov-down"),
+        (["--route", "loop", "--sensor", "hdl16", "--out", os.path.join(tmp, "e")], 2, "--sensor"),
+        (["--route", "loop", "--sensor", "vlp16", "--beams", "32", "--out", os.path.join(tmp, "e")], 2,
+         "mutually exclusive"),
+        (["--route", "loop", "--sensor", "rosette", "--columns", "64", "--out", os.path.join(tmp, "e")], 2,
+         "rosette"),
+        (["--route", "loop", "--mixed-pixels", "1.5", "--out", os.path.join(tmp, "e")], 2, "--mixed-pixels"),
     ]:
         p = run(*args)
         lines = p.stderr.strip().splitlines()
