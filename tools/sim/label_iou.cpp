@@ -45,6 +45,13 @@ void LabelIouCounts::add(const std::vector<std::uint32_t>& truth, const std::vec
   }
 }
 
+void LabelIouCounts::addExact(const std::vector<std::uint32_t>& labels) {
+  for (const std::uint32_t raw : labels) {
+    const int t = evalClassIndex(raw);
+    if (t >= 0) ++tp_[t];
+  }
+}
+
 void LabelIouCounts::merge(const LabelIouCounts& other) {
   for (int k = 0; k < kEvalClasses; ++k) {
     tp_[k] += other.tp_[k];

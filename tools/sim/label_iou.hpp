@@ -40,6 +40,8 @@ class LabelIouCounts {
  public:
   // Both vectors hold one label per point, in the same order.
   void add(const std::vector<std::uint32_t>& truth, const std::vector<std::uint32_t>& predicted);
+  // Labels that are their own truth (no label noise): every scored point is a true positive.
+  void addExact(const std::vector<std::uint32_t>& labels);
   void merge(const LabelIouCounts& other);
   // A class is present when it occurs in the truth or in the prediction.
   bool present(int k) const { return tp_[k] + fp_[k] + fn_[k] > 0; }

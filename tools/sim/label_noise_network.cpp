@@ -212,7 +212,9 @@ std::vector<std::uint32_t> missInstances(const std::vector<std::uint32_t>& label
                                          const Frame& frame, const NetworkNoiseParams& p, std::uint64_t key) {
   std::vector<std::uint32_t> out(labels);
   const auto fate = decideInstances(labels, img, p, key);
+  if (fate.empty()) return out;
   for (std::size_t i = 0; i < labels.size(); ++i) {
+    if (labels[i] < 0x10000u) continue;  // no instance bits: not a thing, nothing to look up
     const auto it = fate.find(labels[i]);
     if (it == fate.end() || it->second.action == -1) continue;
     int k = it->second.action;
@@ -255,14 +257,17 @@ void confuseBlobs(std::vector<std::uint32_t>& labels, const RangeImage& img, con
                   const NetworkNoiseParams& p, std::uint64_t key) {
   const int bw = std::max(1, p.blob_columns), bh = std::max(1, p.blob_beams);
   const double inv_scale = 1.0 / p.range_scale_m;
+  // Each row of blobs is shifted by its own offset (the brick pattern).
+  std::vector<int> shift((img.beams + bh - 1) / bh);
+  for (std::size_t row = 0; row < shift.size(); ++row)
+    shift[row] = static_cast<int>(hashKeys(key, 4, row) % static_cast<std::uint64_t>(bw));
   for (std::size_t i = 0; i < labels.size(); ++i) {
     const int k = evalClassIndex(labels[i]);
     if (k < 0 || p.strength[k] <= 0.0) continue;
     const double rr = img.range[i] * inv_scale;
     const double chance = std::min(0.97, p.strength[k] * (p.near_floor + rr * rr));
     const int row = frame.beam[i] / bh;
-    const int shift = static_cast<int>(hashKeys(key, 4, row) % static_cast<std::uint64_t>(bw));
-    const std::uint64_t h = hashKeys(key, 5, row, (frame.column[i] + shift) / bw, k);
+    const std::uint64_t h = hashKeys(key, 5, row, (frame.column[i] + shift[row]) / bw, k);
     if (unitFromBits(h) >= chance) continue;
     labels[i] = withClass(labels[i], pickConfusion(k, unitFromBits(mix64(h))));
   }

@@ -158,7 +158,10 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
         writeKittiBin((out / "velodyne" / (frameName(k) + ".bin")).string(), frame.scan.points, frame.intensity);
         writeLabels((out / "labels" / (frameName(k) + ".label")).string(), frame.scan.labels);
         points += frame.scan.points.size();
-        iou.add(frame.clean_labels.empty() ? frame.scan.labels : frame.clean_labels, frame.scan.labels);
+        if (frame.clean_labels.empty())
+          iou.addExact(frame.scan.labels);
+        else
+          iou.add(frame.clean_labels, frame.scan.labels);
       } catch (...) {
         std::lock_guard lock(mutex);
         if (!error) error = std::current_exception();
