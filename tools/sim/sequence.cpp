@@ -41,6 +41,15 @@ std::vector<double> row12(const Mat4d& T) {
   return v;
 }
 
+// Per-class IoU of the written labels against the true ones (SemanticKITTI single-scan scoring: moving
+// classes count as static ones); classes absent from both are left out.
+nlohmann::ordered_json labelIouJson(const LabelIouCounts& counts) {
+  nlohmann::ordered_json iou = nlohmann::ordered_json::object();
+  for (int k = 0; k < kEvalClasses; ++k)
+    if (counts.present(k)) iou[kEvalClassTable[k].name] = counts.iou(k);
+  return iou;
+}
+
 }  // namespace
 
 SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) {
@@ -251,12 +260,7 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
                          {"confusion", cfg.label_noise.confusion},
                          {"bleed", cfg.label_noise.bleed},
                          {"miss", cfg.label_noise.miss}};
-  // Per-class IoU of the written labels against the true ones (SemanticKITTI single-scan scoring: moving
-  // classes count as static ones); classes absent from both are left out.
-  nlohmann::ordered_json iou = nlohmann::ordered_json::object();
-  for (int k = 0; k < kEvalClasses; ++k)
-    if (summary.label_iou.present(k)) iou[kEvalClassTable[k].name] = summary.label_iou.iou(k);
-  info["label_iou"] = iou;
+  info["label_iou"] = labelIouJson(summary.label_iou);
   info["label_miou"] = summary.label_iou.meanIou();
   info["odometry_noise"] = {{"translation", opt.odometry.translation},
                             {"rotation_deg_per_m", opt.odometry.rotation_deg_per_m}};
