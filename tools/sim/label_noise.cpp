@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 
+#include "sim/label_noise_network.hpp"
 #include "sim/rng.hpp"
 #include "sim/simulator.hpp"
 
@@ -85,7 +86,18 @@ LabelNoise LabelNoise::fromRate(double rate) {
   return n;
 }
 
+LabelNoise LabelNoise::network() {
+  LabelNoise n;
+  n.model = LabelNoiseModel::kNetwork;
+  return n;
+}
+
 void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, int beams, int columns) {
+  if (noise.model == LabelNoiseModel::kNetwork) {
+    static const NetworkNoiseParams params = NetworkNoiseParams::rangeNet();
+    applyNetworkLabelNoise(frame, params, seed, beams, columns);
+    return;
+  }
   auto& labels = frame.scan.labels;
   frame.clean_labels = labels;
   const std::size_t n = labels.size();

@@ -19,6 +19,8 @@ struct Options {
   std::string poses_path, calib_path, route, frames_spec, out_dir, sensor;
   std::uint64_t seed = 7;
   double label_noise = 0.0, label_confusion = -1, label_bleed = -1, label_miss = -1;
+  std::string label_model;              // "" (not given), "iid" or "network"
+  std::vector<CLI::Option*> iid_knobs;  // --label-noise and its overrides: given ones exclude the network model
   int beams = -1, columns = 0, threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   double max_range = 0.0, range_noise = -1.0, odom_noise = 0.0, odom_rot = -1.0;
   double fov_up = 1e9, fov_down = 1e9;
@@ -38,12 +40,20 @@ void addInputOptions(CLI::App& app, Options& o) {
 }
 
 void addLabelNoiseOptions(CLI::App& app, Options& o) {
-  app.add_option("--label-noise", o.label_noise, "Network-like label noise rate (0 = ground-truth labels)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-confusion", o.label_confusion, "Override: class confusion rate")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-bleed", o.label_bleed, "Override: boundary bleed probability")->check(CLI::Range(0.0, 1.0));
-  app.add_option("--label-miss", o.label_miss, "Override: chance to miss a small object")->check(CLI::Range(0.0, 1.0));
+  o.iid_knobs = {
+      app.add_option("--label-noise", o.label_noise, "Network-like label noise rate (0 = ground-truth labels)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 1.0)),
+      app.add_option("--label-confusion", o.label_confusion, "Override: class confusion rate")
+          ->check(CLI::Range(0.0, 1.0)),
+      app.add_option("--label-bleed", o.label_bleed, "Override: boundary bleed probability")
+          ->check(CLI::Range(0.0, 1.0)),
+      app.add_option("--label-miss", o.label_miss, "Override: chance to miss a small object")
+          ->check(CLI::Range(0.0, 1.0))};
+  app.add_option("--label-noise-model", o.label_model,
+                 "iid: the --label-noise knobs (default); network: errors calibrated to RangeNet53++'s per-class "
+                 "IoU on SemanticKITTI (no other label option with it)")
+      ->check(CLI::IsMember({"iid", "network"}));
 }
 
 void addSensorOptions(CLI::App& app, Options& o) {
@@ -113,6 +123,11 @@ std::string validate(const Options& o) {
   if (o.sensor == "rosette" && (o.columns > 0 || o.fov_up < 1e9))
     return "--columns, --fov-up and --fov-down do not apply to --sensor rosette (it has no columns or beams)";
   if (o.out_dir.empty()) return "--out is required";
+  if (o.label_model == "network")
+    for (const CLI::Option* knob : o.iid_knobs)
+      if (knob->count() > 0)
+        return "--label-noise-model network is a calibrated preset and cannot be mixed with " + knob->get_name() +
+               " (that knob belongs to --label-noise-model iid)";
   return "";
 }
 
@@ -155,6 +170,10 @@ sglc::sim::SimConfig simConfig(const Options& o) {
   cfg.seed = o.seed;
   cfg.sensor = sensorConfig(o);
   cfg.world.moving_objects = !o.no_moving;
+  if (o.label_model == "network") {
+    cfg.label_noise = sglc::sim::LabelNoise::network();
+    return cfg;
+  }
   cfg.label_noise = sglc::sim::LabelNoise::fromRate(o.label_noise);
   if (o.label_confusion >= 0) cfg.label_noise.confusion = o.label_confusion;
   if (o.label_bleed >= 0) cfg.label_noise.bleed = o.label_bleed;
@@ -175,6 +194,19 @@ std::function<void(int, int, double)> progressPrinter() {
   };
 }
 
+// The IoU of the written labels against the true ones: mIoU and the classes present.
+void printLabelIou(const sglc::sim::LabelIouCounts& iou) {
+  std::string classes;
+  char buf[64];
+  for (int k = 0; k < sglc::sim::kEvalClasses; ++k) {
+    if (!iou.present(k)) continue;
+    std::snprintf(buf, sizeof buf, "%s%s %.2f", classes.empty() ? "" : ", ", sglc::sim::kEvalClassTable[k].name,
+                  iou.iou(k));
+    classes += buf;
+  }
+  std::printf("  labels:       mIoU %.3f vs true labels (%s)\n", iou.meanIou(), classes.c_str());
+}
+
 // The summary on stdout.
 void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::sim::SequenceSummary& s) {
   rusage usage_info{};
@@ -192,15 +224,19 @@ void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::
   else
     std::printf("  sensor:       %s, %d beams x %d columns, %.0f m", sc.name.c_str(), sc.beams(), sc.columns,
                 sc.max_range);
-  std::printf("%s%s%s; label noise: confusion %.3f, bleed %.3f, miss %.3f\n", sc.laser_offsets ? ", laser offsets" : "",
-              sc.mixed_pixel_rate > 0 ? ", mixed pixels" : "", sc.motion_distortion ? ", motion distortion" : "",
-              noise.confusion, noise.bleed, noise.miss);
+  std::printf("%s%s%s", sc.laser_offsets ? ", laser offsets" : "", sc.mixed_pixel_rate > 0 ? ", mixed pixels" : "",
+              sc.motion_distortion ? ", motion distortion" : "");
+  if (noise.model == sglc::sim::LabelNoiseModel::kNetwork)
+    std::printf("; label noise: network (RangeNet53++ calibrated)\n");
+  else
+    std::printf("; label noise: confusion %.3f, bleed %.3f, miss %.3f\n", noise.confusion, noise.bleed, noise.miss);
   std::snprintf(buf, sizeof buf,
                 "  world:        seed %llu, %.0f m of street, %zu primitives (%zu buildings, %zu trees, %zu poles, "
                 "%zu signs, %zu parked vehicles, %zu moving agents), %.1f MB, built in %.2f s\n",
                 static_cast<unsigned long long>(o.seed), ws.path_length_m, ws.primitives, ws.buildings, ws.trees,
                 ws.poles, ws.signs, ws.parked_vehicles, ws.moving_agents, ws.memory_bytes / 1e6, ws.build_seconds);
   std::fputs(buf, stdout);
+  printLabelIou(s.label_iou);
   std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
               s.bytes / 1e6);
   std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n", s.frames_per_second,

@@ -41,6 +41,15 @@ std::vector<double> row12(const Mat4d& T) {
   return v;
 }
 
+// Per-class IoU of the written labels against the true ones (SemanticKITTI single-scan scoring: moving
+// classes count as static ones); classes absent from both are left out.
+nlohmann::ordered_json labelIouJson(const LabelIouCounts& counts) {
+  nlohmann::ordered_json iou = nlohmann::ordered_json::object();
+  for (int k = 0; k < kEvalClasses; ++k)
+    if (counts.present(k)) iou[kEvalClassTable[k].name] = counts.iou(k);
+  return iou;
+}
+
 }  // namespace
 
 SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) {
@@ -149,6 +158,7 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
   std::condition_variable cv;
   auto worker = [&] {
     Frame frame;
+    LabelIouCounts iou;  // merged once at the end, so workers never wait on each other
     while (!failed) {
       const int k = next.fetch_add(1);
       if (k >= n) break;
@@ -157,6 +167,10 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
         writeKittiBin((out / "velodyne" / (frameName(k) + ".bin")).string(), frame.scan.points, frame.intensity);
         writeLabels((out / "labels" / (frameName(k) + ".label")).string(), frame.scan.labels);
         points += frame.scan.points.size();
+        if (frame.clean_labels.empty())
+          iou.addExact(frame.scan.labels);
+        else
+          iou.add(frame.clean_labels, frame.scan.labels);
       } catch (...) {
         std::lock_guard lock(mutex);
         if (!error) error = std::current_exception();
@@ -165,6 +179,8 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
       ++done;
       cv.notify_one();
     }
+    std::lock_guard lock(mutex);
+    summary.label_iou.merge(iou);
   };
   const int threads = std::clamp(opt.threads, 1, n);
   std::vector<std::thread> pool;
@@ -247,8 +263,12 @@ SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& opt) 
                    {"memory_bytes", ws.memory_bytes},
                    {"build_seconds", ws.build_seconds},
                    {"content_hash", world.contentHash()}};
-  info["label_noise"] = {
-      {"confusion", cfg.label_noise.confusion}, {"bleed", cfg.label_noise.bleed}, {"miss", cfg.label_noise.miss}};
+  info["label_noise"] = {{"model", cfg.label_noise.modelName()},
+                         {"confusion", cfg.label_noise.confusion},
+                         {"bleed", cfg.label_noise.bleed},
+                         {"miss", cfg.label_noise.miss}};
+  info["label_iou"] = labelIouJson(summary.label_iou);
+  info["label_miou"] = summary.label_iou.meanIou();
   info["odometry_noise"] = {{"translation", opt.odometry.translation},
                             {"rotation_deg_per_m", opt.odometry.rotation_deg_per_m}};
   info["pairs_distance"] = {

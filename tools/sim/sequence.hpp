@@ -8,7 +8,8 @@
 //   pairs_distance.txt   "i j label" (SSC style): i later, j earlier; 1 = loop (< 3 m), 0 = non-loop (> 20 m)
 //   loop_distance4.txt   "i j" + 12 numbers: i earlier, j later, row-major 3x4 T with p_j = T * p_i
 //   odometry.txt     (only with odometry noise) drifting LiDAR poses, same convention as poses.txt
-//   sim_info.json    everything needed to reproduce the output, and a summary
+//   sim_info.json    everything needed to reproduce the output, and a summary (with the per-class IoU of the
+//                    written labels against the true ones)
 #pragma once
 
 #include <functional>
@@ -16,6 +17,7 @@
 #include <vector>
 
 #include "sim/ground_truth.hpp"
+#include "sim/label_iou.hpp"
 #include "sim/simulator.hpp"
 
 namespace sglc::sim {
@@ -42,6 +44,8 @@ struct SequenceSummary {
   double seconds = 0.0;     // rendering + writing frames
   double frames_per_second = 0.0;
   std::size_t positives = 0, negatives = 0, loop_rows = 0, reverse_loop_rows = 0;
+  // Written labels vs true labels over all frames written (all IoU 1 without label noise).
+  LabelIouCounts label_iou;
 };
 
 SequenceSummary writeSequence(const Simulator& sim, const SequenceOptions& options);

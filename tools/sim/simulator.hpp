@@ -87,14 +87,24 @@ struct SensorConfig {
 
 // ---- Label noise --------------------------------------------------------------------------------------
 
-// Mimics a segmentation network's output. All zero = ground-truth labels.
+// Which label noise model applies: the three independent knobs below (kIid), or the network preset (kNetwork)
+// calibrated to RangeNet53++'s published per-class IoU on SemanticKITTI (label_noise_network.hpp).
+enum class LabelNoiseModel : std::uint8_t { kIid = 0, kNetwork = 1 };
+
+// Mimics a segmentation network's output. All zero (iid model) = ground-truth labels.
 struct LabelNoise {
+  LabelNoiseModel model = LabelNoiseModel::kIid;
+  // iid model only:
   double confusion = 0.0;  // chance that a point takes a plausible wrong class (car <-> truck, road <-> parking ...)
   double bleed = 0.0;      // chance that a point at a label boundary (range image) takes its neighbour's label
   double miss = 0.0;       // chance per frame that a small object (pole, sign, trunk) is missed as a whole
   // One knob: confusion = rate, bleed = min(0.5, 2 * rate), miss = min(1, 2 * rate).
   static LabelNoise fromRate(double rate);
-  bool any() const { return confusion > 0 || bleed > 0 || miss > 0; }
+  // The network preset: range-dependent, blob-shaped, per-instance errors whose per-class IoU matches
+  // RangeNet53++ (KNN) on the SemanticKITTI test set; moving objects get their static class.
+  static LabelNoise network();
+  bool any() const { return model == LabelNoiseModel::kNetwork || confusion > 0 || bleed > 0 || miss > 0; }
+  const char* modelName() const { return model == LabelNoiseModel::kNetwork ? "network" : "iid"; }
 };
 
 // ---- Simulator ----------------------------------------------------------------------------------------

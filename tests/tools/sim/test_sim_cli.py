@@ -84,6 +84,27 @@ with tempfile.TemporaryDirectory() as tmp:
     check(not filecmp.cmp(os.path.join(a, "labels", "000000.label"), os.path.join(d, "labels", "000000.label"),
                           shallow=False), "--label-noise changes labels")
 
+    # Every run reports the IoU of its labels against the true ones; the network model lowers it.
+    with open(os.path.join(d, "sim_info.json")) as fh:
+        info = json.load(fh)
+    check(info["label_noise"]["model"] == "iid" and "road" in info["label_iou"] and
+          0 < info["label_miou"] < 1, f"--label-noise run: label_iou and label_miou in sim_info.json ({info['label_miou']})")
+    with open(os.path.join(a, "sim_info.json")) as fh:
+        info = json.load(fh)
+    check(info["label_miou"] == 1 and all(v == 1 for v in info["label_iou"].values()),
+          "without label noise every class has IoU 1")
+    check("labels:       mIoU" in run("--route", "loop", "--frames", "0:2", "--out", os.path.join(tmp, "i"),
+                                      "--quiet", *SMALL).stdout, "the summary has a labels: mIoU line")
+    n = os.path.join(tmp, "n")
+    p = run("--route", "loop", "--frames", "0:1911:200", "--seed", "3", "--out", n, "--label-noise-model", "network",
+            "--quiet")
+    check(p.returncode == 0 and "label noise: network" in p.stdout, f"--label-noise-model network runs ({p.stderr})")
+    with open(os.path.join(n, "sim_info.json")) as fh:
+        info = json.load(fh)
+    check(info["label_noise"]["model"] == "network" and 0.4 < info["label_miou"] < 0.8 and
+          0.8 < info["label_iou"]["road"] < 0.97, f"network model: mIoU {info['label_miou']:.3f}, per class in "
+          f"sim_info.json ({info['label_iou']})")
+
     # Field of view.
     f = os.path.join(tmp, "f")
     p = run("--route", "loop", "--frames", "0:2", "--out", f, "--beams", "8", "--columns", "64", "--fov-up", "10",
@@ -135,6 +156,12 @@ with tempfile.TemporaryDirectory() as tmp:
         (["--poses", os.path.join(tmp, "missing.txt"), "--calib", calib, "--out", os.path.join(tmp, "e")], 1,
          "missing.txt"),
         (["--route", "loop", "--label-noise", "2", "--out", os.path.join(tmp, "e")], 2, "label-noise"),
+        (["--route", "loop", "--label-noise-model", "unet", "--out", os.path.join(tmp, "e")], 2,
+         "--label-noise-model"),
+        (["--route", "loop", "--label-noise-model", "network", "--label-noise", "0.05", "--out",
+          os.path.join(tmp, "e")], 2, "cannot be mixed with --label-noise"),
+        (["--route", "loop", "--label-noise-model", "network", "--label-miss", "0.5", "--out",
+          os.path.join(tmp, "e")], 2, "--label-miss"),
         (["--route", "loop", "--calib", "c.txt", "--out", os.path.join(tmp, "e")], 2, "--calib"),
         (["--route", "loop", "--fov-up", "3", "--out", os.path.join(tmp, "e")], 2, "--fov-down"),
         (["--route", "loop", "--sensor", "hdl16", "--out", os.path.join(tmp, "e")], 2, "--sensor"),

@@ -1,0 +1,58 @@
+// Per-class IoU of noisy labels against the true ones, the way SemanticKITTI's single-scan benchmark scores a
+// network: moving classes count as their static class, unlabelled/outlier/other-structure/other-object points
+// are ignored, and a point predicted as an ignored class counts as a miss of its true class.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+namespace sglc::sim {
+
+// The SemanticKITTI evaluation classes the simulator emits, in the benchmark's order.
+inline constexpr int kEvalClasses = 15;
+struct EvalClass {
+  std::uint32_t id;  // raw SemanticKITTI id of the static class
+  const char* name;  // as in the benchmark tables
+};
+inline constexpr std::array<EvalClass, kEvalClasses> kEvalClassTable = {{{10, "car"},
+                                                                         {18, "truck"},
+                                                                         {20, "other-vehicle"},
+                                                                         {30, "person"},
+                                                                         {40, "road"},
+                                                                         {44, "parking"},
+                                                                         {48, "sidewalk"},
+                                                                         {49, "other-ground"},
+                                                                         {50, "building"},
+                                                                         {51, "fence"},
+                                                                         {70, "vegetation"},
+                                                                         {71, "trunk"},
+                                                                         {72, "terrain"},
+                                                                         {80, "pole"},
+                                                                         {81, "traffic-sign"}}};
+
+// Index into kEvalClassTable of a raw label (instance bits ignored, moving ids folded onto their static
+// class), or -1 for a class the benchmark ignores or the simulator never emits.
+int evalClassIndex(std::uint32_t raw_label);
+
+// Confusion counts (true positives, false positives, false negatives per class) of predicted vs true labels.
+class LabelIouCounts {
+ public:
+  // Both vectors hold one label per point, in the same order.
+  void add(const std::vector<std::uint32_t>& truth, const std::vector<std::uint32_t>& predicted);
+  // Labels that are their own truth (no label noise): every scored point is a true positive.
+  void addExact(const std::vector<std::uint32_t>& labels);
+  void merge(const LabelIouCounts& other);
+  // A class is present when it occurs in the truth or in the prediction.
+  bool present(int k) const { return tp_[k] + fp_[k] + fn_[k] > 0; }
+  // tp / (tp + fp + fn); 0 for an absent class.
+  double iou(int k) const;
+  // Mean over the present classes (1 when none is present).
+  double meanIou() const;
+  std::uint64_t truthPoints(int k) const { return tp_[k] + fn_[k]; }
+
+ private:
+  std::array<std::uint64_t, kEvalClasses> tp_{}, fp_{}, fn_{};
+};
+
+}  // namespace sglc::sim
