@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <thread>
 
 #include "sglc/frame_selection.hpp"
@@ -12,6 +13,8 @@
 #include "sim/sequence.hpp"
 
 namespace {
+
+constexpr int kNoEpoch = std::numeric_limits<int>::min();
 
 // The command line. Negative (and 1e9 for the field of view) means "not given": the preset's value applies.
 struct Options {
@@ -22,6 +25,9 @@ struct Options {
   double max_range = 0.0, range_noise = -1.0, odom_noise = 0.0, odom_rot = -1.0;
   double fov_up = 1e9, fov_down = 1e9;
   bool noise_free = false, no_moving = false, quiet = false, overwrite = false;
+  int epoch = kNoEpoch;  // not given: the frozen world (or day 0 with --turnover)
+  bool turnover = false;
+  double aliasing = 0.0;
   sglc::sim::PairListConfig pairs;
 };
 
@@ -57,6 +63,17 @@ void addSensorOptions(CLI::App& app, Options& o) {
   app.add_flag("--no-moving", o.no_moving, "No moving vehicles or pedestrians");
 }
 
+void addWorldOptions(CLI::App& app, Options& o) {
+  // Checked in validate(), so that the error names the flag and the bad value plainly.
+  app.add_option("--epoch", o.epoch,
+                 "Render the world N >= 0 days after today: parked cars, temporary objects and foliage change "
+                 "(implies --turnover)");
+  app.add_flag("--turnover", o.turnover,
+               "Parked cars come and go during the run, temporary objects follow their epoch (day 0 unless --epoch)");
+  app.add_option("--aliasing", o.aliasing, "Share of lots (0..1) copied from a few templates: look-alike streets")
+      ->capture_default_str();
+}
+
 void addOutputOptions(CLI::App& app, Options& o) {
   app.add_option("--odom-noise", o.odom_noise,
                  "Write odometry.txt with drift: translation sigma as a fraction of distance (e.g. 0.01)")
@@ -81,6 +98,7 @@ void addOptions(CLI::App& app, Options& o) {
   addInputOptions(app, o);
   addLabelNoiseOptions(app, o);
   addSensorOptions(app, o);
+  addWorldOptions(app, o);
   addOutputOptions(app, o);
 }
 
@@ -92,6 +110,10 @@ std::string validate(const Options& o) {
   if (!o.route.empty() && !o.calib_path.empty()) return "--calib applies to --poses only, not to --route";
   if ((o.fov_up < 1e9) != (o.fov_down < 1e9)) return "--fov-up and --fov-down go together";
   if (o.fov_up < 1e9 && o.fov_up <= o.fov_down) return "--fov-up must be above --fov-down";
+  if (o.epoch != kNoEpoch && o.epoch < 0)
+    return "--epoch must be a whole number of days >= 0, got " + std::to_string(o.epoch);
+  if (!(o.aliasing >= 0.0 && o.aliasing <= 1.0))
+    return "--aliasing must be within [0, 1], got " + std::to_string(o.aliasing);
   if (o.out_dir.empty()) return "--out is required";
   return "";
 }
@@ -131,6 +153,9 @@ sglc::sim::SimConfig simConfig(const Options& o) {
   cfg.seed = o.seed;
   cfg.sensor = sensorConfig(o);
   cfg.world.moving_objects = !o.no_moving;
+  cfg.world.turnover = o.turnover || o.epoch != kNoEpoch;
+  cfg.world.epoch = std::max(0, o.epoch);
+  cfg.world.aliasing = o.aliasing;
   cfg.label_noise = sglc::sim::LabelNoise::fromRate(o.label_noise);
   if (o.label_confusion >= 0) cfg.label_noise.confusion = o.label_confusion;
   if (o.label_bleed >= 0) cfg.label_noise.bleed = o.label_bleed;
