@@ -30,12 +30,12 @@ int occupantAt(const OccupancyProcess& process, double t);
 // Tuning of the kerb-side parking slots, lot bays and temporary objects (see tools/sim/README.md for the
 // change shares these give).
 struct TurnoverRates {
-  double short_stay_share = 0.35;                   // share of parking slots used for short stays
-  double short_stay_period = 900.0;                 // s: a short-stay occupant stays 15 minutes
-  double resident_period = 2.7 * kSecondsPerDay;    // a resident's car stays 2.7 days on average
+  double short_stay_share = 0.5;                    // share of parking slots used for short stays
+  double short_stay_period = 600.0;                 // s: a short-stay occupant stays 10 minutes
+  double resident_period = 5.7 * kSecondsPerDay;    // a resident's car stays 5.7 days
   int candidates = 3;                               // different vehicles that may use one slot
   double temporary_period = 10.0 * kSecondsPerDay;  // a skip or construction fence stays ~10 days
-  double temporary_presence = 0.3;                  // chance that a temporary-object site is in use
+  double temporary_presence = 0.4;                  // chance that a temporary-object site is in use
 };
 inline constexpr TurnoverRates kTurnover{};
 

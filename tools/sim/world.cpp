@@ -1141,7 +1141,7 @@ class Generator {
     const double S = w_.path.length();
     Rng rng(hashKeys(w_.seed, kTemporary, side + 2));
     int site = 0;
-    for (double s = rng.uniform(5, 40); s < S; s += rng.uniform(40, 80), ++site) {
+    for (double s = rng.uniform(5, 30); s < S; s += rng.uniform(25, 55), ++site) {
       const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
       const int kind = rng.below(3);
       const double strip = st().road_half_width + st().parking_width / 2;

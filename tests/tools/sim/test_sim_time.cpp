@@ -91,5 +91,108 @@ TEST(Time, ParkedVehiclesChangeOverMinutesDaysAndMonths) {
   EXPECT_GT(season, 0.75);
 }
 
+TEST(Time, FewParkedVehiclesChangeBetweenAVisitAndTheRevisit) {
+  // For each parked vehicle seen (within 20 m) at a first visit and again more than 20 s later on the route.
+  const World& w = turnoverWorld();
+  const auto& poses = loopTrajectory().poses;
+  const double dt = loopTrajectory().frame_dt;
+  std::size_t seen = 0, changed = 0;
+  double gap_sum = 0;
+  std::set<std::uint32_t> done;
+  for (const auto& p : w.statics()) {
+    if (p.presence == 0 || !isVehicle(p) || !done.insert(p.presence).second) continue;
+    int first = -1, again = -1;
+    for (int i = 0; i < static_cast<int>(poses.size()); ++i) {
+      if (std::hypot(poses[i](0, 3) - p.cx, poses[i](1, 3) - p.cy) > 20) continue;
+      if (first < 0) first = i;
+      if ((i - first) * dt > 20) {
+        again = i;
+        break;
+      }
+    }
+    if (again < 0 || !w.present(p, first * dt)) continue;
+    ++seen;
+    gap_sum += (again - first) * dt;
+    changed += !w.present(p, again * dt);
+  }
+  const double share = static_cast<double>(changed) / std::max<std::size_t>(seen, 1);
+  std::printf("revisited parked vehicles changed: %zu of %zu (%.3f), mean gap %.0f s\n", changed, seen, share,
+              gap_sum / std::max<std::size_t>(seen, 1));
+  ASSERT_GT(seen, 30u);
+  EXPECT_GT(share, 0.01);
+  EXPECT_LT(share, 0.15);
+}
+
+TEST(Time, TemporaryObjectsComeAndGoWithTheEpoch) {
+  const World& w = turnoverWorld();
+  const auto& st = w.stats();
+  ASSERT_GT(st.temporary_sites, 5u);
+  // Sites: timed primitives that are not parked vehicles, or trucks outside the slots' vehicles... count by
+  // presence key over the labels temporary objects use, and the epochs at which each is there.
+  std::map<std::uint32_t, int> days_present;
+  std::set<std::uint32_t> sites;
+  for (const auto& p : w.statics()) {
+    const auto c = label::classOf(p.label);
+    if (p.presence == 0 || (c != label::kFence && c != label::kOtherObject)) continue;
+    sites.insert(p.presence);
+    for (int day = 0; day < 120; ++day) days_present[p.presence] += w.present(p, day * 86400.0);
+  }
+  ASSERT_GT(sites.size(), 3u);
+  int sometimes = 0, total = 0;
+  for (const auto& [key, n] : days_present) {
+    sometimes += n > 0 && n < 120;
+    total += n;
+  }
+  const double per_km = (static_cast<double>(total) / 120) * (1000.0 / st.path_length_m);
+  std::printf("temporary sites %zu (fences/skips %zu), fences/skips present per km of street: %.2f\n",
+              st.temporary_sites, sites.size(), per_km);
+  EXPECT_GE(sometimes, static_cast<int>(sites.size()) * 8 / 10);
+  EXPECT_GT(per_km, 0.5);
+  EXPECT_LT(per_km, 10.0);
+}
+
+TEST(Time, FoliageIsSparserInWinterWithTheSameTrunks) {
+  const World winter(loopTrajectory().poses, 7, turnoverConfig(182));
+  const auto &a = turnoverWorld().statics(), &b = winter.statics();
+  ASSERT_EQ(a.size(), b.size());
+  int sparser = 0, crowns = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (label::classOf(a[i].label) == label::kTrunk) {
+      EXPECT_EQ(a[i].cx, b[i].cx);
+      EXPECT_EQ(a[i].z1, b[i].z1);
+    }
+    if (label::classOf(a[i].label) != label::kVegetation) continue;
+    ++crowns;
+    sparser += b[i].pass_through > a[i].pass_through + 20;
+    EXPECT_EQ(a[i].hx, b[i].hx);
+  }
+  ASSERT_GT(crowns, 50);
+  EXPECT_EQ(sparser, crowns);
+  // Day 0 is summer: today's porosity.
+  std::multiset<int> today, day0;
+  for (const auto& p : frozenWorld().statics())
+    if (label::classOf(p.label) == label::kVegetation) today.insert(p.pass_through);
+  for (const auto& p : a)
+    if (label::classOf(p.label) == label::kVegetation && p.presence == 0) day0.insert(p.pass_through);
+  EXPECT_EQ(today, day0);
+}
+
+TEST(Time, SameSeedAndEpochSameFrameOtherEpochOtherParkedCars) {
+  SimConfig cfg = smallConfig();
+  cfg.world = turnoverConfig(1);
+  const Simulator a(loopTrajectory(), cfg), b(loopTrajectory(), cfg);
+  const Frame fa = a.render(150), fb = b.render(150);
+  EXPECT_EQ(fa.scan.points, fb.scan.points);
+  EXPECT_EQ(fa.scan.labels, fb.scan.labels);
+  cfg.world.epoch = 0;
+  const Simulator c(loopTrajectory(), cfg);
+  int differing = 0;
+  for (int index : {100, 150, 400, 700}) {
+    const Frame f1 = a.render(index), f0 = c.render(index);
+    differing += f1.scan.labels != f0.scan.labels;
+  }
+  EXPECT_GE(differing, 3);
+}
+
 }  // namespace
 }  // namespace sglc::sim::test
