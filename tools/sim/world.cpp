@@ -477,9 +477,13 @@ class Generator {
     for (const auto& lot : lots_) buildings(lot, true);
     for (const auto& lot : lots_) frontBoundary(lot);
     for (int side : {-1, 1}) kerbFurniture(side);
+    for (const auto& lot : lots_)
+      if (lot.aliased) aliasedKerb(lot);
     for (const auto& lot : lots_) yard(lot);
     if (w_.config.turnover) today_occ_ = occ_;
     for (int side : {-1, 1}) parkedVehicles(side);
+    for (const auto& lot : lots_)
+      if (lot.aliased) aliasedParking(lot);
     for (const auto& lot : lots_) lotVehicles(lot);
     if (w_.config.turnover)
       for (int side : {-1, 1}) temporaryObjects(side);
@@ -501,6 +505,7 @@ class Generator {
     double setback;
     int boundary;  // 0 none, 1 fence, 2 hedge
     std::uint64_t key;
+    bool aliased = false;  // copies a template (look-alike street)
   };
 
   const WorldStyle& st() const { return w_.style; }
@@ -579,6 +584,8 @@ class Generator {
           Rng trng(tkey);
           drawLot(lot, trng);
           lot.key = hashKeys(tkey, kLots);
+          lot.aliased = true;
+          aliased_[side > 0].emplace_back(s, s + lot.len);
           ++w_.stats.aliased_lots;
         }
         ++k;
@@ -808,6 +815,54 @@ class Generator {
     return true;
   }
 
+  bool placeLamp(int side, double s, double r, double h, double arm, Rng& rng) {
+    const double kerb = st().kerb();
+    const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
+    const Vec2 c = w_.path.point(s) + n * (kerb + 0.35);
+    if (dist(c) < kerb + 0.2 || !freeRect(c, t, 0.3, 0.3, 0.3) || !owned(c, s - 10, s + 10)) return false;
+    const double gz = ground(c);
+    const std::uint32_t lab = World::Impl::withInstance(label::kPole, w_.newInstance());
+    const double refl = rng.uniform(0.25, 0.4);
+    add(makeCylinder(c.x(), c.y(), r, gz - 0.2, gz + h, lab, refl));
+    const Vec2 ac = c - n * (arm / 2);
+    add(makeBox(ac.x(), ac.y(), n, arm / 2, 0.06, gz + h - 0.15, gz + h, lab, refl));
+    const Vec2 lc = c - n * (arm + 0.2);
+    add(makeBox(lc.x(), lc.y(), n, 0.3, 0.15, gz + h - 0.3, gz + h - 0.05, lab, refl));
+    markRect(c, t, 0.3, 0.3);
+    ++w_.stats.poles;
+    return true;
+  }
+
+  // Whether arc length s on `side` lies along a look-alike lot, whose street trees, lamp posts and parked
+  // vehicles come from its template (aliasedKerb, aliasedParking) instead of the street-long passes.
+  bool aliasedStretch(int side, double s) const {
+    for (const auto& [lo, hi] : aliased_[side > 0])
+      if (s >= lo && s < hi) return true;
+    return false;
+  }
+
+  // A look-alike lot's kerb: lamp post and street trees at the template's offsets and spacing.
+  void aliasedKerb(const Lot& lot) {
+    Rng rng(hashKeys(lot.key, kKerb));
+    if (rng.chance(0.6)) {
+      const double a = rng.uniform(1, std::max(1.5, lot.len - 1)), r = rng.uniform(0.08, 0.13);
+      const double h = rng.uniform(6.0, 9.0), arm = rng.uniform(1.0, 2.0);
+      Rng lamp(hashKeys(lot.key, kKerb, 1));
+      placeLamp(lot.side, lot.s + a, r, h, arm, lamp);
+    }
+    static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
+    if (!rng.chance(kChance[static_cast<int>(lot.district)] * 1.3)) return;
+    const double gap = rng.uniform(6, 12), trunk_r = rng.uniform(0.15, 0.3), trunk_h = rng.uniform(3.0, 4.5);
+    const double crown_r = rng.uniform(2.2, 4.0), crown_h = rng.uniform(2.0, 3.2);
+    int k = 0;
+    for (double a = rng.uniform(1, gap); a < lot.len - 1; a += gap) {
+      const double s = lot.s + a;
+      const Vec2 c = w_.path.point(s) + lot.side * leftNormal(w_.path.tangent(s)) * (st().kerb() + 0.75);
+      Rng tree(hashKeys(lot.key, kKerb, 2, k++));
+      placeTree(c, trunk_r, trunk_h, crown_r, crown_h, st().kerb() + 0.3, s - 10, s + 10, tree);
+    }
+  }
+
   // Street trees, lamp posts and traffic signs at the kerb side of the sidewalk.
   void kerbFurniture(int side) {
     const double S = w_.path.length();
@@ -815,21 +870,9 @@ class Generator {
     {
       Rng rng(hashKeys(w_.seed, kKerb, side + 2, 1));
       for (double s = rng.uniform(2, 20); s < S; s += rng.uniform(22, 38)) {
-        if (!rng.chance(0.85)) continue;
-        const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
-        const Vec2 c = w_.path.point(s) + n * (kerb + 0.35);
+        if (!rng.chance(0.85) || aliasedStretch(side, s)) continue;
         const double r = rng.uniform(0.08, 0.13), h = rng.uniform(6.0, 9.0), arm = rng.uniform(1.0, 2.0);
-        if (dist(c) < kerb + 0.2 || !freeRect(c, t, 0.3, 0.3, 0.3) || !owned(c, s - 10, s + 10)) continue;
-        const double gz = ground(c);
-        const std::uint32_t lab = World::Impl::withInstance(label::kPole, w_.newInstance());
-        const double refl = rng.uniform(0.25, 0.4);
-        add(makeCylinder(c.x(), c.y(), r, gz - 0.2, gz + h, lab, refl));
-        const Vec2 ac = c - n * (arm / 2);
-        add(makeBox(ac.x(), ac.y(), n, arm / 2, 0.06, gz + h - 0.15, gz + h, lab, refl));
-        const Vec2 lc = c - n * (arm + 0.2);
-        add(makeBox(lc.x(), lc.y(), n, 0.3, 0.15, gz + h - 0.3, gz + h - 0.05, lab, refl));
-        markRect(c, t, 0.3, 0.3);
-        ++w_.stats.poles;
+        placeLamp(side, s, r, h, arm, rng);
       }
     }
     {
@@ -857,7 +900,8 @@ class Generator {
         const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
         const Vec2 c = w_.path.point(s) + n * (kerb + 0.75);
         static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
-        if (!rng.chance(kChance[static_cast<int>(w_.districtAt(c.x(), c.y()).type)])) continue;
+        if (!rng.chance(kChance[static_cast<int>(w_.districtAt(c.x(), c.y()).type)]) || aliasedStretch(side, s))
+          continue;
         placeTree(c, rng.uniform(0.15, 0.3), rng.uniform(3.0, 4.5), rng.uniform(2.2, 4.0), rng.uniform(2.0, 3.2),
                   kerb + 0.3, s - 10, s + 10, rng);
       }
@@ -956,6 +1000,39 @@ class Generator {
     return true;
   }
 
+  static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};  // share of kerb slots in use, by district
+
+  // A look-alike lot's parking strip: vehicles at the template's places (with turnover, each comes and goes).
+  void aliasedParking(const Lot& lot) {
+    Rng rng(hashKeys(lot.key, kParked, 3));
+    int k = 0;
+    for (double a = rng.uniform(0, 3); a < lot.len; ++k) {
+      const VehicleDims v = drawVehicle(rng, false);
+      const double gap = rng.uniform(0.8, 4.0), mid = lot.s + a + v.L / 2;
+      const Vec2 t = w_.path.tangent(mid), n = lot.side * leftNormal(t);
+      const Vec2 c = w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + rng.uniform(-0.15, 0.1));
+      const bool occupied = rng.chance(kOccupied[static_cast<int>(lot.district)] + 0.2);
+      Candidate q{c, parkedHeading(t, rng), v, vehicleReflectivity(v, rng)};
+      a += v.L + gap;
+      const DistrictInfo d = w_.districtAt(c.x(), c.y());
+      const double s_lo = mid - v.L / 2 - 10, s_hi = mid + v.L / 2 + 10;
+      if (a > lot.len || !d.parking || dist(c) > st().kerb() || !occupied ||
+          !vehicleFits(q, st().road_half_width - 0.3, s_lo, s_hi, occ_))
+        continue;
+      if (!w_.config.turnover) {
+        appendAgentShape(w_.prims, c.x(), c.y(), ground(c), q.heading, v.kind, v.L, v.W, v.H,
+                         World::Impl::withInstance(v.cls, w_.newInstance()), q.refl);
+        markRect(c, q.heading, v.L / 2, v.W / 2);
+        ++w_.stats.parked_vehicles;
+        continue;
+      }
+      OccupancyProcess p = parkingProcess(hashKeys(lot.key, kParked, 4, k), 0.8, true, rng);
+      p.candidates = 1;
+      addSlot(p, {q}, false);
+      ++w_.stats.parking_slots;
+    }
+  }
+
   // Cars, vans and trucks parked along the parking strip, nose to tail with small gaps.
   void parkedVehicles(int side) {
     const double S = w_.path.length();
@@ -968,11 +1045,10 @@ class Generator {
       const Vec2 t = w_.path.tangent(mid), n = side * leftNormal(t);
       const Vec2 c = w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + rng.uniform(-0.15, 0.1));
       const DistrictInfo d = w_.districtAt(c.x(), c.y());
-      static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};
       const bool occupied = rng.chance(kOccupied[static_cast<int>(d.type)]);
       const double yaw = rng.uniform(-3, 3) * std::numbers::pi / 180 + (rng.chance(0.5) ? 0.0 : std::numbers::pi);
       const Vec2 h(std::cos(yaw) * t.x() - std::sin(yaw) * t.y(), std::sin(yaw) * t.x() + std::cos(yaw) * t.y());
-      if (d.parking && dist(c) <= st().kerb()) {
+      if (d.parking && dist(c) <= st().kerb() && !aliasedStretch(side, mid)) {
         if (!w_.config.turnover) {
           if (occupied) placeVehicle(c, h, v, st().road_half_width - 0.3, s - 10, s + v.L + 10, rng);
         } else {
@@ -1225,6 +1301,7 @@ class Generator {
   // occupants are tested, and the random streams consumed, exactly as in the frozen world.
   TiledGrid<std::uint8_t> today_occ_;
   std::vector<std::pair<std::size_t, std::size_t>> deferred_;  // primitive ranges whose instance comes last
+  std::vector<std::pair<double, double>> aliased_[2];          // look-alike lots' stretches, right / left
 };
 
 }  // namespace

@@ -194,5 +194,39 @@ TEST(Time, SameSeedAndEpochSameFrameOtherEpochOtherParkedCars) {
   EXPECT_GE(differing, 3);
 }
 
+World aliasedWorld(double rate) {
+  WorldConfig c;
+  c.aliasing = rate;
+  return World(loopTrajectory().poses, 7, c);
+}
+
+// Pairs of buildings more than 40 m apart with the same footprint and height above their base: copies of
+// one template (independent draws practically never agree to the last bit).
+int lookAlikeBuildingPairs(const World& w) {
+  std::vector<const Primitive*> b;
+  for (const auto& p : w.statics())
+    if (label::classOf(p.label) == label::kBuilding) b.push_back(&p);
+  int pairs = 0;
+  for (std::size_t i = 0; i < b.size(); ++i)
+    for (std::size_t j = i + 1; j < b.size(); ++j)
+      pairs += std::hypot(b[i]->cx - b[j]->cx, b[i]->cy - b[j]->cy) > 40 && b[i]->hy == b[j]->hy &&
+               b[i]->reflectivity == b[j]->reflectivity;
+  return pairs;
+}
+
+TEST(Aliasing, ZeroIsTodaysWorldAndMoreRepeatsMoreTemplates) {
+  EXPECT_EQ(aliasedWorld(0.0).contentHash(), frozenWorld().contentHash());
+  EXPECT_EQ(lookAlikeBuildingPairs(frozenWorld()), 0);
+  const World half = aliasedWorld(0.5), all = aliasedWorld(1.0);
+  const int p_half = lookAlikeBuildingPairs(half), p_all = lookAlikeBuildingPairs(all);
+  std::printf("look-alike lots: R=0.5 %zu, R=1 %zu; look-alike building pairs: R=0.5 %d, R=1 %d (buildings %zu)\n",
+              half.stats().aliased_lots, all.stats().aliased_lots, p_half, p_all, all.stats().buildings);
+  EXPECT_GT(half.stats().aliased_lots, 0u);
+  EXPECT_GT(all.stats().aliased_lots, half.stats().aliased_lots);
+  EXPECT_GT(p_half, 5);
+  EXPECT_GT(p_all, p_half);
+  EXPECT_GT(all.stats().buildings, 40u);  // the templates still make a city, not an empty street
+}
+
 }  // namespace
 }  // namespace sglc::sim::test
