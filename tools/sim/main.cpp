@@ -195,6 +195,13 @@ void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::
                 static_cast<unsigned long long>(o.seed), ws.path_length_m, ws.primitives, ws.buildings, ws.trees,
                 ws.poles, ws.signs, ws.parked_vehicles, ws.moving_agents, ws.memory_bytes / 1e6, ws.build_seconds);
   std::fputs(buf, stdout);
+  const auto& wc = sim.config().world;
+  if (wc.turnover || wc.aliasing > 0)
+    std::printf(
+        "  time:         %s day %d: %zu parking slots, %zu temporary-object sites; aliasing %.2f: %zu "
+        "look-alike lots\n",
+        wc.turnover ? "turnover on," : "frozen,", wc.epoch, ws.parking_slots, ws.temporary_sites, wc.aliasing,
+        ws.aliased_lots);
   std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
               s.bytes / 1e6);
   std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n", s.frames_per_second,
