@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <thread>
 
 #include "sglc/frame_selection.hpp"
@@ -13,6 +14,8 @@
 #include "sim/sequence.hpp"
 
 namespace {
+
+constexpr int kNoEpoch = std::numeric_limits<int>::min();
 
 // The command line. Negative (and 1e9 for the field of view) means "not given": the preset's value applies.
 struct Options {
@@ -27,6 +30,9 @@ struct Options {
   bool noise_free = false, no_moving = false, quiet = false, overwrite = false;
   bool laser_offsets = false, motion_distortion = false;
   double mixed_pixels = 0.0;
+  int epoch = kNoEpoch;  // not given: the frozen world (or day 0 with --turnover)
+  bool turnover = false;
+  double aliasing = 0.0;
   sglc::sim::PairListConfig pairs;
 };
 
@@ -82,6 +88,17 @@ void addRealismOptions(CLI::App& app, Options& o) {
                "Cast each column / ray from the pose at its own time in the sweep (raw, not de-skewed scans)");
 }
 
+void addWorldOptions(CLI::App& app, Options& o) {
+  // Checked in validate(), so that the error names the flag and the bad value plainly.
+  app.add_option("--epoch", o.epoch,
+                 "Render the world N >= 0 days after today: parked cars, temporary objects and foliage change "
+                 "(implies --turnover)");
+  app.add_flag("--turnover", o.turnover,
+               "Parked cars come and go during the run, temporary objects follow their epoch (day 0 unless --epoch)");
+  app.add_option("--aliasing", o.aliasing, "Share of lots (0..1) copied from a few templates: look-alike streets")
+      ->capture_default_str();
+}
+
 void addOutputOptions(CLI::App& app, Options& o) {
   app.add_option("--odom-noise", o.odom_noise,
                  "Write odometry.txt with drift: translation sigma as a fraction of distance (e.g. 0.01)")
@@ -107,6 +124,7 @@ void addOptions(CLI::App& app, Options& o) {
   addLabelNoiseOptions(app, o);
   addSensorOptions(app, o);
   addRealismOptions(app, o);
+  addWorldOptions(app, o);
   addOutputOptions(app, o);
 }
 
@@ -122,6 +140,10 @@ std::string validate(const Options& o) {
     return "--sensor and --beams are mutually exclusive (--sensor picks the beam layout; give one of them)";
   if (o.sensor == "rosette" && (o.columns > 0 || o.fov_up < 1e9))
     return "--columns, --fov-up and --fov-down do not apply to --sensor rosette (it has no columns or beams)";
+  if (o.epoch != kNoEpoch && o.epoch < 0)
+    return "--epoch must be a whole number of days >= 0, got " + std::to_string(o.epoch);
+  if (!(o.aliasing >= 0.0 && o.aliasing <= 1.0))
+    return "--aliasing must be within [0, 1], got " + std::to_string(o.aliasing);
   if (o.out_dir.empty()) return "--out is required";
   if (o.label_model == "network")
     for (const CLI::Option* knob : o.iid_knobs)
@@ -170,6 +192,9 @@ sglc::sim::SimConfig simConfig(const Options& o) {
   cfg.seed = o.seed;
   cfg.sensor = sensorConfig(o);
   cfg.world.moving_objects = !o.no_moving;
+  cfg.world.turnover = o.turnover || o.epoch != kNoEpoch;
+  cfg.world.epoch = std::max(0, o.epoch);
+  cfg.world.aliasing = o.aliasing;
   if (o.label_model == "network") {
     cfg.label_noise = sglc::sim::LabelNoise::network();
     return cfg;
@@ -237,6 +262,13 @@ void printReport(const Options& o, const sglc::sim::Simulator& sim, const sglc::
                 ws.poles, ws.signs, ws.parked_vehicles, ws.moving_agents, ws.memory_bytes / 1e6, ws.build_seconds);
   std::fputs(buf, stdout);
   printLabelIou(s.label_iou);
+  const auto& wc = sim.config().world;
+  if (wc.turnover || wc.aliasing > 0)
+    std::printf(
+        "  time:         %s day %d: %zu parking slots, %zu temporary-object sites; aliasing %.2f: %zu "
+        "look-alike lots\n",
+        wc.turnover ? "turnover on," : "frozen,", wc.epoch, ws.parking_slots, ws.temporary_sites, wc.aliasing,
+        ws.aliased_lots);
   std::printf("  points:       %.0f per frame, %.1f MB written\n", static_cast<double>(s.points) / s.frames,
               s.bytes / 1e6);
   std::printf("  speed:        %.1f frames/s (rendering and writing, %d worker threads), %.2f s\n", s.frames_per_second,

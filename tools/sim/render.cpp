@@ -492,7 +492,11 @@ void Simulator::render(int index, Frame& out, int threads) const {
     q.near = static_cast<float>(std::max(0.0, std::hypot(rx, ry) - p.radius));
     if (q.near < static_cast<float>(reach)) prims.push_back(q);
   };
-  for (int id : ids) local(statics[id], static_cast<std::uint32_t>(id));
+  // Parked vehicles and temporary objects of a world with turnover are there at some times only.
+  const double world_time = world_.absoluteTime(time);
+  for (int id : ids)
+    if (statics[id].presence == 0 || world_.present(statics[id], world_time))
+      local(statics[id], static_cast<std::uint32_t>(id));
   for (std::size_t k = 0; k < moving.size(); ++k) local(moving[k], static_cast<std::uint32_t>(statics.size() + k));
   std::sort(prims.begin(), prims.end(),
             [](const LocalPrim& a, const LocalPrim& b) { return a.near != b.near ? a.near < b.near : a.id < b.id; });

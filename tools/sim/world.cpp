@@ -7,7 +7,10 @@
 #include <deque>
 #include <limits>
 #include <numbers>
+#include <string>
 
+#include "sim/aliasing.hpp"
+#include "sim/occupancy.hpp"
 #include "sim/rng.hpp"
 
 namespace sglc::sim {
@@ -34,7 +37,8 @@ enum Stream : std::uint64_t {
   kYards,
   kParked,
   kMoving,
-  kPeople
+  kPeople,
+  kTemporary
 };
 
 Vec2 leftNormal(const Vec2& t) { return {-t.y(), t.x()}; }
@@ -421,6 +425,14 @@ struct World::Impl {
   std::vector<int> index_start, index_ids;
   float max_radius = 0;
   std::uint32_t next_instance = 0;
+  // Time-varying primitives: Primitive::presence indexes `presences` (entry 0 unused), which names an
+  // occupancy process and the candidate that must be its occupant for the primitive to be there.
+  struct Presence {
+    std::uint32_t process;
+    std::uint8_t candidate;
+  };
+  std::vector<OccupancyProcess> processes;
+  std::vector<Presence> presences{{0, 0}};
 
   DistrictInfo districtAt(double x, double y) const {
     const auto cx = static_cast<std::int64_t>(std::floor((x - district_ox) / kDistrictCell));
@@ -465,10 +477,22 @@ class Generator {
     for (const auto& lot : lots_) buildings(lot, true);
     for (const auto& lot : lots_) frontBoundary(lot);
     for (int side : {-1, 1}) kerbFurniture(side);
+    for (const auto& lot : lots_)
+      if (lot.aliased) aliasedKerb(lot);
     for (const auto& lot : lots_) yard(lot);
+    if (w_.config.turnover) today_occ_ = occ_;
     for (int side : {-1, 1}) parkedVehicles(side);
+    for (const auto& lot : lots_)
+      if (lot.aliased) aliasedParking(lot);
     for (const auto& lot : lots_) lotVehicles(lot);
+    if (w_.config.turnover)
+      for (int side : {-1, 1}) temporaryObjects(side);
     if (w_.config.moving_objects) movingAgents();
+    // Vehicles that are not in today's world get their instance ids last, so that today's keep theirs.
+    for (const auto& [first, last] : deferred_) {
+      const std::uint32_t inst = w_.newInstance();
+      for (std::size_t i = first; i < last; ++i) w_.prims[i].label = World::Impl::withInstance(w_.prims[i].label, inst);
+    }
   }
 
  private:
@@ -481,6 +505,7 @@ class Generator {
     double setback;
     int boundary;  // 0 none, 1 fence, 2 hedge
     std::uint64_t key;
+    bool aliased = false;  // copies a template (look-alike street)
   };
 
   const WorldStyle& st() const { return w_.style; }
@@ -516,8 +541,12 @@ class Generator {
     if (occ_.inside(ix, iy)) fn(ix, iy);
   }
   bool freeRect(const Vec2& c, const Vec2& u, double hl, double hw, double margin) {
+    return freeRect(c, u, hl, hw, margin, occ_);
+  }
+  // Same, in another raster of the same layout.
+  bool freeRect(const Vec2& c, const Vec2& u, double hl, double hw, double margin, const TiledGrid<std::uint8_t>& g) {
     bool free = true;
-    forRectCells(c, u, hl + margin, hw + margin, [&](int ix, int iy) { free = free && occ_.get(ix, iy) == 0; });
+    forRectCells(c, u, hl + margin, hw + margin, [&](int ix, int iy) { free = free && g.get(ix, iy) == 0; });
     return free;
   }
   void markRect(const Vec2& c, const Vec2& u, double hl, double hw) {
@@ -530,6 +559,10 @@ class Generator {
   }
 
   void add(const Primitive& p) { w_.prims.push_back(p); }
+  // Foliage pass-through in the world's season (summer, i.e. today's value, when the world is frozen).
+  std::uint8_t porosity(std::uint8_t summer, std::uint8_t winter) const {
+    return w_.config.turnover ? seasonalPassThrough(summer, winter, w_.config.epoch) : summer;
+  }
 
   // ---- lots: consecutive stretches along each side of the path, each with one kind of content.
   void makeLots() {
@@ -543,33 +576,19 @@ class Generator {
         const Vec2 n = side * leftNormal(w_.path.tangent(s));
         const DistrictInfo d =
             w_.districtAt(p.x() + n.x() * (st().lotLine() + 10), p.y() + n.y() * (st().lotLine() + 10));
-        Lot lot{side, s, 0, d.type, kBuildingLot, 0, 0, hashKeys(w_.seed, kLots, side + 2, k++)};
-        const double u = rng.unit();
-        switch (d.type) {
-          case District::kUrban:
-            lot.len = rng.uniform(12, 28);
-            lot.kind = u < 0.88 ? kBuildingLot : u < 0.94 ? kParkingLot : kPlazaLot;
-            lot.setback = rng.uniform(0.0, 1.0);
-            break;
-          case District::kResidential:
-            lot.len = rng.uniform(10, 18);
-            lot.kind = u < 0.95 ? kBuildingLot : kGardenLot;
-            lot.setback = rng.uniform(0.5, 3.0);
-            lot.boundary = rng.chance(0.2) ? 1 : rng.chance(0.7) ? 2 : 0;
-            break;
-          case District::kGreen:
-            lot.len = rng.uniform(15, 40);
-            lot.kind = u < 0.85 ? kParkLot : kBuildingLot;
-            lot.setback = rng.uniform(8, 20);
-            lot.boundary = rng.chance(0.3) ? 2 : rng.chance(0.2) ? 1 : 0;
-            break;
-          case District::kIndustrial:
-            lot.len = rng.uniform(25, 50);
-            lot.kind = u < 0.7 ? kBuildingLot : kParkingLot;
-            lot.setback = rng.uniform(4, 12);
-            lot.boundary = rng.chance(0.6) ? 1 : 0;
-            break;
+        Lot lot{side, s, 0, d.type, kBuildingLot, 0, 0, hashKeys(w_.seed, kLots, side + 2, k)};
+        drawLot(lot, rng);
+        // A look-alike lot: the same draws from its template's stream instead (the lot's own draws above
+        // are still made, so that the other lots stay as they are).
+        if (const std::uint64_t tkey = lotTemplateKey(w_.seed, side, k, static_cast<int>(d.type), w_.config.aliasing)) {
+          Rng trng(tkey);
+          drawLot(lot, trng);
+          lot.key = hashKeys(tkey, kLots);
+          lot.aliased = true;
+          aliased_[side > 0].emplace_back(s, s + lot.len);
+          ++w_.stats.aliased_lots;
         }
+        ++k;
         lot.len = std::min(lot.len, S - s);
         lots_.push_back(lot);
         s += lot.len;
@@ -577,6 +596,36 @@ class Generator {
     }
     // Interleave both sides along the path, so that a revisit's objects come after the first visit's.
     std::stable_sort(lots_.begin(), lots_.end(), [](const Lot& a, const Lot& b) { return a.s < b.s; });
+  }
+
+  // Length, kind, setback and boundary of a lot of type lot.district.
+  static void drawLot(Lot& lot, Rng& rng) {
+    const double u = rng.unit();
+    switch (lot.district) {
+      case District::kUrban:
+        lot.len = rng.uniform(12, 28);
+        lot.kind = u < 0.88 ? kBuildingLot : u < 0.94 ? kParkingLot : kPlazaLot;
+        lot.setback = rng.uniform(0.0, 1.0);
+        break;
+      case District::kResidential:
+        lot.len = rng.uniform(10, 18);
+        lot.kind = u < 0.95 ? kBuildingLot : kGardenLot;
+        lot.setback = rng.uniform(0.5, 3.0);
+        lot.boundary = rng.chance(0.2) ? 1 : rng.chance(0.7) ? 2 : 0;
+        break;
+      case District::kGreen:
+        lot.len = rng.uniform(15, 40);
+        lot.kind = u < 0.85 ? kParkLot : kBuildingLot;
+        lot.setback = rng.uniform(8, 20);
+        lot.boundary = rng.chance(0.3) ? 2 : rng.chance(0.2) ? 1 : 0;
+        break;
+      case District::kIndustrial:
+        lot.len = rng.uniform(25, 50);
+        lot.kind = u < 0.7 ? kBuildingLot : kParkingLot;
+        lot.setback = rng.uniform(4, 12);
+        lot.boundary = rng.chance(0.6) ? 1 : 0;
+        break;
+    }
   }
 
   struct LotFrame {
@@ -710,7 +759,7 @@ class Generator {
           if (fence)
             p.pass_through = industrial ? 110 : 50;  // mesh and lattice fences let rays through
           else {
-            p.pass_through = 30;
+            p.pass_through = porosity(30, 70);  // hedges are partly evergreen
             p.depth_jitter = 0.35f;
           }
           add(p);
@@ -735,7 +784,7 @@ class Generator {
                      World::Impl::withInstance(label::kTrunk, inst), rng.uniform(0.25, 0.4)));
     auto crown = [&](const Vec2& q, double r, double h, double cz) {
       Primitive p = makeEllipsoid(q.x(), q.y(), cz, r, r, h, label::kVegetation, rng.uniform(0.28, 0.4));
-      p.pass_through = 55;
+      p.pass_through = porosity(55, 200);  // deciduous crowns: bare twigs in winter
       p.depth_jitter = 0.8f;
       add(p);
     };
@@ -758,12 +807,60 @@ class Generator {
     const double gz = ground(c);
     Primitive p = makeEllipsoid(c.x(), c.y(), gz + 0.55 * h, r, r * rng.uniform(0.7, 1.0), h, label::kVegetation,
                                 rng.uniform(0.3, 0.4));
-    p.pass_through = 25;
+    p.pass_through = porosity(25, 110);
     p.depth_jitter = 0.3f;
     add(p);
     markRect(c, Vec2(1, 0), r * 0.7, r * 0.7);
     ++w_.stats.bushes;
     return true;
+  }
+
+  bool placeLamp(int side, double s, double r, double h, double arm, Rng& rng) {
+    const double kerb = st().kerb();
+    const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
+    const Vec2 c = w_.path.point(s) + n * (kerb + 0.35);
+    if (dist(c) < kerb + 0.2 || !freeRect(c, t, 0.3, 0.3, 0.3) || !owned(c, s - 10, s + 10)) return false;
+    const double gz = ground(c);
+    const std::uint32_t lab = World::Impl::withInstance(label::kPole, w_.newInstance());
+    const double refl = rng.uniform(0.25, 0.4);
+    add(makeCylinder(c.x(), c.y(), r, gz - 0.2, gz + h, lab, refl));
+    const Vec2 ac = c - n * (arm / 2);
+    add(makeBox(ac.x(), ac.y(), n, arm / 2, 0.06, gz + h - 0.15, gz + h, lab, refl));
+    const Vec2 lc = c - n * (arm + 0.2);
+    add(makeBox(lc.x(), lc.y(), n, 0.3, 0.15, gz + h - 0.3, gz + h - 0.05, lab, refl));
+    markRect(c, t, 0.3, 0.3);
+    ++w_.stats.poles;
+    return true;
+  }
+
+  // Whether arc length s on `side` lies along a look-alike lot, whose street trees, lamp posts and parked
+  // vehicles come from its template (aliasedKerb, aliasedParking) instead of the street-long passes.
+  bool aliasedStretch(int side, double s) const {
+    for (const auto& [lo, hi] : aliased_[side > 0])
+      if (s >= lo && s < hi) return true;
+    return false;
+  }
+
+  // A look-alike lot's kerb: lamp post and street trees at the template's offsets and spacing.
+  void aliasedKerb(const Lot& lot) {
+    Rng rng(hashKeys(lot.key, kKerb));
+    if (rng.chance(0.6)) {
+      const double a = rng.uniform(1, std::max(1.5, lot.len - 1)), r = rng.uniform(0.08, 0.13);
+      const double h = rng.uniform(6.0, 9.0), arm = rng.uniform(1.0, 2.0);
+      Rng lamp(hashKeys(lot.key, kKerb, 1));
+      placeLamp(lot.side, lot.s + a, r, h, arm, lamp);
+    }
+    static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
+    if (!rng.chance(kChance[static_cast<int>(lot.district)] * 1.3)) return;
+    const double gap = rng.uniform(6, 12), trunk_r = rng.uniform(0.15, 0.3), trunk_h = rng.uniform(3.0, 4.5);
+    const double crown_r = rng.uniform(2.2, 4.0), crown_h = rng.uniform(2.0, 3.2);
+    int k = 0;
+    for (double a = rng.uniform(1, gap); a < lot.len - 1; a += gap) {
+      const double s = lot.s + a;
+      const Vec2 c = w_.path.point(s) + lot.side * leftNormal(w_.path.tangent(s)) * (st().kerb() + 0.75);
+      Rng tree(hashKeys(lot.key, kKerb, 2, k++));
+      placeTree(c, trunk_r, trunk_h, crown_r, crown_h, st().kerb() + 0.3, s - 10, s + 10, tree);
+    }
   }
 
   // Street trees, lamp posts and traffic signs at the kerb side of the sidewalk.
@@ -773,21 +870,9 @@ class Generator {
     {
       Rng rng(hashKeys(w_.seed, kKerb, side + 2, 1));
       for (double s = rng.uniform(2, 20); s < S; s += rng.uniform(22, 38)) {
-        if (!rng.chance(0.85)) continue;
-        const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
-        const Vec2 c = w_.path.point(s) + n * (kerb + 0.35);
+        if (!rng.chance(0.85) || aliasedStretch(side, s)) continue;
         const double r = rng.uniform(0.08, 0.13), h = rng.uniform(6.0, 9.0), arm = rng.uniform(1.0, 2.0);
-        if (dist(c) < kerb + 0.2 || !freeRect(c, t, 0.3, 0.3, 0.3) || !owned(c, s - 10, s + 10)) continue;
-        const double gz = ground(c);
-        const std::uint32_t lab = World::Impl::withInstance(label::kPole, w_.newInstance());
-        const double refl = rng.uniform(0.25, 0.4);
-        add(makeCylinder(c.x(), c.y(), r, gz - 0.2, gz + h, lab, refl));
-        const Vec2 ac = c - n * (arm / 2);
-        add(makeBox(ac.x(), ac.y(), n, arm / 2, 0.06, gz + h - 0.15, gz + h, lab, refl));
-        const Vec2 lc = c - n * (arm + 0.2);
-        add(makeBox(lc.x(), lc.y(), n, 0.3, 0.15, gz + h - 0.3, gz + h - 0.05, lab, refl));
-        markRect(c, t, 0.3, 0.3);
-        ++w_.stats.poles;
+        placeLamp(side, s, r, h, arm, rng);
       }
     }
     {
@@ -815,7 +900,8 @@ class Generator {
         const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
         const Vec2 c = w_.path.point(s) + n * (kerb + 0.75);
         static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
-        if (!rng.chance(kChance[static_cast<int>(w_.districtAt(c.x(), c.y()).type)])) continue;
+        if (!rng.chance(kChance[static_cast<int>(w_.districtAt(c.x(), c.y()).type)]) || aliasedStretch(side, s))
+          continue;
         placeTree(c, rng.uniform(0.15, 0.3), rng.uniform(3.0, 4.5), rng.uniform(2.2, 4.0), rng.uniform(2.0, 3.2),
                   kerb + 0.3, s - 10, s + 10, rng);
       }
@@ -914,23 +1000,62 @@ class Generator {
     return true;
   }
 
+  static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};  // share of kerb slots in use, by district
+
+  // A look-alike lot's parking strip: vehicles at the template's places (with turnover, each comes and goes).
+  void aliasedParking(const Lot& lot) {
+    Rng rng(hashKeys(lot.key, kParked, 3));
+    int k = 0;
+    for (double a = rng.uniform(0, 3); a < lot.len; ++k) {
+      const VehicleDims v = drawVehicle(rng, false);
+      const double gap = rng.uniform(0.8, 4.0), mid = lot.s + a + v.L / 2;
+      const Vec2 t = w_.path.tangent(mid), n = lot.side * leftNormal(t);
+      const Vec2 c = w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + rng.uniform(-0.15, 0.1));
+      const bool occupied = rng.chance(kOccupied[static_cast<int>(lot.district)] + 0.2);
+      Candidate q{c, parkedHeading(t, rng), v, vehicleReflectivity(v, rng)};
+      a += v.L + gap;
+      const DistrictInfo d = w_.districtAt(c.x(), c.y());
+      const double s_lo = mid - v.L / 2 - 10, s_hi = mid + v.L / 2 + 10;
+      if (a > lot.len || !d.parking || dist(c) > st().kerb() || !occupied ||
+          !vehicleFits(q, st().road_half_width - 0.3, s_lo, s_hi, occ_))
+        continue;
+      if (!w_.config.turnover) {
+        appendAgentShape(w_.prims, c.x(), c.y(), ground(c), q.heading, v.kind, v.L, v.W, v.H,
+                         World::Impl::withInstance(v.cls, w_.newInstance()), q.refl);
+        markRect(c, q.heading, v.L / 2, v.W / 2);
+        ++w_.stats.parked_vehicles;
+        continue;
+      }
+      OccupancyProcess p = parkingProcess(hashKeys(lot.key, kParked, 4, k), 0.8, true, rng);
+      p.candidates = 1;
+      addSlot(p, {q}, false);
+      ++w_.stats.parking_slots;
+    }
+  }
+
   // Cars, vans and trucks parked along the parking strip, nose to tail with small gaps.
   void parkedVehicles(int side) {
     const double S = w_.path.length();
     Rng rng(hashKeys(w_.seed, kParked, side + 2));
     double s = rng.uniform(0, 5);
+    int slot = 0;
     while (s < S) {
       const VehicleDims v = drawVehicle(rng, false);
       const double gap = rng.uniform(0.8, 4.0), mid = s + v.L / 2;
       const Vec2 t = w_.path.tangent(mid), n = side * leftNormal(t);
       const Vec2 c = w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + rng.uniform(-0.15, 0.1));
       const DistrictInfo d = w_.districtAt(c.x(), c.y());
-      static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};
       const bool occupied = rng.chance(kOccupied[static_cast<int>(d.type)]);
       const double yaw = rng.uniform(-3, 3) * std::numbers::pi / 180 + (rng.chance(0.5) ? 0.0 : std::numbers::pi);
       const Vec2 h(std::cos(yaw) * t.x() - std::sin(yaw) * t.y(), std::sin(yaw) * t.x() + std::cos(yaw) * t.y());
-      if (d.parking && occupied && dist(c) <= st().kerb())
-        placeVehicle(c, h, v, st().road_half_width - 0.3, s - 10, s + v.L + 10, rng);
+      if (d.parking && dist(c) <= st().kerb() && !aliasedStretch(side, mid)) {
+        if (!w_.config.turnover) {
+          if (occupied) placeVehicle(c, h, v, st().road_half_width - 0.3, s - 10, s + v.L + 10, rng);
+        } else {
+          kerbSlot(side, slot, s, v.L + gap, {c, h, v, 0.0}, occupied, kOccupied[static_cast<int>(d.type)], rng);
+        }
+      }
+      ++slot;
       s += v.L + gap;
     }
   }
@@ -942,8 +1067,14 @@ class Generator {
     if (lot.kind == kParkingLot) {
       for (int row = 0; row < 2; ++row) {
         const double b = L0 + 1.0 + 2.5 + row * 6.5;
-        for (double a = lot.s + 1.5; a < lot.s + lot.len - 1.5; a += rng.uniform(2.5, 2.9)) {
-          if (!rng.chance(0.65)) continue;
+        int bay = 0;
+        for (double a = lot.s + 1.5; a < lot.s + lot.len - 1.5; a += rng.uniform(2.5, 2.9), ++bay) {
+          const bool occupied = rng.chance(0.65);
+          if (w_.config.turnover) {
+            lotBay(lot, row, bay, a, b, occupied, rng);
+            continue;
+          }
+          if (!occupied) continue;
           const Vec2 t = w_.path.tangent(a), n = lot.side * leftNormal(t);
           VehicleDims v = drawVehicle(rng, false);
           if (v.kind == kTruckKind) continue;  // trucks do not park in car bays
@@ -962,6 +1093,165 @@ class Generator {
         placeVehicle(w_.path.point(a) + n * (L0 + 1.5 + v.W / 2), rng.chance(0.5) ? t : Vec2(-t), v, L0 - 0.1,
                      lot.s - 20, lot.s + lot.len + 20, rng);
       }
+    }
+  }
+
+  // ---- turnover: parking slots and temporary objects whose occupant depends on the time.
+  struct Candidate {
+    Vec2 c = Vec2::Zero(), heading = Vec2::UnitX();
+    VehicleDims v{};  // v.L == 0: no candidate
+    double refl = 0.0;
+  };
+  static double vehicleReflectivity(const VehicleDims& v, Rng& rng) {
+    return v.kind == kCarKind ? rng.uniform(0.06, 0.3) : rng.uniform(0.15, 0.4);
+  }
+  static Vec2 parkedHeading(const Vec2& t, Rng& rng) {
+    const double yaw = rng.uniform(-3, 3) * std::numbers::pi / 180 + (rng.chance(0.5) ? 0.0 : std::numbers::pi);
+    return {std::cos(yaw) * t.x() - std::sin(yaw) * t.y(), std::sin(yaw) * t.x() + std::cos(yaw) * t.y()};
+  }
+  bool vehicleFits(const Candidate& k, double min_dist, double s_lo, double s_hi, const TiledGrid<std::uint8_t>& grid) {
+    return minDistRect(k.c, k.heading, k.v.L / 2, k.v.W / 2) >= min_dist &&
+           freeRect(k.c, k.heading, k.v.L / 2, k.v.W / 2, 0.2, grid) && owned(k.c, s_lo, s_hi);
+  }
+  // Today's occupant of a slot is tested against today's raster and draws its reflectivity exactly when the
+  // frozen world does (so the frozen world's streams stay in step); it is kept if it also fits the full one.
+  bool todayOccupant(Candidate& k, double min_dist, double s_lo, double s_hi, Rng& rng) {
+    if (!vehicleFits(k, min_dist, s_lo, s_hi, today_occ_)) return false;
+    k.refl = vehicleReflectivity(k.v, rng);
+    forRectCells(k.c, k.heading, k.v.L / 2, k.v.W / 2, [&](int ix, int iy) { today_occ_.at(ix, iy) = 1; });
+    return vehicleFits(k, min_dist, s_lo, s_hi, occ_);
+  }
+
+  // Registers a slot's occupancy process and adds its candidates (the index is the candidate id). The
+  // candidates may overlap each other, as only one is there at a time, but their footprints are reserved.
+  void addSlot(const OccupancyProcess& process, const std::vector<Candidate>& cands, bool today_first) {
+    const auto pid = static_cast<std::uint32_t>(w_.processes.size());
+    w_.processes.push_back(process);
+    for (std::size_t k = 0; k < cands.size(); ++k) {
+      const Candidate& q = cands[k];
+      if (q.v.L <= 0) continue;
+      const auto presence = static_cast<std::uint32_t>(w_.presences.size());
+      w_.presences.push_back({pid, static_cast<std::uint8_t>(k)});
+      const std::size_t first = w_.prims.size();
+      const bool today = k == 0 && today_first;
+      appendAgentShape(w_.prims, q.c.x(), q.c.y(), ground(q.c), q.heading, q.v.kind, q.v.L, q.v.W, q.v.H,
+                       World::Impl::withInstance(q.v.cls, today ? w_.newInstance() : 0), q.refl);
+      for (std::size_t i = first; i < w_.prims.size(); ++i) w_.prims[i].presence = presence;
+      if (!today) deferred_.emplace_back(first, w_.prims.size());
+      ++w_.stats.parked_vehicles;
+    }
+    for (const Candidate& q : cands)
+      if (q.v.L > 0) markRect(q.c, q.heading, q.v.L / 2, q.v.W / 2);
+  }
+
+  OccupancyProcess parkingProcess(std::uint64_t key, double occupancy, bool occupied_today, Rng& rng) const {
+    OccupancyProcess p;
+    p.key = key;
+    p.period = rng.chance(kTurnover.short_stay_share) ? kTurnover.short_stay_period : kTurnover.resident_period;
+    p.phase = rng.uniform(0, p.period);
+    p.empty = static_cast<float>(1.0 - occupancy);
+    p.candidates = static_cast<std::uint8_t>(kTurnover.candidates);
+    p.at_zero = occupied_today ? 0 : OccupancyProcess::kEmpty;
+    return p;
+  }
+
+  // A kerb-side slot (today's vehicle and its gap to the next): today's vehicle as candidate 0 and other
+  // vehicles that fit the slot's room, one at a time, as the slot's occupancy process picks them.
+  void kerbSlot(int side, int slot, double s, double room, Candidate today, bool occupied, double occupancy, Rng& rng) {
+    const double min_dist = st().road_half_width - 0.3;
+    Rng srng(hashKeys(w_.seed, kParked, side + 2, slot, 1));
+    std::vector<Candidate> cands(kTurnover.candidates, Candidate{});
+    bool today_in = false;
+    if (occupied) {
+      today_in = todayOccupant(today, min_dist, s - 10, s + today.v.L + 10, rng);
+      if (today_in) cands[0] = today;
+    } else {
+      today.refl = vehicleReflectivity(today.v, srng);
+      if (vehicleFits(today, min_dist, s - 10, s + today.v.L + 10, occ_)) cands[0] = today;
+    }
+    const double fit = room - 0.8;  // keeps the frozen world's smallest gap to the next slot
+    for (int k = 1; k < kTurnover.candidates; ++k) {
+      const VehicleDims v = drawVehicle(srng, false);
+      const double mid = s + v.L / 2 + srng.uniform(0, std::max(0.0, fit - v.L));
+      const Vec2 t = w_.path.tangent(mid), n = side * leftNormal(t);
+      const Vec2 c =
+          w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + srng.uniform(-0.15, 0.1));
+      const Candidate q{c, parkedHeading(t, srng), v, vehicleReflectivity(v, srng)};
+      if (v.L <= fit && vehicleFits(q, min_dist, s - 10, s + v.L + 10, occ_)) cands[k] = q;
+    }
+    addSlot(parkingProcess(hashKeys(w_.seed, kParked, side + 2, slot, 2), occupancy, occupied, srng), cands, today_in);
+    ++w_.stats.parking_slots;
+  }
+
+  // A bay of a parking lot with turnover (same scheme as kerbSlot).
+  void lotBay(const Lot& lot, int row, int bay, double a, double b, bool occupied, Rng& rng) {
+    const double L0 = st().lotLine(), s_lo = lot.s - 20, s_hi = lot.s + lot.len + 20;
+    const Vec2 t = w_.path.tangent(a), n = lot.side * leftNormal(t);
+    std::vector<Candidate> cands(kTurnover.candidates, Candidate{});
+    bool today_in = false;
+    if (occupied) {  // the frozen world's draws, in its order
+      VehicleDims v = drawVehicle(rng, false);
+      if (v.kind != kTruckKind) {
+        v.L = std::min(v.L, 5.0);
+        const Vec2 heading = (row == 0) == rng.chance(0.8) ? n : Vec2(-n);
+        Candidate q{w_.path.point(a) + n * b, heading, v, 0.0};
+        today_in = todayOccupant(q, L0 - 0.1, s_lo, s_hi, rng);
+        if (today_in) cands[0] = q;
+      }
+    }
+    Rng brng(hashKeys(lot.key, kParked, row, bay));
+    for (int k = occupied ? 1 : 0; k < kTurnover.candidates; ++k) {
+      VehicleDims v = drawVehicle(brng, false);
+      v.L = std::min(v.L, 5.0);
+      const Vec2 heading = (row == 0) == brng.chance(0.8) ? n : Vec2(-n);
+      const Candidate q{w_.path.point(a) + n * b, heading, v, vehicleReflectivity(v, brng)};
+      if (v.kind != kTruckKind && vehicleFits(q, L0 - 0.1, s_lo, s_hi, occ_)) cands[k] = q;
+    }
+    addSlot(parkingProcess(hashKeys(lot.key, kParked, row, bay, 2), 0.65, occupied, brng), cands, today_in);
+    ++w_.stats.parking_slots;
+  }
+
+  // Skips, construction fences and parked trucks that stay for days to weeks: candidate sites along the
+  // sidewalk's outer edge and the parking strip, each in use in some epochs only.
+  void temporaryObjects(int side) {
+    const double S = w_.path.length();
+    Rng rng(hashKeys(w_.seed, kTemporary, side + 2));
+    int site = 0;
+    for (double s = rng.uniform(5, 30); s < S; s += rng.uniform(25, 55), ++site) {
+      const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
+      const int kind = rng.below(3);
+      const double strip = st().road_half_width + st().parking_width / 2;
+      const double hl = kind == 0 ? rng.uniform(2.5, 6.0) : kind == 1 ? rng.uniform(1.6, 2.0) : rng.uniform(3.2, 4.2);
+      const double hw = kind == 0 ? 0.05 : kind == 1 ? rng.uniform(0.8, 1.0) : 1.225;
+      const double h = kind == 0 ? rng.uniform(1.8, 2.1) : kind == 1 ? rng.uniform(1.2, 1.7) : rng.uniform(3.0, 3.6);
+      const double refl = rng.uniform(0.2, 0.45);
+      const Vec2 c = w_.path.point(s) + n * (kind == 0 ? st().lotLine() - 0.35 : strip);
+      const double min_dist = kind == 0 ? st().kerb() + 0.2 : st().road_half_width - 0.3;
+      if (minDistRect(c, t, hl, hw) < min_dist || !freeRect(c, t, hl, hw, 0.2, occ_) || !owned(c, s - 10, s + 10))
+        continue;
+      OccupancyProcess p;
+      p.key = hashKeys(w_.seed, kTemporary, side + 2, site, 2);
+      p.period = kTurnover.temporary_period;
+      p.phase = rng.uniform(0, p.period);
+      p.empty = static_cast<float>(1.0 - kTurnover.temporary_presence);
+      w_.processes.push_back(p);
+      const auto presence = static_cast<std::uint32_t>(w_.presences.size());
+      w_.presences.push_back({static_cast<std::uint32_t>(w_.processes.size() - 1), 0});
+      const std::size_t first = w_.prims.size();
+      const double gz = ground(c);
+      if (kind == 2) {
+        appendAgentShape(w_.prims, c.x(), c.y(), gz, rng.chance(0.5) ? t : Vec2(-t), kTruckKind, 2 * hl, 2 * hw, h,
+                         label::kTruck, refl);
+        deferred_.emplace_back(first, w_.prims.size());
+      } else {
+        Primitive q =
+            makeBox(c.x(), c.y(), t, hl, hw, gz - 0.05, gz + h, kind == 0 ? label::kFence : label::kOtherObject, refl);
+        q.pass_through = kind == 0 ? 110 : 0;  // mesh panels
+        add(q);
+      }
+      for (std::size_t i = first; i < w_.prims.size(); ++i) w_.prims[i].presence = presence;
+      markRect(c, t, hl, hw);
+      ++w_.stats.temporary_sites;
     }
   }
 
@@ -1007,6 +1297,11 @@ class Generator {
   World::Impl& w_;
   TiledGrid<std::uint8_t> occ_;
   std::vector<Lot> lots_;
+  // With turnover: the raster as the frozen world would have it (today's objects only), so that today's
+  // occupants are tested, and the random streams consumed, exactly as in the frozen world.
+  TiledGrid<std::uint8_t> today_occ_;
+  std::vector<std::pair<std::size_t, std::size_t>> deferred_;  // primitive ranges whose instance comes last
+  std::vector<std::pair<double, double>> aliased_[2];          // look-alike lots' stretches, right / left
 };
 
 }  // namespace
@@ -1015,6 +1310,9 @@ World::World(const std::vector<Mat4d>& poses, std::uint64_t seed, const WorldCon
     : impl_(std::make_unique<Impl>()) {
   const auto t0 = std::chrono::steady_clock::now();
   Impl& w = *impl_;
+  if (config.epoch < 0) throw InputError("world: epoch must be >= 0 days, got " + std::to_string(config.epoch));
+  if (!(config.aliasing >= 0.0 && config.aliasing <= 1.0))
+    throw InputError("world: aliasing must be within [0, 1], got " + std::to_string(config.aliasing));
   w.seed = seed;
   w.config = config;
   {
@@ -1156,6 +1454,16 @@ void World::staticsNear(double x, double y, double radius, std::vector<int>& ids
   std::sort(ids.begin(), ids.end());
 }
 
+bool World::present(const Primitive& p, double time) const {
+  if (p.presence == 0) return true;
+  const Impl::Presence& e = impl_->presences[p.presence];
+  return occupantAt(impl_->processes[e.process], time) == e.candidate;
+}
+
+double World::absoluteTime(double frame_time) const {
+  return impl_->config.turnover ? impl_->config.epoch * kSecondsPerDay + frame_time : frame_time;
+}
+
 void World::movingNear(double time, double x, double y, double radius, std::vector<Primitive>& out) const {
   const Impl& w = *impl_;
   const double S = w.path.length();
@@ -1214,7 +1522,13 @@ std::uint64_t World::contentHash() const {
     h = hashKeys(h, static_cast<std::uint64_t>(p.shape), p.flags, p.pass_through, p.label, bitsOf(p.cx), bitsOf(p.cy),
                  bitsOf(p.z0), bitsOf(p.z1), bitsOf(p.hx), bitsOf(p.hy), bitsOf(p.cos_yaw), bitsOf(p.sin_yaw),
                  bitsOf(p.reflectivity), bitsOf(p.depth_jitter));
+    if (p.presence != 0) h = hashKeys(h, p.presence);  // only time-varying worlds have any
   }
+  for (const auto& q : w.processes)
+    h = hashKeys(h, q.key, bitsOf(q.period), bitsOf(q.phase), bitsOf(q.empty), q.candidates,
+                 static_cast<std::uint64_t>(q.at_zero + 2));
+  for (std::size_t k = 1; k < w.presences.size(); ++k)
+    h = hashKeys(h, w.presences[k].process, w.presences[k].candidate);
   for (const auto& a : w.agents)
     h = hashKeys(h, bitsOf(a.s0), bitsOf(a.speed), static_cast<std::uint64_t>(a.dir + 2), bitsOf(a.offset), a.label,
                  bitsOf(a.length));

@@ -64,12 +64,21 @@ struct Primitive {
                                          // ellipsoid horizontal semi-axes
   float cos_yaw = 1.0f, sin_yaw = 0.0f;  // box axis direction in the world
   float radius = 0.0f;                   // bounding circle in xy (m)
+  std::uint32_t presence = 0;            // 0: always there; else when it is there (World::present)
 };
 
 struct WorldConfig {
   double sensor_height = 1.73;   // LiDAR above the ground under the vehicle (m)
   bool moving_objects = true;    // moving vehicles on the road and pedestrians on sidewalks
   double path_extension = 60.0;  // the street continues this far beyond both ends of the trajectory (m)
+  // Time (tools/sim/README.md, "Time and look-alike streets"). Off: the world is frozen as it is today. On:
+  // parked vehicles come and go, temporary objects (skips, construction fences, trucks) appear and vanish,
+  // and foliage follows the season; a frame at time t (s) shows the world at epoch * 86400 s + t.
+  bool turnover = false;
+  int epoch = 0;  // days after today (>= 0); used only with turnover
+  // Share of lots (0..1) whose content (length, buildings, yard, fence, bays) is copied from one of a few
+  // templates per district type instead of being drawn from its own position: look-alike streets.
+  double aliasing = 0.0;
 };
 
 // Street cross-section, drawn once from the seed (lateral distances from the driven path, m).
@@ -120,6 +129,7 @@ struct WorldStats {
   std::size_t primitives = 0;
   std::size_t buildings = 0, fences = 0, hedges = 0, trees = 0, bushes = 0, poles = 0, signs = 0;
   std::size_t parked_vehicles = 0, moving_agents = 0;
+  std::size_t parking_slots = 0, temporary_sites = 0, aliased_lots = 0;  // with turnover / aliasing only
   double path_length_m = 0.0;
   std::size_t memory_bytes = 0;  // world model (rasters, primitives, indices)
   double build_seconds = 0.0;
@@ -144,6 +154,11 @@ class World {
   const std::vector<Primitive>& statics() const;
   // Ids of static primitives whose bounding circle may lie within `radius` of (x, y), ascending.
   void staticsNear(double x, double y, double radius, std::vector<int>& ids) const;
+  // Whether a static primitive is there at absolute time `time` (s, see absoluteTime): parked vehicles and
+  // temporary objects of a world with turnover come and go; everything else is always there.
+  bool present(const Primitive& p, double time) const;
+  // The absolute time of a frame at `frame_time` seconds into the trajectory: epoch * 86400 + frame_time.
+  double absoluteTime(double frame_time) const;
   // Moving agents (vehicles, pedestrians) at `time` seconds, whose centre lies within `radius` of (x, y).
   // Positions are a function of time only.
   void movingNear(double time, double x, double y, double radius, std::vector<Primitive>& out) const;

@@ -144,6 +144,30 @@ with tempfile.TemporaryDirectory() as tmp:
     else:
         print(f"SKIP (KITTI part): {poses} not found")
 
+    # Time: another epoch moves parked cars (frames differ) but not the ground truth; aliasing 0 is the default.
+    frames = ["--route", "loop", "--frames", "0:1911:150", "--seed", "5", *SMALL]
+    e0, e1, al = (os.path.join(tmp, x) for x in ("e0", "e1", "al"))
+    p0 = run(*frames, "--epoch", "0", "--out", e0)
+    p1 = run(*frames, "--epoch", "1", "--out", e1)
+    check(p0.returncode == 0 and p1.returncode == 0, f"--epoch runs exit 0 ({p0.stderr.strip()} {p1.stderr.strip()})")
+    check("turnover on, day 1" in p1.stdout, "the summary names the epoch")
+    for name in ("poses.txt", "pairs_distance.txt", "loop_distance4.txt", "times.txt"):
+        check(filecmp.cmp(os.path.join(e0, name), os.path.join(e1, name), shallow=False),
+              f"--epoch 1 keeps {name} of --epoch 0")
+    differing = sum(not filecmp.cmp(os.path.join(e0, "labels", n), os.path.join(e1, "labels", n), shallow=False)
+                    for n in sorted(os.listdir(os.path.join(e0, "labels"))))
+    check(differing >= 5, f"--epoch 1 changes the parked cars in most frames (got {differing} of 13 differing)")
+    with open(os.path.join(e1, "sim_info.json")) as f:
+        world = json.load(f)["world"]
+    check(world["epoch"] == 1 and world["turnover"] and world["parking_slots"] > 0, "sim_info.json records the epoch")
+    few = ["--route", "loop", "--frames", "0:1911:600", "--seed", "5", *SMALL]
+    p = run(*few, "--aliasing", "0", "--out", al)
+    dflt = os.path.join(tmp, "dflt")
+    q = run(*few, "--out", dflt)
+    check(p.returncode == 0 and q.returncode == 0, "--aliasing 0 run exits 0")
+    check(all(filecmp.cmp(os.path.join(al, "velodyne", n), os.path.join(dflt, "velodyne", n), shallow=False)
+              for n in os.listdir(os.path.join(dflt, "velodyne"))), "--aliasing 0 gives the default's bytes")
+
     # Errors: one line on stderr, exit 2 for usage, 1 for bad input.
     for args, code, word in [
         (["--route", "loop"], 2, "--out"),
@@ -170,6 +194,10 @@ with tempfile.TemporaryDirectory() as tmp:
         (["--route", "loop", "--sensor", "rosette", "--columns", "64", "--out", os.path.join(tmp, "e")], 2,
          "rosette"),
         (["--route", "loop", "--mixed-pixels", "1.5", "--out", os.path.join(tmp, "e")], 2, "--mixed-pixels"),
+        (["--route", "loop", "--epoch", "-1", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
+        (["--route", "loop", "--epoch", "x", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
+        (["--route", "loop", "--aliasing", "1.5", "--out", os.path.join(tmp, "e")], 2, "--aliasing"),
+        (["--route", "loop", "--aliasing", "nan", "--out", os.path.join(tmp, "e")], 2, "--aliasing"),
     ]:
         p = run(*args)
         lines = p.stderr.strip().splitlines()
