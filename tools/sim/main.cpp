@@ -28,8 +28,9 @@ struct Options {
   double max_range = 0.0, range_noise = -1.0, odom_noise = 0.0, odom_rot = -1.0;
   double fov_up = 1e9, fov_down = 1e9;
   bool noise_free = false, no_moving = false, quiet = false, overwrite = false;
-  bool laser_offsets = false, motion_distortion = false;
+  bool laser_offsets = false, motion_distortion = false, realistic = false;
   double mixed_pixels = 0.0;
+  CLI::Option* mixed_pixels_option = nullptr;
   int epoch = kNoEpoch;  // not given: the frozen world (or day 0 with --turnover)
   bool turnover = false;
   double aliasing = 0.0;
@@ -80,10 +81,14 @@ void addSensorOptions(CLI::App& app, Options& o) {
 void addRealismOptions(CLI::App& app, Options& o) {
   app.add_flag("--laser-offsets", o.laser_offsets,
                "Per-laser calibration errors (elevation, azimuth, range bias) drawn from the seed");
-  app.add_option("--mixed-pixels", o.mixed_pixels,
-                 "Chance that a return beside a > 1 m depth edge blends the two ranges (0 = off; try 0.5)")
-      ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+  app.add_flag("--realistic", o.realistic,
+               "The field preset: --label-noise-model network, --turnover, --laser-offsets and --mixed-pixels 0.5 "
+               "(each of the last two may still be given; the label knobs may not)");
+  o.mixed_pixels_option =
+      app.add_option("--mixed-pixels", o.mixed_pixels,
+                     "Chance that a return beside a > 1 m depth edge blends the two ranges (0 = off; try 0.5)")
+          ->capture_default_str()
+          ->check(CLI::Range(0.0, 1.0));
   app.add_flag("--motion-distortion", o.motion_distortion,
                "Cast each column / ray from the pose at its own time in the sweep (raw, not de-skewed scans)");
 }
@@ -145,12 +150,23 @@ std::string validate(const Options& o) {
   if (!(o.aliasing >= 0.0 && o.aliasing <= 1.0))
     return "--aliasing must be within [0, 1], got " + std::to_string(o.aliasing);
   if (o.out_dir.empty()) return "--out is required";
-  if (o.label_model == "network")
+  if (o.realistic && o.label_model == "iid") return "--realistic uses --label-noise-model network; give one of them";
+  if (o.realistic || o.label_model == "network")
     for (const CLI::Option* knob : o.iid_knobs)
       if (knob->count() > 0)
-        return "--label-noise-model network is a calibrated preset and cannot be mixed with " + knob->get_name() +
+        return std::string(o.realistic ? "--realistic" : "--label-noise-model network") +
+               " uses the calibrated network label noise and cannot be mixed with " + knob->get_name() +
                " (that knob belongs to --label-noise-model iid)";
   return "";
+}
+
+// --realistic: what a robot in the street sees, rather than the lab (tools/sim/README.md, "Realistic preset").
+void applyRealistic(Options& o) {
+  if (!o.realistic) return;
+  o.label_model = "network";
+  o.turnover = true;
+  o.laser_offsets = true;
+  if (o.mixed_pixels_option->count() == 0) o.mixed_pixels = 0.5;
 }
 
 sglc::sim::SequenceOptions sequenceOptions(const Options& o, const sglc::sim::Trajectory& traj) {
@@ -320,6 +336,7 @@ int main(int argc, char** argv) {
     std::cerr << "sglc-sim: error: " << problem << " (see --help)" << std::endl;
     return 2;
   }
+  applyRealistic(options);
   try {
     run(options);
     return 0;

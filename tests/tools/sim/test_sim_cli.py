@@ -128,6 +128,21 @@ with tempfile.TemporaryDirectory() as tmp:
     with open(os.path.join(g, "sim_info.json")) as fh:
         sensor = json.load(fh)["sensor"]
     check(p.returncode == 0 and sensor["beams"] == 16 and sensor["columns"] == 1800, "--sensor vlp16: 16 x 1800")
+    # The realistic preset: network label noise, turnover, laser offsets, mixed pixels (0.5 unless given).
+    p = run("--route", "loop", "--frames", "0:1", "--out", g, "--realistic", "--mixed-pixels", "0.25", "--overwrite",
+            "--quiet")
+    with open(os.path.join(g, "sim_info.json")) as fh:
+        info = json.load(fh)
+    check(p.returncode == 0 and info["label_noise"]["model"] == "network" and info["world"]["turnover"] and
+          info["world"]["epoch"] == 0 and info["sensor"]["laser_offsets"] and
+          info["sensor"]["mixed_pixel_rate"] == 0.25 and not info["sensor"]["motion_distortion"],
+          f"--realistic sets its parts and keeps a given --mixed-pixels ({p.stderr.strip()})")
+    p = run("--route", "loop", "--frames", "0:1", "--out", g, "--realistic", "--sensor", "vlp16", "--epoch", "2",
+            "--overwrite", "--quiet")
+    with open(os.path.join(g, "sim_info.json")) as fh:
+        info = json.load(fh)
+    check(p.returncode == 0 and info["sensor"]["mixed_pixel_rate"] == 0.5 and info["world"]["epoch"] == 2 and
+          info["sensor"]["beams"] == 16, "--realistic combines with --sensor and --epoch")
 
     # KITTI trajectory (needs the shared data).
     poses = os.path.join(data, "kitti_odometry_gt_poses", "poses", "00.txt")
@@ -193,6 +208,10 @@ with tempfile.TemporaryDirectory() as tmp:
          "mutually exclusive"),
         (["--route", "loop", "--sensor", "rosette", "--columns", "64", "--out", os.path.join(tmp, "e")], 2,
          "rosette"),
+        (["--route", "loop", "--realistic", "--label-noise", "0.1", "--out", os.path.join(tmp, "e")], 2,
+         "--realistic uses the calibrated network label noise and cannot be mixed with --label-noise"),
+        (["--route", "loop", "--realistic", "--label-noise-model", "iid", "--out", os.path.join(tmp, "e")], 2,
+         "--realistic uses --label-noise-model network"),
         (["--route", "loop", "--mixed-pixels", "1.5", "--out", os.path.join(tmp, "e")], 2, "--mixed-pixels"),
         (["--route", "loop", "--epoch", "-1", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
         (["--route", "loop", "--epoch", "x", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
