@@ -195,8 +195,9 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(refine.min_normal_cosine), closed(0, 1), "refine stage: normals agree at least this"));
   t.add(field<Config>(SGLC_KEY(refine.cauchy_m), above(0), "refine stage: Cauchy kernel scale (m)"));
   t.add(field<Config>(SGLC_KEY(refine.instance_weight), atLeast(0), "refine stage: weight of the instance anchor"));
-  t.add(field<Config>(SGLC_KEY(refine.min_information), atLeast(0),
-                      "directions the planes constrain less than this (1/m^2) are held by the anchor"));
+  t.add(field<Config>(
+      SGLC_KEY(refine.min_information), atLeast(0),
+      "horizontal directions (yaw, x, y) the planes constrain less than this (1/m^2) are held by the anchor"));
   t.add(field<Config>(SGLC_KEY(refine.converged_m), finite(), "refine stage: stop when an update moves less (m)"));
   t.add(field<Config>(SGLC_KEY(refine.max_shift_m), above(0),
                       "planes moving the pose farther are not trusted, nor do they confirm a loop (m)"));

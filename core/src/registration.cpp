@@ -400,13 +400,15 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   auto addAnchor = [&](const Mat4d& T, Mat6& H, Vec6& g) {
     const double wa = config.instance_weight;
     if (wa > 0 && !anchor_pairs.empty()) {
-      // The anchor acts only along directions the planes leave (nearly) free: elsewhere the planes decide.
+      // The anchor acts only along horizontal directions (yaw, x, y) the planes leave (nearly) free: elsewhere
+      // the planes decide. Roll, pitch and height stay with the planes even where they are weak: the ground
+      // fixes them, while instance pairs (a car's points sampled differently from two viewpoints) tilt them.
       const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
-      const Eigen::SelfAdjointEigenSolver<Mat6> eig(Hs);
-      Mat6 P = Mat6::Zero();  // projector onto the weak subspace (scaled coordinates)
-      for (int k = 0; k < 6; ++k)
+      const Eigen::SelfAdjointEigenSolver<Mat3d> eig(Hs.block<3, 3>(2, 2));
+      Mat6 P = Mat6::Zero();  // projector onto the weak horizontal subspace (scaled coordinates)
+      for (int k = 0; k < 3; ++k)
         if (eig.eigenvalues()[k] < config.min_information)
-          P += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
+          P.block<3, 3>(2, 2) += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
       if (P.isZero()) return;  // fully constrained: the pairs are not needed
       Mat6 Ha = Mat6::Zero();
       Vec6 ga = Vec6::Zero();

@@ -313,6 +313,39 @@ TEST(RefinePlanes, CorridorTakesTheFreeDirectionFromTheAnchor) {
   EXPECT_GT(std::abs(free.T(0, 3) - T(0, 3)), 0.2) << free.T;
 }
 
+// A narrow road (2 m of ground across) between two facades seen only at one height: roll about the road's
+// axis has little plane information (below min_information at the 10 m lever), yet the anchor must not set it.
+// Instance pairs tilt (a car's points are sampled differently from two viewpoints); the ground does not.
+TEST(RefinePlanes, AnchorDoesNotTiltAWeaklyConstrainedRoll) {
+  std::vector<Plane> query;
+  auto add = [&](Vec3f c, Vec3f n) {
+    Plane p;
+    p.centroid = c;
+    p.normal = n;
+    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
+    query.push_back(p);
+  };
+  for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
+    for (float y : {-0.5f, 0.5f}) add({x, y, -1.7f}, {0, 0, 1});
+    add({x, 8.0f, 1.0f}, {0, -1, 0});
+    add({x, -8.0f, 1.0f}, {0, 1, 0});
+  }
+  const Mat4d T = makeT(1.0, 1.3, 0.2, 0.0);
+  const auto candidate = movedPlanes(query, T.inverse());
+  const PlaneIndex index(query, 1.0);
+  const Mat4d tilt = makeT(0.0, 0.0, 0.0, 0.0, 0.0, 0.5);  // the pairs agree with a pose rolled by 0.5 deg
+  const auto tilted = anchorPairs(tilt * T, Vec3d::Zero());
+  const Mat4d T0 = makeT(1.0, 1.0, 0.2, 0.0);  // 0.3 m short along the road: the anchor's job
+  const RefineResult r = refinePlanes(query, index, candidate, tilted, T0, RefineConfig{});
+  EXPECT_LT(test::rotationErrorDeg(r.T, T), 0.05) << r.T;
+  EXPECT_LT(std::abs(r.T(0, 3) - T(0, 3)), 0.05) << r.T;  // x still comes from the anchor
+  // An anchor acting in every direction takes the tilt.
+  RefineConfig everywhere;
+  everywhere.min_information = 1e12;
+  const RefineResult pulled = refinePlanes(query, index, candidate, tilted, T0, everywhere);
+  EXPECT_GT(test::rotationErrorDeg(pulled.T, T), 0.1) << pulled.T;
+}
+
 Mat4d rightPerturbed(const Mat4d& T, const Eigen::Matrix<double, 6, 1>& xi) {
   Mat4d E = Mat4d::Identity();
   const Vec3d phi = xi.tail<3>();

@@ -147,7 +147,8 @@ struct RefineConfig {
   double cauchy_m = 0.1;           // robust kernel scale of plane residuals
   double instance_weight = 1.0;    // weight of instance point residuals kept as anchor
   // Directions whose plane information (Hessian eigenvalue, rotations scaled by a 10 m lever arm, in 1/m^2)
-  // is below this are degenerate for the planes (a straight corridor); only there the anchor acts.
+  // is below this are degenerate for the planes (a straight corridor); only there, and only among the horizontal
+  // directions (yaw, x, y), the anchor acts: roll, pitch and height always stay with the planes.
   double min_information = 5.0;
   double converged_m = 1e-5;
   // Guard (ours): the planes may move the pose they start from by at most this much. Beyond it the refinement
