@@ -41,9 +41,16 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
     for (int j = i + 1; j < n; ++j) {
       const float d = (nodes[i].center - nodes[j].center).norm();
       if (d >= dmax) continue;
-      const int bin = std::min(static_cast<int>(d * inv_bin), layout.bins - 1);
-      f(i, nodes[j].cls * layout.bins + bin) += 1.0f;  // neighbour's class (the reference used its own)
-      f(j, nodes[i].cls * layout.bins + bin) += 1.0f;
+      // Soft binning (ours): the count is shared between the two nearest bin centres, so a neighbour whose
+      // distance moves by a few decimetres (a car labelled in part, a new viewpoint) shifts weight smoothly
+      // instead of jumping to the next bin.
+      const float x = std::max(0.0f, d * inv_bin - 0.5f);
+      const int lo = std::min(static_cast<int>(x), layout.bins - 1), hi = std::min(lo + 1, layout.bins - 1);
+      const float w = std::min(1.0f, x - static_cast<float>(lo));
+      f(i, nodes[j].cls * layout.bins + lo) += 1.0f - w;  // neighbour's class (the reference used its own)
+      f(i, nodes[j].cls * layout.bins + hi) += w;
+      f(j, nodes[i].cls * layout.bins + lo) += 1.0f - w;
+      f(j, nodes[i].cls * layout.bins + hi) += w;
     }
   // Square roots of the counts (ours; the reference normalises raw counts): a crowd of neighbours in one bin
   // (a row of parked cars, a mislabelled hedge broken into pieces) no longer swamps the rest of the histogram,
@@ -76,8 +83,12 @@ std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vec
     for (std::size_t j = i + 1; j < nodes.size(); ++j) {
       const float d = (nodes[i].center - nodes[j].center).norm();
       if (d >= dmax) continue;
-      const int bin = std::min(static_cast<int>(d * inv_bin), layout.bins - 1);
-      edges[edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins + bin] += 1.0f;
+      const float x = std::max(0.0f, d * inv_bin - 0.5f);  // soft binning, as in nodeDescriptors
+      const int lo = std::min(static_cast<int>(x), layout.bins - 1), hi = std::min(lo + 1, layout.bins - 1);
+      const float w = std::min(1.0f, x - static_cast<float>(lo));
+      const int base = edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins;
+      edges[base + lo] += 1.0f - w;
+      edges[base + hi] += w;
     }
   }
   l2normalise(counts);

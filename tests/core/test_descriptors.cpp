@@ -64,11 +64,12 @@ TEST(Descriptors, EdgeTypeUniqueAndSymmetric) {
   EXPECT_EQ(three, (std::set<int>{0, 1, 2, 3, 4, 5}));
 }
 
-// Hand-checked: 3 nodes of classes 0, 1, 2; d_max 60, d_i 2 (30 bins per class).
-//   node 0 (0,0,0) cls 0 -- node 1 (5,0,0) cls 1: d = 5     -> bin 2
-//   node 0             -- node 2 (0,13,0) cls 2: d = 13    -> bin 6
-//   node 1             -- node 2:               d = 13.93 -> bin 6
-// Each row counts the NEIGHBOUR's class: row 0 has ones at 1*30+2 and 2*30+6, and so on; L2 -> 1/sqrt(2).
+// Hand-checked: 3 nodes of classes 0, 1, 2; d_max 60, d_i 2 (30 bins per class, bin k centred on (k + 0.5) d_i).
+// A count is shared between the two nearest bin centres (soft binning):
+//   node 0 (0,0,0) cls 0 -- node 1 (5,0,0) cls 1: d = 5     -> on bin 2's centre: all in bin 2
+//   node 0             -- node 2 (0,13,0) cls 2: d = 13    -> on bin 6's centre: all in bin 6
+//   node 1             -- node 2:               d = 13.93 -> 6.464 bin widths: 0.536 in bin 6, 0.464 in bin 7
+// Each row counts the NEIGHBOUR's class; the square roots of the counts are L2-normalised.
 TEST(Descriptors, LocalPartCountsNeighbourClass) {
   const std::vector<Node> nodes{node(0, 0, 0, 0), node(5, 0, 0, 1), node(0, 13, 0, 2)};
   const DescriptorLayout l = layoutFor(3, 60.0);
@@ -76,14 +77,34 @@ TEST(Descriptors, LocalPartCountsNeighbourClass) {
   ASSERT_EQ(f.rows(), 3);
   ASSERT_EQ(f.cols(), 120);
   const float h = 1.0f / std::sqrt(2.0f);
+  const float w = static_cast<float>(std::sqrt(25.0 + 169.0) / 2.0 - 0.5 - 6.0);  // share of bin 7
+  ASSERT_NEAR(w, 0.464, 0.001);
   Eigen::MatrixXf expected = Eigen::MatrixXf::Zero(3, 90);
   expected(0, 1 * 30 + 2) = h;
   expected(0, 2 * 30 + 6) = h;
-  expected(1, 0 * 30 + 2) = h;
-  expected(1, 2 * 30 + 6) = h;
+  expected(1, 0 * 30 + 2) = h;  // sqrt(1), sqrt(1 - w), sqrt(w) have squares summing to 2
+  expected(1, 2 * 30 + 6) = std::sqrt(1.0f - w) * h;
+  expected(1, 2 * 30 + 7) = std::sqrt(w) * h;
   expected(2, 0 * 30 + 6) = h;
-  expected(2, 1 * 30 + 6) = h;
-  EXPECT_TRUE(f.leftCols(90).isApprox(expected, 1e-6f)) << f.leftCols(90);
+  expected(2, 1 * 30 + 6) = std::sqrt(1.0f - w) * h;
+  expected(2, 1 * 30 + 7) = std::sqrt(w) * h;
+  EXPECT_TRUE(f.leftCols(90).isApprox(expected, 1e-5f)) << f.leftCols(90);
+}
+
+// Soft binning moves weight smoothly: a neighbour walking from one bin centre to the next hands its count
+// over linearly, with no jump at the bin edge (hard bins would flip the whole count there).
+TEST(Descriptors, LocalPartMovesSmoothlyWithDistance) {
+  const DescriptorLayout l = layoutFor(2, 60.0);
+  Eigen::RowVectorXf previous;
+  for (double d = 9.0; d <= 11.0 + 1e-9; d += 0.1) {  // bin 4's centre to bin 5's
+    const Eigen::MatrixXf f = nodeDescriptors({node(0, 0, 0, 0), node(d, 0, 0, 1)}, l, 60.0, 2.0);
+    const float a = f(0, 30 + 4), b = f(0, 30 + 5);
+    const double share = (d - 9.0) / 2.0;
+    EXPECT_NEAR(a * a, 1.0 - share, 1e-4) << d;  // squares of the normalised square roots = the shares
+    EXPECT_NEAR(b * b, share, 1e-4) << d;
+    if (previous.size() > 0) EXPECT_LT((f.row(0).head(60) - previous).norm(), 0.25f) << d;
+    previous = f.row(0).head(60);
+  }
 }
 
 // A crowd in one bin: node 0 has four neighbours of class 1 at 5 m (bin 2) and one of class 2 at 13 m (bin 6).
@@ -173,7 +194,9 @@ TEST(Descriptors, NodeDescriptorsInvariantToRigidMotion) {
     ASSERT_EQ(adjacency(m, 60.0), adjacency(nodes, 60.0));
     const Eigen::MatrixXf g = nodeDescriptors(m, l, 60.0, 2.0);
     ASSERT_EQ(g.rows(), f.rows());
-    EXPECT_LT((g - f).cwiseAbs().maxCoeff(), 1e-5f);
+    // Distances after the motion differ from the originals by float rounding; a neighbour on a bin centre then
+    // has a share of ~1e-7 in the next bin, which the square root lifts to ~3e-4.
+    EXPECT_LT((g - f).cwiseAbs().maxCoeff(), 1e-3f);
   }
 }
 
@@ -206,7 +229,8 @@ TEST(Descriptors, NodeDescriptorsFollowPermutationAndMotion) {
   for (int k = 0; k < n; ++k) q[k] = path[perm[k]];  // q[k] is path node perm[k]
   q = moved(q, T);
   const Eigen::MatrixXf g = nodeDescriptors(q, l, 10.0, 2.0);
-  for (int k = 0; k < n; ++k) EXPECT_LT((g.row(k) - f.row(perm[k])).cwiseAbs().maxCoeff(), 1e-5f) << "node " << perm[k];
+  // 1e-3: float rounding of distances that sit on a bin centre, lifted by the square root (see above).
+  for (int k = 0; k < n; ++k) EXPECT_LT((g.row(k) - f.row(perm[k])).cwiseAbs().maxCoeff(), 1e-3f) << "node " << perm[k];
 }
 
 TEST(Descriptors, NodeDescriptorsNormalised) {
@@ -260,15 +284,19 @@ TEST(Descriptors, ScanDescriptorHandChecked) {
   const DescriptorLayout l = layoutFor(3, 60.0);
   const auto d = scanDescriptor(nodes, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
   ASSERT_EQ(d.size(), 231u);
-  // counts (2, 0, 1) / sqrt5; edges: type(0,0)=0 bin 2, type(0,2)=2 bin 6 twice -> (1, 2) / sqrt5.
+  // counts (2, 0, 1) / sqrt5; edges (soft bins): type(0,0)=0, 5 m on bin 2's centre: 1 in bin 2; type(0,2)=2,
+  // 13 m on bin 6's centre: 1 in bin 6, and 13.93 m: 1 - w in bin 6, w in bin 7. Each part L2-normalised, so
   // fg = [counts | edges] has norm sqrt2 -> each / sqrt2; ring key zero -> stays zero.
+  const double w = std::sqrt(194.0) / 2.0 - 0.5 - 6.0;
+  const double e = std::sqrt(1.0 + (2.0 - w) * (2.0 - w) + w * w);
   const double k = 1.0 / std::sqrt(5.0) / std::sqrt(2.0);
   std::vector<double> expected(231, 0.0);
   expected[0] = 2 * k;
   expected[2] = 1 * k;
-  expected[3 + 0 * 30 + 2] = 1 * k;
-  expected[3 + 2 * 30 + 6] = 2 * k;
-  for (int i = 0; i < 231; ++i) EXPECT_NEAR(d[i], expected[i], 1e-6) << i;
+  expected[3 + 0 * 30 + 2] = 1.0 / e / std::sqrt(2.0);
+  expected[3 + 2 * 30 + 6] = (2.0 - w) / e / std::sqrt(2.0);
+  expected[3 + 2 * 30 + 7] = w / e / std::sqrt(2.0);
+  for (int i = 0; i < 231; ++i) EXPECT_NEAR(d[i], expected[i], 1e-5) << i;
 }
 
 TEST(Descriptors, ScanDescriptorZeroRingKeyNoNaN) {
