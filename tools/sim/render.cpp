@@ -10,7 +10,10 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <string>
 #include <thread>
+#include <tuple>
+#include <utility>
 
 #include "sim/rng.hpp"
 #include "sim/sensor.hpp"
@@ -367,6 +370,118 @@ bool sensorReturn(const Scene& sc, const World& world, const SensorConfig& senso
   return true;
 }
 
+// ---- per-frame scene: render() gathers the primitives near the sensor and buckets them by azimuth sector
+
+// A world primitive moved into coordinates centred on the sensor at o (world axes).
+LocalPrim toLocal(const Primitive& p, std::uint32_t id, const Vec3d& o) {
+  LocalPrim q;
+  const double rx = p.cx - o.x(), ry = p.cy - o.y();
+  q.shape = p.shape;
+  q.flags = p.flags;
+  q.pass = p.pass_through;
+  q.jitter = p.depth_jitter;
+  q.reflectivity = p.reflectivity;
+  q.label = p.label;
+  q.id = id;
+  q.hx = p.hx;
+  q.hy = p.hy;
+  q.c = p.cos_yaw;
+  q.s = p.sin_yaw;
+  q.z0 = static_cast<float>(p.z0 - o.z());
+  q.z1 = static_cast<float>(p.z1 - o.z());
+  // A box is tested in its own frame, so store the sensor's position there; round shapes only need the offset.
+  if (p.shape == Shape::kBox) {
+    q.ox = static_cast<float>(-(p.cos_yaw * rx + p.sin_yaw * ry));
+    q.oy = static_cast<float>(-(-p.sin_yaw * rx + p.cos_yaw * ry));
+  } else {
+    q.ox = static_cast<float>(-rx);
+    q.oy = static_cast<float>(-ry);
+  }
+  q.near = static_cast<float>(std::max(0.0, std::hypot(rx, ry) - p.radius));
+  return q;
+}
+
+// The static and moving primitives present at `time` whose bounding circle comes within `reach` of o,
+// nearest first. Ties are broken by id because std::sort is not stable: the order decides which of two
+// equally near primitives a ray tests first, and it must not depend on the world's index layout.
+void gatherPrims(const World& world, const Vec3d& o, double time, double reach, std::vector<LocalPrim>& prims) {
+  std::vector<int> ids;
+  world.staticsNear(o.x(), o.y(), reach, ids);
+  std::vector<Primitive> moving;
+  world.movingNear(time, o.x(), o.y(), reach, moving);
+  const auto& statics = world.statics();
+  prims.reserve(ids.size() + moving.size());
+  auto keep = [&](const Primitive& p, std::uint32_t id) {
+    const LocalPrim q = toLocal(p, id, o);
+    if (q.near < static_cast<float>(reach)) prims.push_back(q);
+  };
+  // Parked vehicles and temporary objects of a world with turnover are there at some times only.
+  const double world_time = world.absoluteTime(time);
+  for (int id : ids)
+    if (statics[id].presence == 0 || world.present(statics[id], world_time))
+      keep(statics[id], static_cast<std::uint32_t>(id));
+  for (std::size_t k = 0; k < moving.size(); ++k) keep(moving[k], static_cast<std::uint32_t>(statics.size() + k));
+  std::sort(prims.begin(), prims.end(),
+            [](const LocalPrim& a, const LocalPrim& b) { return a.near != b.near ? a.near < b.near : a.id < b.id; });
+}
+
+// Sector k's slot in [0, kSectors): a primitive's sector range may run past either end of the circle.
+inline int wrapSector(int k) { return ((k % kSectors) + kSectors) % kSectors; }
+
+// The sectors [first, last] (unwrapped) from which a ray can hit q: the azimuths its bounding circle spans,
+// the circle grown by `margin` (how far the sensor moves during the sweep) and the span widened by 0.6 of a
+// sector so that a ray near a sector's edge still finds it. All sectors when the sensor is inside or close to
+// the circle, where the angle is undefined or wider than half a turn.
+std::pair<int, int> sectorSpan(const LocalPrim& q, double margin) {
+  const float sector_w = 2.0f * kPi / kSectors;
+  // Centre relative to the sensor, from the stored local origin.
+  float cx, cy;
+  if (q.shape == Shape::kBox) {
+    cx = -(q.c * q.ox - q.s * q.oy);
+    cy = -(q.s * q.ox + q.c * q.oy);
+  } else {
+    cx = -q.ox;
+    cy = -q.oy;
+  }
+  const float dist = std::hypot(cx, cy), radius = dist - q.near + static_cast<float>(margin);
+  if (q.near <= static_cast<float>(margin) || dist <= radius * 1.0001f) return {0, kSectors - 1};
+  const float phi = std::atan2(cy, cx);
+  const float alpha = std::asin(std::min(1.0f, radius / dist)) + 0.6f * sector_w;
+  if (alpha >= kPi) return {0, kSectors - 1};
+  return {static_cast<int>(std::floor((phi - alpha + kPi) / sector_w)),
+          static_cast<int>(std::floor((phi + alpha + kPi) / sector_w))};
+}
+
+// Sector lists in CSR form (sector k: sector_items[sector_start[k] .. sector_start[k + 1])), each nearest
+// first because scene.prims already is: a ray can then stop at the first primitive too far to beat its hit.
+void bucketSectors(Scene& scene, double margin) {
+  const std::vector<LocalPrim>& prims = scene.prims;
+  std::vector<int>& sector_start = scene.sector_start;
+  sector_start.assign(kSectors + 1, 0);
+  std::vector<int> first(prims.size()), last(prims.size());
+  for (std::size_t i = 0; i < prims.size(); ++i) {
+    std::tie(first[i], last[i]) = sectorSpan(prims[i], margin);
+    for (int k = first[i]; k <= last[i]; ++k) ++sector_start[wrapSector(k) + 1];
+  }
+  for (int k = 0; k < kSectors; ++k) sector_start[k + 1] += sector_start[k];
+  std::vector<int>& sector_items = scene.sector_items;
+  sector_items.resize(sector_start[kSectors]);
+  std::vector<int> fill(sector_start.begin(), sector_start.end() - 1);
+  for (std::size_t i = 0; i < prims.size(); ++i)
+    for (int k = first[i]; k <= last[i]; ++k) sector_items[fill[wrapSector(k)]++] = static_cast<int>(i);
+}
+
+// The sensor at pose Pk, relative to the frame's sensor position o (the scene's centre).
+RayOrigin rayOrigin(const Mat4d& Pk, const Vec3d& o, const GroundPatch& ground) {
+  RayOrigin ro;
+  ro.o = Pk.topRightCorner<3, 1>();
+  ro.f0 = ro.o.z() - ground.height(ro.o.x(), ro.o.y());
+  ro.shift = (ro.o - o).cast<float>();
+  ro.shift_h = std::hypot(ro.shift.x(), ro.shift.y());
+  ro.R = Pk.topLeftCorner<3, 3>().cast<float>();
+  return ro;
+}
+
 }  // namespace
 
 // Per-frame inputs of the ray loops.
@@ -444,131 +559,54 @@ void Simulator::render(int index, Frame& out, int threads) const {
     throw InputError("frame " + std::to_string(index) + " is outside the trajectory (0.." +
                      std::to_string(numFrames() - 1) + ")");
   const SensorConfig& sensor = config_.sensor;
-  const int B = sensor.beams(), C = sensor.columns;
   const Mat4d& P = trajectory_.poses[index];
   const Vec3d o = P.topRightCorner<3, 1>();
-  const Eigen::Matrix3f R = P.topLeftCorner<3, 3>().cast<float>();
   const double time = index * trajectory_.frame_dt;
   const std::uint64_t frame_key = hashKeys(config_.seed, 0xF4A3E5ULL, static_cast<std::uint64_t>(index));
-  const float max_range = static_cast<float>(sensor.max_range);
   // With motion distortion the sensor moves up to `margin` from o during the sweep: gather and bucket with it.
   const std::optional<SweepMotion> sweep =
       sensor.motion_distortion ? std::optional<SweepMotion>(std::in_place, trajectory_.poses, index) : std::nullopt;
   const double margin = sweep ? (sweep->at(1.0).topRightCorner<3, 1>() - o).norm() + 0.01 : 0.0;
-  const double reach = sensor.max_range + margin;
 
-  // ---- gather and bucket the primitives around the sensor
-  std::vector<int> ids;
-  world_.staticsNear(o.x(), o.y(), reach, ids);
-  std::vector<Primitive> moving;
-  world_.movingNear(time, o.x(), o.y(), reach, moving);
-  const auto& statics = world_.statics();
+  // What all rays share: the primitives around the sensor by sector, and the ground under them.
   Scene scene;
-  std::vector<LocalPrim>& prims = scene.prims;
-  prims.reserve(ids.size() + moving.size());
-  auto local = [&](const Primitive& p, std::uint32_t id) {
-    LocalPrim q;
-    const double rx = p.cx - o.x(), ry = p.cy - o.y();
-    q.shape = p.shape;
-    q.flags = p.flags;
-    q.pass = p.pass_through;
-    q.jitter = p.depth_jitter;
-    q.reflectivity = p.reflectivity;
-    q.label = p.label;
-    q.id = id;
-    q.hx = p.hx;
-    q.hy = p.hy;
-    q.c = p.cos_yaw;
-    q.s = p.sin_yaw;
-    q.z0 = static_cast<float>(p.z0 - o.z());
-    q.z1 = static_cast<float>(p.z1 - o.z());
-    if (p.shape == Shape::kBox) {
-      q.ox = static_cast<float>(-(p.cos_yaw * rx + p.sin_yaw * ry));
-      q.oy = static_cast<float>(-(-p.sin_yaw * rx + p.cos_yaw * ry));
-    } else {
-      q.ox = static_cast<float>(-rx);
-      q.oy = static_cast<float>(-ry);
-    }
-    q.near = static_cast<float>(std::max(0.0, std::hypot(rx, ry) - p.radius));
-    if (q.near < static_cast<float>(reach)) prims.push_back(q);
-  };
-  // Parked vehicles and temporary objects of a world with turnover are there at some times only.
-  const double world_time = world_.absoluteTime(time);
-  for (int id : ids)
-    if (statics[id].presence == 0 || world_.present(statics[id], world_time))
-      local(statics[id], static_cast<std::uint32_t>(id));
-  for (std::size_t k = 0; k < moving.size(); ++k) local(moving[k], static_cast<std::uint32_t>(statics.size() + k));
-  std::sort(prims.begin(), prims.end(),
-            [](const LocalPrim& a, const LocalPrim& b) { return a.near != b.near ? a.near < b.near : a.id < b.id; });
-
-  // Sector lists (CSR), nearest first because prims are already sorted.
-  const float sector_w = 2.0f * kPi / kSectors;
-  std::vector<int>& sector_start = scene.sector_start;
-  sector_start.assign(kSectors + 1, 0);
-  std::vector<int> first(prims.size()), last(prims.size());
-  for (std::size_t i = 0; i < prims.size(); ++i) {
-    const LocalPrim& q = prims[i];
-    // Centre relative to the sensor, from the stored local origin.
-    float cx, cy;
-    if (q.shape == Shape::kBox) {
-      cx = -(q.c * q.ox - q.s * q.oy);
-      cy = -(q.s * q.ox + q.c * q.oy);
-    } else {
-      cx = -q.ox;
-      cy = -q.oy;
-    }
-    const float dist = std::hypot(cx, cy), radius = dist - q.near + static_cast<float>(margin);
-    if (q.near <= static_cast<float>(margin) || dist <= radius * 1.0001f) {
-      first[i] = 0;
-      last[i] = kSectors - 1;
-    } else {
-      const float phi = std::atan2(cy, cx);
-      const float alpha = std::asin(std::min(1.0f, radius / dist)) + 0.6f * sector_w;
-      if (alpha >= kPi) {
-        first[i] = 0;
-        last[i] = kSectors - 1;
-      } else {
-        first[i] = static_cast<int>(std::floor((phi - alpha + kPi) / sector_w));
-        last[i] = static_cast<int>(std::floor((phi + alpha + kPi) / sector_w));
-      }
-    }
-    for (int k = first[i]; k <= last[i]; ++k) ++sector_start[((k % kSectors) + kSectors) % kSectors + 1];
-  }
-  for (int k = 0; k < kSectors; ++k) sector_start[k + 1] += sector_start[k];
-  std::vector<int>& sector_items = scene.sector_items;
-  sector_items.resize(sector_start[kSectors]);
-  {
-    std::vector<int> fill(sector_start.begin(), sector_start.end() - 1);
-    for (std::size_t i = 0; i < prims.size(); ++i)
-      for (int k = first[i]; k <= last[i]; ++k)
-        sector_items[fill[((k % kSectors) + kSectors) % kSectors]++] = static_cast<int>(i);
-  }
-
-  // ---- cast into an image: spinning column-major (pixel = column * beams + beam), rosette in firing order
+  gatherPrims(world_, o, time, sensor.max_range + margin, scene.prims);
+  bucketSectors(scene, margin);
   scene.ground_max = sensor.max_range + 1.0;
-  scene.max_range = max_range;
+  scene.max_range = static_cast<float>(sensor.max_range);
   world_.groundPatch(o.x(), o.y(), scene.ground_max + 2.0 + margin, scene.ground);
+
   FrameRays fr{scene, frame_key, {}, {}, {}};
-  fr.start.o = o;
-  fr.start.f0 = o.z() - scene.ground.height(o.x(), o.y());
-  fr.start.R = R;
+  fr.start = rayOrigin(P, o, scene.ground);
   if (sensor.isRosette()) rosetteRays(sensor, config_.seed, index, fr.rosette);
-  const int units = sensor.isRosette() ? sensor.rosette_rays : C;  // what threads split: columns or rays
+  const int units = sensor.isRosette() ? sensor.rosette_rays : sensor.columns;  // what threads split
   if (sweep) {
     // One pose per column (spinning) or per ray (rosette), at its time within the sweep.
     fr.sweep.resize(static_cast<std::size_t>(units));
-    for (int k = 0; k < units; ++k) {
-      const Mat4d Pk = sweep->at(static_cast<double>(k) / units);
-      RayOrigin& ro = fr.sweep[k];
-      ro.o = Pk.topRightCorner<3, 1>();
-      ro.f0 = ro.o.z() - scene.ground.height(ro.o.x(), ro.o.y());
-      ro.shift = (ro.o - o).cast<float>();
-      ro.shift_h = std::hypot(ro.shift.x(), ro.shift.y());
-      ro.R = Pk.topLeftCorner<3, 3>().cast<float>();
-    }
+    for (int k = 0; k < units; ++k) fr.sweep[k] = rayOrigin(sweep->at(static_cast<double>(k) / units), o, scene.ground);
   }
-  const std::size_t N = sensor.isRosette() ? static_cast<std::size_t>(units) : static_cast<std::size_t>(B) * C;
   RayImage img;
+  castImage(fr, units, threads, img);
+  // Neighbours across a depth edge: the next column on the same beam, or the next rosette ray.
+  out.mixed_points = applyMixedPixels(img.range, img.point, img.label, img.intensity,
+                                      sensor.isRosette() ? 1 : static_cast<std::size_t>(sensor.beams()),
+                                      !sensor.isRosette(), sensor.mixed_pixel_rate, frame_key);
+
+  out.index = index;
+  out.time = time;
+  out.pose = P;
+  compact(fr, img, out);
+  if (config_.label_noise.any())
+    applyLabelNoise(out, config_.label_noise, config_.seed, sensor.beams(), sensor.columns);
+}
+
+// Casts every ray of the frame into an image, spinning column-major (pixel = column * beams + beam), rosette
+// in firing order. The columns (rays) are split into contiguous blocks, one per thread; every ray writes only
+// its own pixel, so the image does not depend on the split.
+void Simulator::castImage(const FrameRays& fr, int units, int threads, RayImage& img) const {
+  const SensorConfig& sensor = config_.sensor;
+  const std::size_t N =
+      sensor.isRosette() ? static_cast<std::size_t>(units) : static_cast<std::size_t>(sensor.beams()) * sensor.columns;
   img.range.assign(N, -1.0f);
   img.intensity.assign(N, 0.0f);
   img.label.assign(N, 0);
@@ -582,24 +620,14 @@ void Simulator::render(int index, Frame& out, int threads) const {
   threads = std::clamp(threads, 1, units);
   if (threads == 1) {
     cast(0, units);
-  } else {
-    std::vector<std::thread> pool;
-    for (int k = 1; k < threads; ++k)
-      pool.emplace_back(cast, static_cast<int>(static_cast<long>(units) * k / threads),
-                        static_cast<int>(static_cast<long>(units) * (k + 1) / threads));
-    cast(0, units / threads);
-    for (auto& t : pool) t.join();
+    return;
   }
-  // Neighbours across a depth edge: the next column on the same beam, or the next rosette ray.
-  out.mixed_points = applyMixedPixels(img.range, img.point, img.label, img.intensity,
-                                      sensor.isRosette() ? 1 : static_cast<std::size_t>(B), !sensor.isRosette(),
-                                      sensor.mixed_pixel_rate, frame_key);
-
-  out.index = index;
-  out.time = time;
-  out.pose = P;
-  compact(fr, img, out);
-  if (config_.label_noise.any()) applyLabelNoise(out, config_.label_noise, config_.seed, B, C);
+  std::vector<std::thread> pool;
+  for (int k = 1; k < threads; ++k)
+    pool.emplace_back(cast, static_cast<int>(static_cast<long>(units) * k / threads),
+                      static_cast<int>(static_cast<long>(units) * (k + 1) / threads));
+  cast(0, units / threads);
+  for (auto& t : pool) t.join();
 }
 
 // Spinning sensor: columns [c_begin, c_end), every beam.

@@ -159,6 +159,7 @@ class Simulator {
   // render() in parts (render.cpp).
   struct FrameRays;
   struct RayImage;
+  void castImage(const FrameRays& fr, int units, int threads, RayImage& img) const;
   void castSpinning(const FrameRays& fr, RayImage& img, int c_begin, int c_end) const;
   void castRosette(const FrameRays& fr, RayImage& img, int k_begin, int k_end) const;
   void castOne(const FrameRays& fr, const RayOrigin& ro, std::uint32_t ray, const Vec3f& ds, const Vec3f& dt,

@@ -41,19 +41,20 @@ Vec2 routeGroundGradient(double x, double y) {
           -0.5 * 2 * std::numbers::pi / 170.0 * std::sin(2 * std::numbers::pi * y / 170.0)};
 }
 
-}  // namespace
+constexpr double kStep = 0.05;  // spacing of the route's samples (m)
 
-Trajectory loopRoute() {
-  // Street corners of the driven centreline; corners are rounded with a 10 m radius.
-  const std::vector<Vec2> corners = {{0, 0},     {200, 0},   {200, 120}, {0, 120},   {0, 0},   {200, 0}, {200, 120},
-                                     {200, 180}, {140, 180}, {140, 120}, {200, 120}, {200, 0}, {0, 0}};
-  constexpr double kRadius = 10.0, kStep = 0.05, kLane = 1.2, kSensorHeight = 1.73;
-  struct Sample {
-    Vec2 p;
-    double heading;
-    bool curve;
-  };
-  std::vector<Sample> centre;
+// A point of the route, kStep apart from the next.
+struct RouteSample {
+  Vec2 p;
+  double heading;
+  bool curve;  // on a rounded corner (the car slows down there)
+};
+
+// The centreline through the street corners, each turning corner rounded with a 10 m radius; corners
+// driven straight through (intersections) stay as they are.
+std::vector<RouteSample> roundedCentreline(const std::vector<Vec2>& corners) {
+  constexpr double kRadius = 10.0;
+  std::vector<RouteSample> centre;
   auto straight = [&](const Vec2& a, const Vec2& b) {
     const Vec2 d = b - a;
     const double len = d.norm();
@@ -80,16 +81,13 @@ Trajectory loopRoute() {
     cursor = corners[i] + dout * tl;
   }
   straight(cursor, corners.back());
+  return centre;
+}
 
-  // Drive in the right-hand lane: offset the centreline to the right of the heading.
-  std::vector<Vec2> lane(centre.size());
-  std::vector<double> s(centre.size(), 0.0), speed(centre.size());
-  for (std::size_t k = 0; k < centre.size(); ++k) {
-    const double h = centre[k].heading;
-    lane[k] = centre[k].p + kLane * Vec2(std::sin(h), -std::cos(h));
-    if (k > 0) s[k] = s[k - 1] + (lane[k] - lane[k - 1]).norm();
-  }
-  // 9 m/s on straights, 5 m/s in bends, with ramps over +-15 m.
+// Speed at each sample: 9 m/s on straights, 5 m/s in bends, with linear ramps over the 15 m (arc length
+// `s`) before and after a bend.
+std::vector<double> routeSpeeds(const std::vector<RouteSample>& centre, const std::vector<double>& s) {
+  std::vector<double> speed(centre.size());
   for (std::size_t k = 0; k < centre.size(); ++k) {
     double v = 9.0;
     for (std::size_t j = k; j-- > 0 && s[k] - s[j] < 15.0;)
@@ -98,7 +96,44 @@ Trajectory loopRoute() {
       if (centre[j].curve) v = std::min(v, 5.0 + 4.0 * (s[j] - s[k]) / 15.0);
     speed[k] = v;
   }
+  return speed;
+}
 
+// The LiDAR pose at point p of the lane heading h: yawed along the lane, pitched and rolled with the ground's
+// slope, the sensor 1.73 m (KITTI's mounting height) above the ground.
+Mat4d lanePose(const Vec2& p, double h) {
+  constexpr double kSensorHeight = 1.73;
+  const Vec2 fwd(std::cos(h), std::sin(h)), left(-std::sin(h), std::cos(h));
+  const Vec2 g = routeGroundGradient(p.x(), p.y());
+  const double pitch = std::atan(g.dot(fwd)), roll = std::atan(g.dot(left));
+  Mat4d T = Mat4d::Identity();
+  T.topLeftCorner<3, 3>() = (Eigen::AngleAxisd(h, Vec3d::UnitZ()) * Eigen::AngleAxisd(-pitch, Vec3d::UnitY()) *
+                             Eigen::AngleAxisd(roll, Vec3d::UnitX()))
+                                .toRotationMatrix();
+  T.topRightCorner<3, 1>() = Vec3d(p.x(), p.y(), routeGround(p.x(), p.y()) + kSensorHeight);
+  return T;
+}
+
+}  // namespace
+
+Trajectory loopRoute() {
+  // Street corners of the driven centreline.
+  const std::vector<Vec2> corners = {{0, 0},     {200, 0},   {200, 120}, {0, 120},   {0, 0},   {200, 0}, {200, 120},
+                                     {200, 180}, {140, 180}, {140, 120}, {200, 120}, {200, 0}, {0, 0}};
+  constexpr double kLane = 1.2;
+  const std::vector<RouteSample> centre = roundedCentreline(corners);
+
+  // Drive in the right-hand lane: offset the centreline to the right of the heading; s is arc length on it.
+  std::vector<Vec2> lane(centre.size());
+  std::vector<double> s(centre.size(), 0.0);
+  for (std::size_t k = 0; k < centre.size(); ++k) {
+    const double h = centre[k].heading;
+    lane[k] = centre[k].p + kLane * Vec2(std::sin(h), -std::cos(h));
+    if (k > 0) s[k] = s[k - 1] + (lane[k] - lane[k - 1]).norm();
+  }
+  const std::vector<double> speed = routeSpeeds(centre, s);
+
+  // One pose per frame: advance along the lane by the local speed times the frame time.
   Trajectory t;
   t.frame_dt = 0.1;
   t.source = "built-in loop route";
@@ -110,16 +145,7 @@ Trajectory loopRoute() {
     if (k + 1 >= s.size()) break;
     const double u = (pos - s[k]) / std::max(1e-9, s[k + 1] - s[k]);
     const Vec2 p = lane[k] * (1 - u) + lane[k + 1] * u;
-    const double h = std::atan2(lane[k + 1].y() - lane[k].y(), lane[k + 1].x() - lane[k].x());
-    const Vec2 fwd(std::cos(h), std::sin(h)), left(-std::sin(h), std::cos(h));
-    const Vec2 g = routeGroundGradient(p.x(), p.y());
-    const double pitch = std::atan(g.dot(fwd)), roll = std::atan(g.dot(left));
-    Mat4d T = Mat4d::Identity();
-    T.topLeftCorner<3, 3>() = (Eigen::AngleAxisd(h, Vec3d::UnitZ()) * Eigen::AngleAxisd(-pitch, Vec3d::UnitY()) *
-                               Eigen::AngleAxisd(roll, Vec3d::UnitX()))
-                                  .toRotationMatrix();
-    T.topRightCorner<3, 1>() = Vec3d(p.x(), p.y(), routeGround(p.x(), p.y()) + kSensorHeight);
-    poses.push_back(T);
+    poses.push_back(lanePose(p, std::atan2(lane[k + 1].y() - lane[k].y(), lane[k + 1].x() - lane[k].x())));
     pos += speed[k] * t.frame_dt;
   }
   // World = LiDAR frame of frame 0.

@@ -1304,105 +1304,105 @@ class Generator {
   std::vector<std::pair<double, double>> aliased_[2];          // look-alike lots' stretches, right / left
 };
 
-}  // namespace
+// The street style (lane and sidewalk widths) and the district grid's offset, drawn from the seed.
+void drawStyle(World::Impl& w) {
+  Rng rng(hashKeys(w.seed, kStyle));
+  w.style.lane_width = rng.uniform(3.0, 3.6);
+  w.style.road_half_width = w.style.lane_width + 0.2;
+  w.style.parking_width = 2.2;
+  w.style.sidewalk_width = rng.uniform(1.5, 2.8);
+  w.district_ox = rng.uniform(0, kDistrictCell);
+  w.district_oy = rng.uniform(0, kDistrictCell);
+}
 
-World::World(const std::vector<Mat4d>& poses, std::uint64_t seed, const WorldConfig& config)
-    : impl_(std::make_unique<Impl>()) {
-  const auto t0 = std::chrono::steady_clock::now();
-  Impl& w = *impl_;
-  if (config.epoch < 0) throw InputError("world: epoch must be >= 0 days, got " + std::to_string(config.epoch));
-  if (!(config.aliasing >= 0.0 && config.aliasing <= 1.0))
-    throw InputError("world: aliasing must be within [0, 1], got " + std::to_string(config.aliasing));
-  w.seed = seed;
-  w.config = config;
-  {
-    Rng rng(hashKeys(seed, kStyle));
-    w.style.lane_width = rng.uniform(3.0, 3.6);
-    w.style.road_half_width = w.style.lane_width + 0.2;
-    w.style.parking_width = 2.2;
-    w.style.sidewalk_width = rng.uniform(1.5, 2.8);
-    w.district_ox = rng.uniform(0, kDistrictCell);
-    w.district_oy = rng.uniform(0, kDistrictCell);
+// The area the rasters and the index cover: the path's bounding box grown by kMargin on every side.
+struct Bounds {
+  double xmin, ymin, xmax, ymax;
+};
+
+Bounds rasterBounds(const Path& path) {
+  Bounds b{1e300, 1e300, -1e300, -1e300};
+  for (const auto& v : path.vertices()) {
+    b.xmin = std::min(b.xmin, v.x);
+    b.ymin = std::min(b.ymin, v.y);
+    b.xmax = std::max(b.xmax, v.x);
+    b.ymax = std::max(b.ymax, v.y);
   }
-  w.path.build(poses, config.sensor_height, config.path_extension);
-  w.stats.path_length_m = w.path.length();
+  b.xmin -= kMargin;
+  b.ymin -= kMargin;
+  b.xmax += kMargin;
+  b.ymax += kMargin;
+  return b;
+}
 
-  double xmin = 1e300, ymin = 1e300, xmax = -1e300, ymax = -1e300;
-  for (const auto& v : w.path.vertices()) {
-    xmin = std::min(xmin, v.x);
-    ymin = std::min(ymin, v.y);
-    xmax = std::max(xmax, v.x);
-    ymax = std::max(ymax, v.y);
-  }
-  xmin -= kMargin;
-  ymin -= kMargin;
-  xmax += kMargin;
-  ymax += kMargin;
-
-  // Distance to the path, splatted segment by segment within kFar.
-  w.dist = TiledGrid<float>(xmin, ymin, kDistCell, static_cast<int>((xmax - xmin) / kDistCell) + 1,
-                            static_cast<int>((ymax - ymin) / kDistCell) + 1, static_cast<float>(kFar));
+// Distance to the path, splatted segment by segment within kFar (cells farther away keep kFar).
+void buildDistance(World::Impl& w, const Bounds& b) {
+  w.dist = TiledGrid<float>(b.xmin, b.ymin, kDistCell, static_cast<int>((b.xmax - b.xmin) / kDistCell) + 1,
+                            static_cast<int>((b.ymax - b.ymin) / kDistCell) + 1, static_cast<float>(kFar));
   for (int k = 0; k < w.path.segments(); ++k) {
-    const Vec2 a = w.path.vertex(k), b = w.path.vertex(k + 1);
-    const int x0 = w.dist.cellX(std::min(a.x(), b.x()) - kFar), x1 = w.dist.cellX(std::max(a.x(), b.x()) + kFar);
-    const int y0 = w.dist.cellY(std::min(a.y(), b.y()) - kFar), y1 = w.dist.cellY(std::max(a.y(), b.y()) + kFar);
+    const Vec2 a = w.path.vertex(k), c = w.path.vertex(k + 1);
+    const int x0 = w.dist.cellX(std::min(a.x(), c.x()) - kFar), x1 = w.dist.cellX(std::max(a.x(), c.x()) + kFar);
+    const int y0 = w.dist.cellY(std::min(a.y(), c.y()) - kFar), y1 = w.dist.cellY(std::max(a.y(), c.y()) + kFar);
     for (int iy = y0; iy <= y1; ++iy)
       for (int ix = x0; ix <= x1; ++ix) {
         if (!w.dist.inside(ix, iy)) continue;
-        const double d = segmentDistance(Vec2(w.dist.centreX(ix), w.dist.centreY(iy)), a, b);
+        const double d = segmentDistance(Vec2(w.dist.centreX(ix), w.dist.centreY(iy)), a, c);
         if (d < kFar && d < w.dist.get(ix, iy)) w.dist.at(ix, iy) = static_cast<float>(d);
       }
   }
+}
 
-  // Ground height: Gaussian-weighted path heights within 24 m, then the nearest known value outward.
-  {
-    const int nx = static_cast<int>((xmax - xmin) / kHeightCell) + 1,
-              ny = static_cast<int>((ymax - ymin) / kHeightCell) + 1;
-    std::vector<double> acc(static_cast<std::size_t>(nx) * ny, 0.0), wsum(acc.size(), 0.0);
-    for (const auto& v : w.path.vertices()) {
-      const int cx = static_cast<int>((v.x - xmin) / kHeightCell), cy = static_cast<int>((v.y - ymin) / kHeightCell);
-      for (int iy = std::max(0, cy - 6); iy <= std::min(ny - 1, cy + 6); ++iy)
-        for (int ix = std::max(0, cx - 6); ix <= std::min(nx - 1, cx + 6); ++ix) {
-          const double dx = xmin + (ix + 0.5) * kHeightCell - v.x, dy = ymin + (iy + 0.5) * kHeightCell - v.y;
-          const double d2 = dx * dx + dy * dy;
-          if (d2 > 24.0 * 24.0) continue;
-          const double wt = std::exp(-d2 / (2 * 8.0 * 8.0));
-          acc[iy * nx + ix] += wt * v.z;
-          wsum[iy * nx + ix] += wt;
-        }
+// Ground height: each cell within 24 m of the path takes the Gaussian-weighted (sigma 8 m) mean height of
+// the path vertices around it, so the ground follows the road smoothly; farther cells take the height of
+// the nearest such cell (breadth-first fill), so the ground stays flat beyond the driven area.
+void buildHeight(World::Impl& w, const Bounds& b) {
+  const int nx = static_cast<int>((b.xmax - b.xmin) / kHeightCell) + 1,
+            ny = static_cast<int>((b.ymax - b.ymin) / kHeightCell) + 1;
+  std::vector<double> acc(static_cast<std::size_t>(nx) * ny, 0.0), wsum(acc.size(), 0.0);
+  for (const auto& v : w.path.vertices()) {
+    const int cx = static_cast<int>((v.x - b.xmin) / kHeightCell), cy = static_cast<int>((v.y - b.ymin) / kHeightCell);
+    for (int iy = std::max(0, cy - 6); iy <= std::min(ny - 1, cy + 6); ++iy)
+      for (int ix = std::max(0, cx - 6); ix <= std::min(nx - 1, cx + 6); ++ix) {
+        const double dx = b.xmin + (ix + 0.5) * kHeightCell - v.x, dy = b.ymin + (iy + 0.5) * kHeightCell - v.y;
+        const double d2 = dx * dx + dy * dy;
+        if (d2 > 24.0 * 24.0) continue;
+        const double wt = std::exp(-d2 / (2 * 8.0 * 8.0));
+        acc[iy * nx + ix] += wt * v.z;
+        wsum[iy * nx + ix] += wt;
+      }
+  }
+  w.height = TiledGrid<float>(b.xmin, b.ymin, kHeightCell, nx, ny, 0.0f);
+  std::vector<char> known(acc.size(), 0);
+  std::deque<int> queue;
+  for (std::size_t c = 0; c < acc.size(); ++c)
+    if (wsum[c] > 1e-9) {
+      w.height.at(static_cast<int>(c % nx), static_cast<int>(c / nx)) = static_cast<float>(acc[c] / wsum[c]);
+      known[c] = 1;
+      queue.push_back(static_cast<int>(c));
     }
-    w.height = TiledGrid<float>(xmin, ymin, kHeightCell, nx, ny, 0.0f);
-    std::vector<char> known(acc.size(), 0);
-    std::deque<int> queue;
-    for (std::size_t c = 0; c < acc.size(); ++c)
-      if (wsum[c] > 1e-9) {
-        w.height.at(static_cast<int>(c % nx), static_cast<int>(c / nx)) = static_cast<float>(acc[c] / wsum[c]);
-        known[c] = 1;
-        queue.push_back(static_cast<int>(c));
-      }
-    while (!queue.empty()) {
-      const int c = queue.front();
-      queue.pop_front();
-      const int cx = c % nx, cy = c / nx;
-      const float h = w.height.get(cx, cy);
-      const int nbr[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
-      for (const auto& d : nbr) {
-        const int x = cx + d[0], y = cy + d[1];
-        if (x < 0 || y < 0 || x >= nx || y >= ny || known[y * nx + x]) continue;
-        known[y * nx + x] = 1;
-        w.height.at(x, y) = h;
-        queue.push_back(y * nx + x);
-      }
+  while (!queue.empty()) {
+    const int c = queue.front();
+    queue.pop_front();
+    const int cx = c % nx, cy = c / nx;
+    const float h = w.height.get(cx, cy);
+    const int nbr[4][2] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+    for (const auto& d : nbr) {
+      const int x = cx + d[0], y = cy + d[1];
+      if (x < 0 || y < 0 || x >= nx || y >= ny || known[y * nx + x]) continue;
+      known[y * nx + x] = 1;
+      w.height.at(x, y) = h;
+      queue.push_back(y * nx + x);
     }
   }
+}
 
-  Generator(w).run();
-
-  // Static index.
-  w.ix0 = xmin;
-  w.iy0 = ymin;
-  w.inx = static_cast<int>((xmax - xmin) / kIndexCell) + 1;
-  w.iny = static_cast<int>((ymax - ymin) / kIndexCell) + 1;
+// The static index: a uniform kIndexCell grid in CSR form, each primitive in the cell of its centre (queries
+// widen their radius by max_radius to find primitives reaching in from neighbouring cells).
+void buildIndex(World::Impl& w, const Bounds& b) {
+  w.ix0 = b.xmin;
+  w.iy0 = b.ymin;
+  w.inx = static_cast<int>((b.xmax - b.xmin) / kIndexCell) + 1;
+  w.iny = static_cast<int>((b.ymax - b.ymin) / kIndexCell) + 1;
   std::vector<int> count(static_cast<std::size_t>(w.inx) * w.iny + 1, 0);
   auto cellOf = [&](const Primitive& p) {
     const int cx = std::clamp(static_cast<int>((p.cx - w.ix0) / kIndexCell), 0, w.inx - 1);
@@ -1417,6 +1417,28 @@ World::World(const std::vector<Mat4d>& poses, std::uint64_t seed, const WorldCon
   w.index_start = count;
   w.index_ids.assign(w.prims.size(), 0);
   for (std::size_t i = 0; i < w.prims.size(); ++i) w.index_ids[count[cellOf(w.prims[i])]++] = static_cast<int>(i);
+}
+
+}  // namespace
+
+World::World(const std::vector<Mat4d>& poses, std::uint64_t seed, const WorldConfig& config)
+    : impl_(std::make_unique<Impl>()) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Impl& w = *impl_;
+  if (config.epoch < 0) throw InputError("world: epoch must be >= 0 days, got " + std::to_string(config.epoch));
+  if (!(config.aliasing >= 0.0 && config.aliasing <= 1.0))
+    throw InputError("world: aliasing must be within [0, 1], got " + std::to_string(config.aliasing));
+  w.seed = seed;
+  w.config = config;
+  drawStyle(w);
+  w.path.build(poses, config.sensor_height, config.path_extension);
+  w.stats.path_length_m = w.path.length();
+  // The rasters first: the generator places objects by distance to the path and on the ground height.
+  const Bounds bounds = rasterBounds(w.path);
+  buildDistance(w, bounds);
+  buildHeight(w, bounds);
+  Generator(w).run();
+  buildIndex(w, bounds);
 
   w.stats.primitives = w.prims.size();
   w.stats.memory_bytes = sizeof(Impl) + w.path.memoryBytes() + w.dist.memoryBytes() + w.height.memoryBytes() +
