@@ -7,6 +7,9 @@ import os
 import platform
 import sys
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import field_md  # noqa: E402
+
 
 def load(path):
     try:
@@ -177,6 +180,8 @@ def main():
       "Ground truth is the pose each frame was rendered from. Simulated worlds are not KITTI: these numbers "
       "show the method and its regressions, they are not a substitute for a run on the real sequences.")
     w("")
+    if os.path.isdir(os.path.join(root, "field")):  # scripts/field.sh's runs come first: the headline
+        out.extend(field_md.section(os.path.join(root, "field")))
     w("## The paper's numbers (real KITTI, as reported; do not mix protocols)")
     w("")
     w("| protocol | paper (SGLC, RA-L 2024) | our comparable table |")
