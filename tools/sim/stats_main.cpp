@@ -4,9 +4,10 @@
 //   sglc-sim-stats NAME=BIN:LABEL [NAME=BIN:LABEL ...]
 //   sglc-sim-stats --version
 //
-// Per scan: points, points per class, range histogram, intensity, the engine's clustered landmarks (nodes per
-// class and their sizes), graph edges, plane features, background cells, scan-descriptor occupancy. Across
-// scans: the L2 distance of every pair of scan descriptors (the engine's retrieval distance).
+// Per scan: points, points per class, range histogram, median and 90th percentile, intensity, the engine's
+// clustered landmarks (nodes per class and their sizes), graph edges, plane features, background cells,
+// scan-descriptor occupancy. Across scans: the L2 distance of every pair of scan descriptors (the engine's
+// retrieval distance).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -76,6 +77,7 @@ void addPointStats(ordered_json& s, const NamedScan& in) {
   s["range_hist"] = hist;
   s["range_mean_m"] = ranges.empty() ? 0.0 : range_sum / ranges.size();
   s["range_median_m"] = ranges.empty() ? 0.0 : ranges[ranges.size() / 2];
+  s["range_p90_m"] = ranges.empty() ? 0.0 : ranges[ranges.size() * 9 / 10];
   s["range_max_m"] = ranges.empty() ? 0.0 : ranges.back();
 }
 
