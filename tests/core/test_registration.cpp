@@ -234,16 +234,18 @@ std::vector<Plane> movedPlanes(const std::vector<Plane>& planes, const Mat4d& T)
   return out;
 }
 
+Plane buildingPlane(const Vec3f& centroid, const Vec3f& normal) {
+  Plane p;
+  p.centroid = centroid;
+  p.normal = normal;
+  p.cls = static_cast<std::uint8_t>(Background::kBuilding);
+  return p;
+}
+
 // A straight corridor 60 m long: road and two facades along x, planes every metre. Nothing fixes x.
 std::vector<Plane> corridorPlanes() {
   std::vector<Plane> planes;
-  auto add = [&](Vec3f c, Vec3f n) {
-    Plane p;
-    p.centroid = c;
-    p.normal = n;
-    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
-    planes.push_back(p);
-  };
+  auto add = [&](Vec3f c, Vec3f n) { planes.push_back(buildingPlane(c, n)); };
   for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
     for (float y = -7.5f; y <= 7.5f; y += 1.0f) add({x, y, -1.7f}, {0, 0, 1});
     for (float z = -1.2f; z <= 4.0f; z += 1.0f) {
@@ -318,13 +320,7 @@ TEST(RefinePlanes, CorridorTakesTheFreeDirectionFromTheAnchor) {
 // Instance pairs tilt (a car's points are sampled differently from two viewpoints); the ground does not.
 TEST(RefinePlanes, AnchorDoesNotTiltAWeaklyConstrainedRoll) {
   std::vector<Plane> query;
-  auto add = [&](Vec3f c, Vec3f n) {
-    Plane p;
-    p.centroid = c;
-    p.normal = n;
-    p.cls = static_cast<std::uint8_t>(Background::kBuilding);
-    query.push_back(p);
-  };
+  auto add = [&](Vec3f c, Vec3f n) { query.push_back(buildingPlane(c, n)); };
   for (float x = -29.5f; x <= 29.5f; x += 1.0f) {
     for (float y : {-0.5f, 0.5f}) add({x, y, -1.7f}, {0, 0, 1});
     add({x, 8.0f, 1.0f}, {0, -1, 0});

@@ -2,25 +2,13 @@
 """Writes docs/RESULTS.md (on stdout) from the summaries scripts/results.sh leaves in RESULTS_DIR."""
 import csv
 import datetime
-import json
 import os
 import platform
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import field_md  # noqa: E402
-
-
-def load(path):
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except FileNotFoundError:
-        return None
-
-
-def f3(x):
-    return "-" if x is None else f"{x:.3f}"
+from field_md import f3, load  # noqa: E402
 
 
 def pct(x):

@@ -6,6 +6,20 @@
 #include "sim/sensor.hpp"
 
 namespace sglc::sim {
+namespace {
+
+// A spinning sensor whose beams are spread evenly from `top_deg` down to `bottom_deg`.
+SensorConfig uniformSpinning(const char* name, int beams, double top_deg, double bottom_deg, int columns,
+                             double max_range) {
+  SensorConfig s;
+  s.name = name;
+  for (int k = 0; k < beams; ++k) s.elevation_deg.push_back(top_deg - k * (top_deg - bottom_deg) / (beams - 1));
+  s.columns = columns;
+  s.max_range = max_range;
+  return s;
+}
+
+}  // namespace
 
 SensorConfig SensorConfig::hdl64() {
   SensorConfig s;
@@ -18,23 +32,9 @@ SensorConfig SensorConfig::hdl64() {
   return s;
 }
 
-SensorConfig SensorConfig::hdl32() {
-  SensorConfig s;
-  s.name = "hdl32";
-  for (int k = 0; k < 32; ++k) s.elevation_deg.push_back(10.67 - k * (10.67 + 30.67) / 31.0);
-  s.columns = 1800;
-  s.max_range = 100.0;
-  return s;
-}
+SensorConfig SensorConfig::hdl32() { return uniformSpinning("hdl32", 32, 10.67, -30.67, 1800, 100.0); }
 
-SensorConfig SensorConfig::beams128() {
-  SensorConfig s;
-  s.name = "beams128";
-  for (int k = 0; k < 128; ++k) s.elevation_deg.push_back(15.0 - k * 40.0 / 127.0);
-  s.columns = 1800;
-  s.max_range = 120.0;
-  return s;
-}
+SensorConfig SensorConfig::beams128() { return uniformSpinning("beams128", 128, 15.0, -25.0, 1800, 120.0); }
 
 SensorConfig SensorConfig::preset(int beams) {
   if (beams == 64) return hdl64();
@@ -59,24 +59,10 @@ SensorConfig& SensorConfig::noiseFree() {
   return *this;
 }
 
-SensorConfig SensorConfig::vlp16() {
-  SensorConfig s;
-  s.name = "vlp16";
-  for (int k = 0; k < 16; ++k) s.elevation_deg.push_back(15.0 - k * 2.0);
-  s.columns = 1800;
-  s.max_range = 100.0;
-  return s;
-}
+SensorConfig SensorConfig::vlp16() { return uniformSpinning("vlp16", 16, 15.0, -15.0, 1800, 100.0); }
 
 // The OS1-128 runs at 512, 1024 or 2048 columns per revolution; 1024 at 10 Hz is its default mode.
-SensorConfig SensorConfig::os1_128() {
-  SensorConfig s;
-  s.name = "os1-128";
-  for (int k = 0; k < 128; ++k) s.elevation_deg.push_back(22.5 - k * 45.0 / 127.0);
-  s.columns = 1024;
-  s.max_range = 120.0;
-  return s;
-}
+SensorConfig SensorConfig::os1_128() { return uniformSpinning("os1-128", 128, 22.5, -22.5, 1024, 120.0); }
 
 // The Avia fires 240 000 points/s, so 24 000 per 100 ms frame, over 70.4 deg x 77.2 deg; its range is 190 m
 // at 80 % reflectivity, capped here at the world's 150 m. The 128 x 128 pseudo image (cells of about 0.55 x
