@@ -279,24 +279,21 @@ TEST(Descriptors, ScanDescriptorUnitNormAndFinite) {
 }
 
 TEST(Descriptors, ScanDescriptorHandChecked) {
+  // Edges use hard bins (stored descriptors must keep one definition; see scanDescriptor).
   // Two class-0 nodes 5 m apart and one class-2 node 13 m from the first, 13.93 m from the second; no ring key.
   const std::vector<Node> nodes{node(0, 0, 0, 0), node(5, 0, 0, 0), node(0, 13, 0, 2)};
   const DescriptorLayout l = layoutFor(3, 60.0);
   const auto d = scanDescriptor(nodes, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
   ASSERT_EQ(d.size(), 231u);
-  // counts (2, 0, 1) / sqrt5; edges (soft bins): type(0,0)=0, 5 m on bin 2's centre: 1 in bin 2; type(0,2)=2,
-  // 13 m on bin 6's centre: 1 in bin 6, and 13.93 m: 1 - w in bin 6, w in bin 7. Each part L2-normalised, so
+  // counts (2, 0, 1) / sqrt5; edges: type(0,0)=0 bin 2, type(0,2)=2 bin 6 twice -> (1, 2) / sqrt5.
   // fg = [counts | edges] has norm sqrt2 -> each / sqrt2; ring key zero -> stays zero.
-  const double w = std::sqrt(194.0) / 2.0 - 0.5 - 6.0;
-  const double e = std::sqrt(1.0 + (2.0 - w) * (2.0 - w) + w * w);
   const double k = 1.0 / std::sqrt(5.0) / std::sqrt(2.0);
   std::vector<double> expected(231, 0.0);
   expected[0] = 2 * k;
   expected[2] = 1 * k;
-  expected[3 + 0 * 30 + 2] = 1.0 / e / std::sqrt(2.0);
-  expected[3 + 2 * 30 + 6] = (2.0 - w) / e / std::sqrt(2.0);
-  expected[3 + 2 * 30 + 7] = w / e / std::sqrt(2.0);
-  for (int i = 0; i < 231; ++i) EXPECT_NEAR(d[i], expected[i], 1e-5) << i;
+  expected[3 + 0 * 30 + 2] = 1 * k;
+  expected[3 + 2 * 30 + 6] = 2 * k;
+  for (int i = 0; i < 231; ++i) EXPECT_NEAR(d[i], expected[i], 1e-6) << i;
 }
 
 TEST(Descriptors, ScanDescriptorZeroRingKeyNoNaN) {
