@@ -6,14 +6,17 @@
 #   scripts/field.sh                         # everything (about an hour on 2 cores)
 #   PARTS="reloc sensors" scripts/field.sh   # some parts: sequence, iid, reloc, sensors, aliasing
 #   SEED=12 SEQS=05 scripts/field.sh         # another world, one path
-# Simulated scans go to $WORK (deleted after each run; about 2 MB per frame while it lasts).
+# Simulated scans go to a fresh directory under $WORK (default /tmp), deleted after each run and at exit; about
+# 2 MB per frame while it lasts. A part that runs replaces its own results in $OUT; the others stay, and the
+# tables name each run's seed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 DATA=${DATA:-../shared/data}
 SIM=${SIM:-build/bin/sglc-sim}
 EVAL=${EVAL:-build/bin/sglc-eval}
 OUT=${OUT:-docs/results/field}
-WORK=${WORK:-$(mktemp -d /tmp/sglc-field.XXXXXX)}
+mkdir -p "${WORK:=/tmp}"
+WORK=$(mktemp -d "$WORK/sglc-field.XXXXXX")  # only this directory is ever deleted
 SEED=${SEED:-11}
 SEQS=${SEQS-"00 05 08"}
 STEP=${STEP:-1}  # the sequence protocol takes every STEP-th frame of the path (1: all, as the paper)
@@ -36,12 +39,14 @@ simulate() {
 }
 # sequence NAME: the sequence protocol on $WORK/NAME, into $OUT/NAME.
 sequence() {
+  rm -rf "${OUT:?}/$1"
   "$EVAL" --protocol sequence --data "$WORK/$1" --out "$OUT/$1" --title "field: $1" --no-plots > /dev/null
   cp "$WORK/$1/sim_info.json" "$OUT/$1/sim_info.json"
   rm -rf "${WORK:?}/$1"
 }
 # relocalize MAP NAME: the queries of $WORK/NAME against the map $WORK/MAP, into $OUT/NAME.
 relocalize() {
+  rm -rf "${OUT:?}/$2"
   "$EVAL" --protocol relocalization --map-data "$WORK/$1" --data "$WORK/$2" --out "$OUT/$2" \
     --title "field: $2 against $1" --no-plots > /dev/null
   cp "$WORK/$2/sim_info.json" "$OUT/$2/sim_info.json"

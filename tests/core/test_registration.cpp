@@ -293,7 +293,7 @@ TEST(RefinePlanes, BiasedAnchorDoesNotMoveAConstrainedPose) {
   const RefineResult r = refinePlanes(query, index, candidate, anchor, Mat4d::Identity(), RefineConfig{});
   EXPECT_LT(test::translationError(r.T, T), 2e-3) << r.T;
   EXPECT_LT(test::rotationErrorDeg(r.T, T), 0.01);
-  // An anchor acting in every direction (min_information above any eigenvalue) is pulled by the bias.
+  // An anchor acting in all of yaw, x and y (min_information above any eigenvalue) is pulled by the bias.
   RefineConfig everywhere;
   everywhere.min_information = 1e12;
   const RefineResult pulled = refinePlanes(query, index, candidate, anchor, Mat4d::Identity(), everywhere);
@@ -335,7 +335,8 @@ TEST(RefinePlanes, AnchorDoesNotTiltAWeaklyConstrainedRoll) {
   const RefineResult r = refinePlanes(query, index, candidate, tilted, T0, RefineConfig{});
   EXPECT_LT(test::rotationErrorDeg(r.T, T), 0.05) << r.T;
   EXPECT_LT(std::abs(r.T(0, 3) - T(0, 3)), 0.05) << r.T;  // x still comes from the anchor
-  // An anchor acting in every direction takes the tilt.
+  // An anchor acting in all of yaw, x and y is pulled off by the tilted pairs (through yaw): the check above can
+  // tell a pulled pose from a held one.
   RefineConfig everywhere;
   everywhere.min_information = 1e12;
   const RefineResult pulled = refinePlanes(query, index, candidate, tilted, T0, everywhere);

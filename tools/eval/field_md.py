@@ -34,6 +34,10 @@ def runs(root, prefix):
     return out
 
 
+def seed(info):
+    return str(info.get("seed", "-"))
+
+
 def miou(info):
     v = info.get("label_miou")
     return "-" if v is None else f"{v:.3f}"
@@ -52,7 +56,7 @@ def sequence_rows(root):
                          ("aliasing1-", "realistic + aliasing 1"), ("iid-", "ablation: iid label noise 0.1, static world")):
         for name, s, info in runs(root, prefix):
             path = name.rsplit("-", 1)[1]
-            rows.append(f"| {path} | {what} | {s['queries']} | {miou(info)} | {mark(s['f1max'], 0.93)} | {f3(s['ep'])} | "
+            rows.append(f"| {path} | {what} | {seed(info)} | {s['queries']} | {miou(info)} | {mark(s['f1max'], 0.93)} | {f3(s['ep'])} | "
                         f"{f3(s['recall_at_1'])} | {mark(s.get('precision_all_verified'), 0.98)} "
                         f"({s.get('verified_true', 0)} / {s.get('verified_false', 0)}) | {f3(s['rr'])} | "
                         f"{f3(s['rte_median'])} | {f3(s['rre_median'])} |")
@@ -68,7 +72,7 @@ def reloc_rows(root):
             answered = s["verified_true"] + s["verified_false"] > 0  # else precision and pose errors are undefined
             precision = mark(s["precision"], 0.98) if answered else "**-** (nothing verified)"
             posed = s.get("registered", 0) > 0
-            rows.append(f"| {what} | {s['queries']} ({s['queries_with_true_place']}) | {miou(info)} | "
+            rows.append(f"| {what} | {seed(info)} | {s['queries']} ({s['queries_with_true_place']}) | {miou(info)} | "
                         f"{mark(s['recall_at_1'], floor)} | {precision} | "
                         f"{mark(s.get('precision_all_verified'), 0.98)} ({s['verified_true']} / {s['verified_false']}) | "
                         f"{f3(s['rte_median']) if posed else '-'} | {f3(s['rre_median']) if posed else '-'} |")
@@ -92,18 +96,18 @@ def section(root):
     if seq:
         w("Sequence protocol (every frame queries all earlier frames but the last 100), KITTI paths, HDL-64:")
         w("")
-        w("| path | conditions | queries | label mIoU | F1max | EP | Recall@1 | precision, every verified top-1 "
+        w("| path | conditions | seed | queries | label mIoU | F1max | EP | Recall@1 | precision, every verified top-1 "
           "(true / false) | RR | RTE median (m) | RRE median (deg) |")
-        w("|---|---|---|---|---|---|---|---|---|---|---|")
+        w("|---|---|---|---|---|---|---|---|---|---|---|---|")
         out.extend(seq)
         w("")
     if rel:
         w("Relocalization against a map of every 4th frame of KITTI 00's path (HDL-64, day 0, realistic preset); "
           "queries: every 8th frame from frame 2 of another drive, realistic preset:")
         w("")
-        w("| queries | count (with a true place) | label mIoU | Recall@1 | precision (operating threshold) | "
+        w("| queries | seed | count (with a true place) | label mIoU | Recall@1 | precision (operating threshold) | "
           "precision, every verified top-1 (true / false) | RTE median (m) | RRE median (deg) |")
-        w("|---|---|---|---|---|---|---|---|")
+        w("|---|---|---|---|---|---|---|---|---|")
         out.extend(rel)
         w("")
     w(END)
