@@ -3,9 +3,10 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
-#include <limits>
 #include <thread>
 
 #include "sglc/frame_selection.hpp"
@@ -14,8 +15,6 @@
 #include "sim/sequence.hpp"
 
 namespace {
-
-constexpr int kNoEpoch = std::numeric_limits<int>::min();
 
 // The command line. Negative (and 1e9 for the field of view) means "not given": the preset's value applies.
 struct Options {
@@ -31,7 +30,8 @@ struct Options {
   bool laser_offsets = false, motion_distortion = false, realistic = false;
   double mixed_pixels = 0.0;
   CLI::Option* mixed_pixels_option = nullptr;
-  int epoch = kNoEpoch;  // not given: the frozen world (or day 0 with --turnover)
+  int epoch = 0;  // with epoch_option not given: the frozen world (or day 0 with --turnover)
+  CLI::Option* epoch_option = nullptr;
   bool turnover = false;
   double aliasing = 0.0;
   sglc::sim::PairListConfig pairs;
@@ -95,9 +95,10 @@ void addRealismOptions(CLI::App& app, Options& o) {
 
 void addWorldOptions(CLI::App& app, Options& o) {
   // Checked in validate(), so that the error names the flag and the bad value plainly.
-  app.add_option("--epoch", o.epoch,
-                 "Render the world N >= 0 days after today: parked cars, temporary objects and foliage change "
-                 "(implies --turnover)");
+  o.epoch_option =
+      app.add_option("--epoch", o.epoch,
+                     "Render the world N >= 0 days after today: parked cars, temporary objects and foliage change "
+                     "(implies --turnover)");
   app.add_flag("--turnover", o.turnover,
                "Parked cars come and go during the run, temporary objects follow their epoch (day 0 unless --epoch)");
   app.add_option("--aliasing", o.aliasing, "Share of lots (0..1) copied from a few templates: look-alike streets")
@@ -133,6 +134,19 @@ void addOptions(CLI::App& app, Options& o) {
   addOutputOptions(app, o);
 }
 
+// A given value that reads as NaN or infinity, named with its option, or "". CLI11's range checks compare with
+// < and >, which NaN passes, and an unset marker (-1, 1e9) compared the same way would let it through silently.
+std::string nonFiniteValue(const CLI::App& app) {
+  for (const CLI::Option* opt : app.get_options())
+    for (const std::string& text : opt->results()) {
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      if (end != text.c_str() && *end == '\0' && !std::isfinite(v))
+        return opt->get_name() + " must be a finite number, got '" + text + "'";
+    }
+  return "";
+}
+
 // What is wrong with a parsed command line, or "" when nothing is.
 std::string validate(const Options& o) {
   if (o.poses_path.empty() == o.route.empty()) return "give either --poses (with --calib) or --route loop";
@@ -145,7 +159,7 @@ std::string validate(const Options& o) {
     return "--sensor and --beams are mutually exclusive (--sensor picks the beam layout; give one of them)";
   if (o.sensor == "rosette" && (o.columns > 0 || o.fov_up < 1e9))
     return "--columns, --fov-up and --fov-down do not apply to --sensor rosette (it has no columns or beams)";
-  if (o.epoch != kNoEpoch && o.epoch < 0)
+  if (o.epoch_option->count() > 0 && o.epoch < 0)
     return "--epoch must be a whole number of days >= 0, got " + std::to_string(o.epoch);
   if (!(o.aliasing >= 0.0 && o.aliasing <= 1.0))
     return "--aliasing must be within [0, 1], got " + std::to_string(o.aliasing);
@@ -208,7 +222,7 @@ sglc::sim::SimConfig simConfig(const Options& o) {
   cfg.seed = o.seed;
   cfg.sensor = sensorConfig(o);
   cfg.world.moving_objects = !o.no_moving;
-  cfg.world.turnover = o.turnover || o.epoch != kNoEpoch;
+  cfg.world.turnover = o.turnover || o.epoch_option->count() > 0;
   cfg.world.epoch = std::max(0, o.epoch);
   cfg.world.aliasing = o.aliasing;
   if (o.label_model == "network") {
@@ -332,7 +346,9 @@ int main(int argc, char** argv) {
     std::cerr << "sglc-sim: error: " << e.what() << " (see --help)" << std::endl;
     return 2;
   }
-  if (const std::string problem = validate(options); !problem.empty()) {
+  std::string problem = nonFiniteValue(app);
+  if (problem.empty()) problem = validate(options);
+  if (!problem.empty()) {
     std::cerr << "sglc-sim: error: " << problem << " (see --help)" << std::endl;
     return 2;
   }

@@ -537,7 +537,8 @@ Simulator::Simulator(Trajectory trajectory, SimConfig config)
   if (s.isRosette() && (s.rosette_rays > 4'000'000 || s.rosette_fov_h_deg <= 0 || s.rosette_fov_h_deg >= 180 ||
                         s.rosette_fov_v_deg <= 0 || s.rosette_fov_v_deg >= 180))
     throw InputError("sensor: rosette needs 1..4000000 rays and fields of view in (0, 180) deg");
-  if (s.mixed_pixel_rate < 0 || s.mixed_pixel_rate > 1) throw InputError("sensor: mixed_pixel_rate must be in 0..1");
+  if (!(s.mixed_pixel_rate >= 0 && s.mixed_pixel_rate <= 1))  // NaN too
+    throw InputError("sensor: mixed_pixel_rate must be in 0..1");
   if (s.laser_offsets) {
     // The lasers' true directions (what the ray is cast along) and range biases; points are still reported
     // along the nominal tables, as an uncorrected sensor would.

@@ -217,6 +217,12 @@ with tempfile.TemporaryDirectory() as tmp:
         (["--route", "loop", "--epoch", "x", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
         (["--route", "loop", "--aliasing", "1.5", "--out", os.path.join(tmp, "e")], 2, "--aliasing"),
         (["--route", "loop", "--aliasing", "nan", "--out", os.path.join(tmp, "e")], 2, "--aliasing"),
+        (["--route", "loop", "--mixed-pixels", "nan", "--out", os.path.join(tmp, "e")], 2,
+         "--mixed-pixels must be a finite number"),
+        (["--route", "loop", "--label-noise", "nan", "--out", os.path.join(tmp, "e")], 2, "--label-noise"),
+        (["--route", "loop", "--range", "nan", "--out", os.path.join(tmp, "e")], 2, "--range"),
+        (["--route", "loop", "--fov-up", "nan", "--fov-down", "-10", "--out", os.path.join(tmp, "e")], 2, "--fov-up"),
+        (["--route", "loop", "--epoch", "-2147483648", "--out", os.path.join(tmp, "e")], 2, "--epoch"),
     ]:
         p = run(*args)
         lines = p.stderr.strip().splitlines()
