@@ -23,6 +23,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "common/finite_options.hpp"
 #include "server_process.hpp"
 #include "sglc/client/client.hpp"
 #include "sglc/elapsed.hpp"
@@ -267,6 +268,10 @@ int main(int argc, char** argv) {
   Options options;
   addOptions(app, options);
   CLI11_PARSE(app, argc, argv);
+  if (const std::string problem = sglc::tools::nonFiniteValue(app); !problem.empty()) {
+    std::cerr << "sglc-bench: error: " << problem << std::endl;
+    return 2;
+  }
 
   ordered_json out;
   const Keyframes keyframes = renderKeyframes(options.frames, out);

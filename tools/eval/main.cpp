@@ -21,6 +21,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "common/finite_options.hpp"
 #include "progress.hpp"
 #include "protocols.hpp"
 #include "sglc/config/engine_file.hpp"
@@ -297,6 +298,10 @@ int main(int argc, char** argv) {
   addProtocolOptions(app, o);
   addRunOptions(app, o);
   CLI11_PARSE(app, argc, argv);
+  if (const std::string problem = sglc::tools::nonFiniteValue(app); !problem.empty()) {
+    std::cerr << "sglc-eval: error: " << problem << std::endl;
+    return 2;
+  }
   try {
     return evaluate(o);
   } catch (const std::exception& e) {

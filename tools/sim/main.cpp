@@ -3,12 +3,11 @@
 #include <sys/resource.h>
 
 #include <CLI/CLI.hpp>
-#include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <iostream>
 #include <thread>
 
+#include "common/finite_options.hpp"
 #include "sglc/frame_selection.hpp"
 #include "sglc/version.hpp"
 #include "sim/sensor.hpp"
@@ -132,19 +131,6 @@ void addOptions(CLI::App& app, Options& o) {
   addRealismOptions(app, o);
   addWorldOptions(app, o);
   addOutputOptions(app, o);
-}
-
-// A given value that reads as NaN or infinity, named with its option, or "". CLI11's range checks compare with
-// < and >, which NaN passes, and an unset marker (-1, 1e9) compared the same way would let it through silently.
-std::string nonFiniteValue(const CLI::App& app) {
-  for (const CLI::Option* opt : app.get_options())
-    for (const std::string& text : opt->results()) {
-      char* end = nullptr;
-      const double v = std::strtod(text.c_str(), &end);
-      if (end != text.c_str() && *end == '\0' && !std::isfinite(v))
-        return opt->get_name() + " must be a finite number, got '" + text + "'";
-    }
-  return "";
 }
 
 // What is wrong with a parsed command line, or "" when nothing is.
@@ -346,7 +332,7 @@ int main(int argc, char** argv) {
     std::cerr << "sglc-sim: error: " << e.what() << " (see --help)" << std::endl;
     return 2;
   }
-  std::string problem = nonFiniteValue(app);
+  std::string problem = sglc::tools::nonFiniteValue(app);
   if (problem.empty()) problem = validate(options);
   if (!problem.empty()) {
     std::cerr << "sglc-sim: error: " << problem << " (see --help)" << std::endl;

@@ -211,12 +211,17 @@ def main():
             (["--protocol", "sequence", "--data", os.path.join(tmp, "nodir"), "--out", tmp], "nodir"),
             (["--protocol", "sequence", "--sim", "--frames", "5:1", "--out", tmp], "5:1"),
             (["--protocol", "relocalization", "--data", tmp, "--out", tmp], "--map-data DIR go together"),
-            (["--protocol", "sequence", "--sim", "--positive-m", "nan", "--out", tmp], "positive distance"),
+            (["--protocol", "sequence", "--sim", "--positive-m", "-1", "--out", tmp], "positive distance"),
             (["--protocol", "sequence", "--map-data", tmp, "--data", tmp, "--out", tmp], "go together"),
         ]
         for args, words in cases:
             p = run(args, expect=1)
             assert words in p.stderr, f"{args}: '{words}' not in: {p.stderr}"
+        # NaN and infinity pass CLI11's range checks: every option refuses them by name (exit 2, nothing run).
+        for option, value in (("--positive-m", "nan"), ("--label-noise", "nan"), ("--negative-m", "inf")):
+            p = run(["--protocol", "sequence", "--sim", option, value, "--out", os.path.join(tmp, "nan")], expect=2)
+            assert f"{option} must be a finite number" in p.stderr, p.stderr
+            assert not os.path.exists(os.path.join(tmp, "nan")), option
         print("ok")
         return 0
     finally:
