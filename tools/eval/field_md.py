@@ -115,22 +115,30 @@ def section(root):
     return out
 
 
-def splice(path, root):
+def replace_section(path, new, begin, end, insert_at):
+    """The lines of the file at path with the marked section (begin .. end and one blank line after it) replaced
+    by new, or new inserted at line insert_at(lines) when the file has no such section yet. new empty: the file
+    as it is."""
     text = open(path).read().split("\n")
-    new = section(root)
     if not new:
         return "\n".join(text)
-    if (BEGIN in text) != (END in text):
-        sys.exit(f"{path}: one of the field section's markers is missing; fix the file by hand")
-    if BEGIN in text:
-        a, b = text.index(BEGIN), text.index(END)
-        end = b + 2 if b + 1 < len(text) and text[b + 1] == "" else b + 1
-        text = text[:a] + new + text[end:]
+    if (begin in text) != (end in text):
+        sys.exit(f"{path}: one of the markers {begin} / {end} is missing; fix the file by hand")
+    if begin in text:
+        a, b = text.index(begin), text.index(end)
+        stop = b + 2 if b + 1 < len(text) and text[b + 1] == "" else b + 1
+        text = text[:a] + new + text[stop:]
     else:
-        heads = [k for k, line in enumerate(text) if line.startswith("## ")]
-        k = heads[0] if heads else len(text)
+        k = insert_at(text)
         text = text[:k] + new + text[k:]
     return "\n".join(text)
+
+
+def splice(path, root):
+    """RESULTS.md at path with its field section replaced by root's (or put before the first section)."""
+    def first_section(text):
+        return next((k for k, line in enumerate(text) if line.startswith("## ")), len(text))
+    return replace_section(path, section(root), BEGIN, END, first_section)
 
 
 def main():

@@ -122,20 +122,9 @@ def labels_section(root):
 def splice(path, root):
     """RESULTS.md at path with its label-free sections replaced by the ones of root (or added before the
     figures)."""
-    text = open(path).read().split("\n")
-    new = labels_section(root)
-    if not new:
-        return "\n".join(text)  # no label-free run here: the section stays as it was
-    if (BEGIN_LABELS in text) != (END_LABELS in text):
-        sys.exit(f"{path}: one of the label-free section's markers is missing; fix the file by hand")
-    if BEGIN_LABELS in text:
-        a, b = text.index(BEGIN_LABELS), text.index(END_LABELS)
-        end = b + 2 if b + 1 < len(text) and text[b + 1] == "" else b + 1
-        text = text[:a] + new + text[end:]
-    else:
-        k = text.index("## Figures") if "## Figures" in text else len(text)
-        text = text[:k] + new + text[k:]
-    return "\n".join(text)
+    def before_figures(text):
+        return text.index("## Figures") if "## Figures" in text else len(text)
+    return field_md.replace_section(path, labels_section(root), BEGIN_LABELS, END_LABELS, before_figures)
 
 
 def main():
