@@ -7,6 +7,7 @@
 #include <iostream>
 
 #include "sglc/frame_selection.hpp"
+#include "sglc/version.hpp"
 #include "sim/label_noise_network.hpp"
 
 namespace {
@@ -49,6 +50,7 @@ void printTable(const sglc::sim::LabelIouCounts& counts) {
 
 int main(int argc, char** argv) {
   CLI::App app{"Fits the per-class strengths of sglc-sim's network label noise preset to RangeNet53++'s IoU table"};
+  app.set_version_flag("--version", std::string("sglc-sim-fit-labels ") + sglc::kVersion);
   Options o;
   app.add_option("--poses", o.poses_path, "KITTI poses file to render frames of as well (with --calib)");
   app.add_option("--calib", o.calib_path, "calib.txt whose Tr converts --poses");
