@@ -546,6 +546,14 @@ Simulator::Simulator(Trajectory trajectory, SimConfig config)
     laser_el_ = off.elevation_rad;
     laser_az_ = off.azimuth_rad;
     laser_bias_ = off.range_bias_m;
+    if (!s.isRosette())
+      for (int b = 0; b < s.beams(); ++b) {
+        const float se = std::sin(std::asin(sin_el_[b]) + laser_el_[b]);
+        true_sin_el_.push_back(se);
+        true_cos_el_.push_back(std::sqrt(1.0f - se * se));
+        turn_cos_az_.push_back(std::cos(laser_az_[b]));
+        turn_sin_az_.push_back(std::sin(laser_az_[b]));
+      }
   }
 }
 
@@ -647,8 +655,7 @@ void Simulator::castSpinning(const FrameRays& fr, RayImage& img, int c_begin, in
         continue;
       }
       // The laser's true direction: its elevation and azimuth offsets added to the nominal angles.
-      const float se = std::sin(std::asin(sin_el_[b]) + laser_el_[b]), ce = std::sqrt(1.0f - se * se);
-      const float ca = std::cos(laser_az_[b]), sa = std::sin(laser_az_[b]);
+      const float se = true_sin_el_[b], ce = true_cos_el_[b], ca = turn_cos_az_[b], sa = turn_sin_az_[b];
       const Vec3f dt(ce * (cos_az_[c] * ca - sin_az_[c] * sa), ce * (sin_az_[c] * ca + cos_az_[c] * sa), se);
       castOne(fr, ro, ray, ds, dt, laser_bias_[b], static_cast<std::size_t>(c) * B + b, img);
     }

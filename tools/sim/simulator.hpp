@@ -155,6 +155,9 @@ class Simulator {
   std::vector<std::uint8_t> ego_blocked_;
   // Per-laser calibration errors (empty unless sensor.laser_offsets): radians, radians, metres.
   std::vector<float> laser_el_, laser_az_, laser_bias_;
+  // Spinning sensors with offsets: each beam's true elevation (sine, cosine) and azimuth turn (cosine, sine),
+  // once per sensor rather than once per ray.
+  std::vector<float> true_sin_el_, true_cos_el_, turn_cos_az_, turn_sin_az_;
 
   // render() in parts (render.cpp).
   struct FrameRays;
