@@ -850,8 +850,7 @@ class Generator {
       Rng lamp(hashKeys(lot.key, kKerb, 1));
       placeLamp(lot.side, lot.s + a, r, h, arm, lamp);
     }
-    static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
-    if (!rng.chance(kChance[static_cast<int>(lot.district)] * 1.3)) return;
+    if (!rng.chance(kStreetTrees[static_cast<int>(lot.district)] * 1.3)) return;
     const double gap = rng.uniform(6, 12), trunk_r = rng.uniform(0.15, 0.3), trunk_h = rng.uniform(3.0, 4.5);
     const double crown_r = rng.uniform(2.2, 4.0), crown_h = rng.uniform(2.0, 3.2);
     int k = 0;
@@ -899,8 +898,7 @@ class Generator {
       for (double s = rng.uniform(2, 10); s < S; s += rng.uniform(6, 12)) {
         const Vec2 t = w_.path.tangent(s), n = side * leftNormal(t);
         const Vec2 c = w_.path.point(s) + n * (kerb + 0.75);
-        static constexpr double kChance[4] = {0.35, 0.5, 0.7, 0.15};
-        if (!rng.chance(kChance[static_cast<int>(w_.districtAt(c.x(), c.y()).type)]) || aliasedStretch(side, s))
+        if (!rng.chance(kStreetTrees[static_cast<int>(w_.districtAt(c.x(), c.y()).type)]) || aliasedStretch(side, s))
           continue;
         placeTree(c, rng.uniform(0.15, 0.3), rng.uniform(3.0, 4.5), rng.uniform(2.2, 4.0), rng.uniform(2.0, 3.2),
                   kerb + 0.3, s - 10, s + 10, rng);
@@ -989,18 +987,15 @@ class Generator {
 
   bool placeVehicle(const Vec2& c, const Vec2& heading, const VehicleDims& v, double min_dist, double s_lo, double s_hi,
                     Rng& rng) {
-    if (minDistRect(c, heading, v.L / 2, v.W / 2) < min_dist) return false;
-    if (!freeRect(c, heading, v.L / 2, v.W / 2, 0.2)) return false;
-    if (!owned(c, s_lo, s_hi)) return false;
-    const double refl = v.kind == kCarKind ? rng.uniform(0.06, 0.3) : rng.uniform(0.15, 0.4);
-    appendAgentShape(w_.prims, c.x(), c.y(), ground(c), heading, v.kind, v.L, v.W, v.H,
-                     World::Impl::withInstance(v.cls, w_.newInstance()), refl);
-    markRect(c, heading, v.L / 2, v.W / 2);
-    ++w_.stats.parked_vehicles;
+    Candidate q{c, heading, v, 0.0};
+    if (!vehicleFits(q, min_dist, s_lo, s_hi, occ_)) return false;
+    q.refl = vehicleReflectivity(v, rng);
+    appendParked(q);
     return true;
   }
 
-  static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};  // share of kerb slots in use, by district
+  static constexpr double kOccupied[4] = {0.55, 0.5, 0.3, 0.4};      // share of kerb slots in use, by district
+  static constexpr double kStreetTrees[4] = {0.35, 0.5, 0.7, 0.15};  // chance of a kerb tree per step, by district
 
   // A look-alike lot's parking strip: vehicles at the template's places (with turnover, each comes and goes).
   void aliasedParking(const Lot& lot) {
@@ -1020,15 +1015,12 @@ class Generator {
           !vehicleFits(q, st().road_half_width - 0.3, s_lo, s_hi, occ_))
         continue;
       if (!w_.config.turnover) {
-        appendAgentShape(w_.prims, c.x(), c.y(), ground(c), q.heading, v.kind, v.L, v.W, v.H,
-                         World::Impl::withInstance(v.cls, w_.newInstance()), q.refl);
-        markRect(c, q.heading, v.L / 2, v.W / 2);
-        ++w_.stats.parked_vehicles;
+        appendParked(q);
         continue;
       }
-      OccupancyProcess p = parkingProcess(hashKeys(lot.key, kParked, 4, k), 0.8, true, rng);
-      p.candidates = 1;
-      addSlot(p, {q}, false);
+      // Its own stream, so that the template's later vehicles are the frozen world's (day 0 starts from them).
+      Rng prng(hashKeys(lot.key, kParked, 4, k, 1));
+      addSlot(parkingProcess(hashKeys(lot.key, kParked, 4, k), 0.8, true, 1, prng), {q}, true);
       ++w_.stats.parking_slots;
     }
   }
@@ -1046,8 +1038,7 @@ class Generator {
       const Vec2 c = w_.path.point(mid) + n * (st().road_half_width + st().parking_width / 2 + rng.uniform(-0.15, 0.1));
       const DistrictInfo d = w_.districtAt(c.x(), c.y());
       const bool occupied = rng.chance(kOccupied[static_cast<int>(d.type)]);
-      const double yaw = rng.uniform(-3, 3) * std::numbers::pi / 180 + (rng.chance(0.5) ? 0.0 : std::numbers::pi);
-      const Vec2 h(std::cos(yaw) * t.x() - std::sin(yaw) * t.y(), std::sin(yaw) * t.x() + std::cos(yaw) * t.y());
+      const Vec2 h = parkedHeading(t, rng);
       if (d.parking && dist(c) <= st().kerb() && !aliasedStretch(side, mid)) {
         if (!w_.config.turnover) {
           if (occupied) placeVehicle(c, h, v, st().road_half_width - 0.3, s - 10, s + v.L + 10, rng);
@@ -1109,6 +1100,13 @@ class Generator {
     const double yaw = rng.uniform(-3, 3) * std::numbers::pi / 180 + (rng.chance(0.5) ? 0.0 : std::numbers::pi);
     return {std::cos(yaw) * t.x() - std::sin(yaw) * t.y(), std::sin(yaw) * t.x() + std::cos(yaw) * t.y()};
   }
+  // A vehicle of the frozen world: always there, its footprint kept clear of later objects.
+  void appendParked(const Candidate& q) {
+    appendAgentShape(w_.prims, q.c.x(), q.c.y(), ground(q.c), q.heading, q.v.kind, q.v.L, q.v.W, q.v.H,
+                     World::Impl::withInstance(q.v.cls, w_.newInstance()), q.refl);
+    markRect(q.c, q.heading, q.v.L / 2, q.v.W / 2);
+    ++w_.stats.parked_vehicles;
+  }
   bool vehicleFits(const Candidate& k, double min_dist, double s_lo, double s_hi, const TiledGrid<std::uint8_t>& grid) {
     return minDistRect(k.c, k.heading, k.v.L / 2, k.v.W / 2) >= min_dist &&
            freeRect(k.c, k.heading, k.v.L / 2, k.v.W / 2, 0.2, grid) && owned(k.c, s_lo, s_hi);
@@ -1144,13 +1142,14 @@ class Generator {
       if (q.v.L > 0) markRect(q.c, q.heading, q.v.L / 2, q.v.W / 2);
   }
 
-  OccupancyProcess parkingProcess(std::uint64_t key, double occupancy, bool occupied_today, Rng& rng) const {
+  OccupancyProcess parkingProcess(std::uint64_t key, double occupancy, bool occupied_today, int candidates,
+                                  Rng& rng) const {
     OccupancyProcess p;
     p.key = key;
     p.period = rng.chance(kTurnover.short_stay_share) ? kTurnover.short_stay_period : kTurnover.resident_period;
     p.phase = rng.uniform(0, p.period);
     p.empty = static_cast<float>(1.0 - occupancy);
-    p.candidates = static_cast<std::uint8_t>(kTurnover.candidates);
+    p.candidates = static_cast<std::uint8_t>(candidates);
     p.at_zero = occupied_today ? 0 : OccupancyProcess::kEmpty;
     return p;
   }
@@ -1179,7 +1178,9 @@ class Generator {
       const Candidate q{c, parkedHeading(t, srng), v, vehicleReflectivity(v, srng)};
       if (v.L <= fit && vehicleFits(q, min_dist, s - 10, s + v.L + 10, occ_)) cands[k] = q;
     }
-    addSlot(parkingProcess(hashKeys(w_.seed, kParked, side + 2, slot, 2), occupancy, occupied, srng), cands, today_in);
+    addSlot(
+        parkingProcess(hashKeys(w_.seed, kParked, side + 2, slot, 2), occupancy, occupied, kTurnover.candidates, srng),
+        cands, today_in);
     ++w_.stats.parking_slots;
   }
 
@@ -1207,7 +1208,8 @@ class Generator {
       const Candidate q{w_.path.point(a) + n * b, heading, v, vehicleReflectivity(v, brng)};
       if (v.kind != kTruckKind && vehicleFits(q, L0 - 0.1, s_lo, s_hi, occ_)) cands[k] = q;
     }
-    addSlot(parkingProcess(hashKeys(lot.key, kParked, row, bay, 2), 0.65, occupied, brng), cands, today_in);
+    addSlot(parkingProcess(hashKeys(lot.key, kParked, row, bay, 2), 0.65, occupied, kTurnover.candidates, brng), cands,
+            today_in);
     ++w_.stats.parking_slots;
   }
 
