@@ -5,6 +5,7 @@
 #include <array>
 
 #include "sim/label_noise_network.hpp"
+#include "sim/point_image.hpp"
 #include "sim/rng.hpp"
 #include "sim/simulator.hpp"
 
@@ -92,10 +93,10 @@ LabelNoise LabelNoise::network() {
   return n;
 }
 
-void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, int beams, int columns) {
+void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, int beams, int columns, bool wrap) {
   if (noise.model == LabelNoiseModel::kNetwork) {
     static const NetworkNoiseParams params = NetworkNoiseParams::rangeNet();
-    applyNetworkLabelNoise(frame, params, seed, beams, columns);
+    applyNetworkLabelNoise(frame, params, seed, beams, columns, wrap);
     return;
   }
   auto& labels = frame.scan.labels;
@@ -105,14 +106,8 @@ void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, 
   if (frame.beam.size() != n || frame.column.size() != n)
     throw InputError("label noise: the frame has no beam/column of its points");
   const std::uint64_t key = hashKeys(seed, 0x1AB1ULL, static_cast<std::uint64_t>(frame.index));
-  std::vector<int> image(static_cast<std::size_t>(beams) * columns, -1);
-  for (std::size_t i = 0; i < n; ++i)
-    image[static_cast<std::size_t>(frame.beam[i]) * columns + frame.column[i]] = static_cast<int>(i);
-  auto at = [&](int b, int c) -> int {
-    if (b < 0 || b >= beams) return -1;
-    c = (c % columns + columns) % columns;
-    return image[static_cast<std::size_t>(b) * columns + c];
-  };
+  const PointImage image(frame, beams, columns, wrap);
+  auto at = [&](int b, int c) { return image.at(b, c); };
 
   // 1. Missed small objects take the class found beside them on the same beam.
   std::vector<std::uint32_t> step(labels);

@@ -16,6 +16,7 @@
 #include <cstdio>
 #include <unordered_map>
 
+#include "sim/point_image.hpp"
 #include "sim/rng.hpp"
 
 namespace sglc::sim {
@@ -125,31 +126,14 @@ std::uint32_t staticOf(std::uint32_t cls) {
   }
 }
 
-// The frame's range image: point index per pixel, and each point's range.
-struct RangeImage {
-  int beams = 0, columns = 0;
-  std::vector<int> index;
+// The frame's points on its grid, and each point's range.
+struct RangeImage : PointImage {
   std::vector<float> range;
-  int at(int b, int c) const {
-    if (b < 0 || b >= beams) return -1;
-    c = (c % columns + columns) % columns;
-    return index[static_cast<std::size_t>(b) * columns + c];
+  RangeImage(const Frame& frame, int beams_, int columns_, bool wrap_) : PointImage(frame, beams_, columns_, wrap_) {
+    range.reserve(frame.scan.points.size());
+    for (const Vec3f& p : frame.scan.points) range.push_back(p.norm());
   }
 };
-
-RangeImage buildImage(const Frame& frame, int beams, int columns) {
-  RangeImage img;
-  img.beams = beams;
-  img.columns = columns;
-  img.index.assign(static_cast<std::size_t>(beams) * columns, -1);
-  const std::size_t n = frame.scan.labels.size();
-  img.range.resize(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    img.index[static_cast<std::size_t>(frame.beam[i]) * columns + frame.column[i]] = static_cast<int>(i);
-    img.range[i] = frame.scan.points[i].norm();
-  }
-  return img;
-}
 
 // 1. Moving objects take their static class, per instance.
 void foldMoving(std::vector<std::uint32_t>& labels, const NetworkNoiseParams& p, std::uint64_t key) {
@@ -275,8 +259,8 @@ void confuseBlobs(std::vector<std::uint32_t>& labels, const RangeImage& img, con
 
 }  // namespace
 
-void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std::uint64_t seed, int beams,
-                            int columns) {
+void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std::uint64_t seed, int beams, int columns,
+                            bool wrap) {
   auto& labels = frame.scan.labels;
   frame.clean_labels = labels;
   const std::size_t n = labels.size();
@@ -284,7 +268,7 @@ void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std:
   if (frame.beam.size() != n || frame.column.size() != n || frame.scan.points.size() != n)
     throw InputError("label noise: the frame has no beam/column of its points");
   const std::uint64_t key = hashKeys(seed, 0x4E37ULL, static_cast<std::uint64_t>(frame.index));
-  const RangeImage img = buildImage(frame, beams, columns);
+  const RangeImage img(frame, beams, columns, wrap);
   std::vector<std::uint32_t> step(labels);
   foldMoving(step, params, key);
   step = missInstances(step, img, frame, params, key);

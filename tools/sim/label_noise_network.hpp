@@ -64,7 +64,9 @@ struct NetworkNoiseParams {
 
 // Applies the network model to a rendered frame in place (fills clean_labels). Deterministic in
 // (seed, frame.index, labels, ranges).
-void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std::uint64_t seed, int beams, int columns);
+// wrap as applyLabelNoise's.
+void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std::uint64_t seed, int beams, int columns,
+                            bool wrap = true);
 
 // IoU counts of the network model with `params` over frames rendered without label noise (their labels are
 // the truth; the frames are left unchanged).

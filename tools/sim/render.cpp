@@ -606,7 +606,7 @@ void Simulator::render(int index, Frame& out, int threads) const {
   out.pose = P;
   compact(fr, img, out);
   if (config_.label_noise.any())
-    applyLabelNoise(out, config_.label_noise, config_.seed, sensor.beams(), sensor.columns);
+    applyLabelNoise(out, config_.label_noise, config_.seed, sensor.beams(), sensor.columns, !sensor.isRosette());
 }
 
 // Casts every ray of the frame into an image, spinning column-major (pixel = column * beams + beam), rosette

@@ -172,6 +172,8 @@ class Simulator {
 
 // Applies label noise to a rendered frame in place (fills clean_labels). Exposed for tests; render()
 // calls it when config().label_noise.any().
-void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, int beams, int columns);
+// wrap: the image's last column neighbours its first (spinning sensors; false for the rosette's pseudo image).
+void applyLabelNoise(Frame& frame, const LabelNoise& noise, std::uint64_t seed, int beams, int columns,
+                     bool wrap = true);
 
 }  // namespace sglc::sim

@@ -5,12 +5,46 @@
 
 #include "sim/label_iou.hpp"
 #include "sim/label_noise_network.hpp"
+#include "sim/point_image.hpp"
 #include "sim_test_util.hpp"
 
 namespace sglc::sim {
 namespace {
 
 using test::loopTrajectory;
+
+// A one-beam frame with a road point in the first column and a building point in the last.
+Frame edgeFrame(int columns) {
+  Frame f;
+  f.index = 3;
+  for (int c : {0, columns - 1}) {
+    f.scan.points.emplace_back(5.0f, 0.0f, 0.0f);
+    f.scan.labels.push_back(c == 0 ? label::kRoad : label::kBuilding);
+    f.beam.push_back(0);
+    f.column.push_back(static_cast<std::uint16_t>(c));
+  }
+  return f;
+}
+
+// A spinning sensor's first and last columns are neighbours (a full turn); the rosette's pseudo image has two
+// separate edges, so no label may leak from one side of its field of view to the other.
+TEST(PointImage, WrapsOnlyAFullTurn) {
+  const Frame f = edgeFrame(8);
+  const PointImage turn(f, 1, 8, true), forward(f, 1, 8, false);
+  EXPECT_EQ(turn.at(0, -1), 1);
+  EXPECT_EQ(turn.at(0, 8), 0);
+  EXPECT_EQ(forward.at(0, -1), -1);
+  EXPECT_EQ(forward.at(0, 8), -1);
+  EXPECT_EQ(forward.at(0, 7), 1);
+  EXPECT_EQ(forward.at(1, 0), -1);
+  LabelNoise bleed_only;
+  bleed_only.bleed = 1.0;  // every point beside another class takes its label
+  Frame spun = edgeFrame(8), ahead = edgeFrame(8);
+  applyLabelNoise(spun, bleed_only, 5, 1, 8, true);
+  applyLabelNoise(ahead, bleed_only, 5, 1, 8, false);
+  EXPECT_EQ(spun.scan.labels[0], label::kBuilding);  // across the wrap
+  EXPECT_EQ(ahead.scan.labels, ahead.clean_labels);  // nothing beside either point
+}
 
 // HDL-64 frames of the built-in route with the network model (the preset is calibrated for HDL-64), rendered
 // once for all tests: 48 frames spread over the route, offset from the frames the calibration used.
