@@ -135,12 +135,11 @@ struct RangeImage : PointImage {
   }
 };
 
-// 1. Moving objects take their static class, per instance.
-void foldMoving(std::vector<std::uint32_t>& labels, const NetworkNoiseParams& p, std::uint64_t key) {
+// 1. Moving objects take their static class (instance kept): a single-scan network has no moving classes.
+void foldMoving(std::vector<std::uint32_t>& labels) {
   for (auto& raw : labels) {
     const std::uint32_t cls = label::classOf(raw);
-    if (cls < 252 || cls > 259) continue;
-    if (unitFromBits(hashKeys(key, 1, raw)) < p.moving_as_static) raw = staticOf(cls) | (raw & 0xFFFF0000u);
+    if (cls >= 252 && cls <= 259) raw = staticOf(cls) | (raw & 0xFFFF0000u);
   }
 }
 
@@ -270,7 +269,7 @@ void applyNetworkLabelNoise(Frame& frame, const NetworkNoiseParams& params, std:
   const std::uint64_t key = hashKeys(seed, 0x4E37ULL, static_cast<std::uint64_t>(frame.index));
   const RangeImage img(frame, beams, columns, wrap);
   std::vector<std::uint32_t> step(labels);
-  foldMoving(step, params, key);
+  foldMoving(step);
   step = missInstances(step, img, frame, params, key);
   std::vector<std::uint32_t> out = bleed(step, img, frame, params, key);
   confuseBlobs(out, img, frame, params, key);

@@ -1,7 +1,7 @@
 // The "network" label noise preset: errors shaped like a range-image segmentation network's, with one
 // strength per class calibrated so that the per-class IoU of noisy vs true labels matches RangeNet53++'s
 // published table (see kRangeNetIou). The shapes are fixed; only the per-class strengths are fitted
-// (label_noise_fit.cpp, tools/sim/fit_labels_main.cpp) and then frozen in NetworkNoiseParams::rangeNet().
+// (fitNetworkNoise below, run by tools/sim/fit_labels_main.cpp) and then frozen in NetworkNoiseParams::rangeNet().
 #pragma once
 
 #include <array>
@@ -54,9 +54,6 @@ struct NetworkNoiseParams {
   // Blobs: blob_beams rows x blob_columns columns of the range image share one decision per class (rows of
   // blobs are staggered like bricks, so blob edges do not line up).
   int blob_beams = 4, blob_columns = 16;
-  // Chance per instance and frame that a moving object gets its static class (a single-scan network has no
-  // moving classes, so RangeNet++ always outputs the static one).
-  double moving_as_static = 1.0;
 
   // The frozen calibration (fitted on HDL-64 frames of the built-in route and of KITTI 00).
   static NetworkNoiseParams rangeNet();

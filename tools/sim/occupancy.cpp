@@ -16,7 +16,10 @@ int occupantAt(const OccupancyProcess& process, double t) {
   return static_cast<int>(((mix64(h) >> 32) * process.candidates) >> 32);
 }
 
+namespace {
+// Leaf cover in [0, 1] on day `epoch`: 1 at epoch 0 (summer), 0 half a year later (winter), yearly cycle.
 double leafCover(double epoch_days) { return 0.5 + 0.5 * std::cos(2.0 * std::numbers::pi * epoch_days / 365.25); }
+}  // namespace
 
 std::uint8_t seasonalPassThrough(std::uint8_t summer, std::uint8_t winter, double epoch_days) {
   const double leaf = leafCover(epoch_days);

@@ -39,8 +39,6 @@ struct TurnoverRates {
 };
 inline constexpr TurnoverRates kTurnover{};
 
-// Leaf cover in [0, 1] on day `epoch`: 1 at epoch 0 (summer), 0 half a year later (winter), yearly cycle.
-double leafCover(double epoch_days);
 // A porous object's pass-through (x/255) on day `epoch`: `summer` in full leaf, `winter` bare.
 std::uint8_t seasonalPassThrough(std::uint8_t summer, std::uint8_t winter, double epoch_days);
 

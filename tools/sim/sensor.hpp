@@ -51,9 +51,6 @@ class SweepMotion {
   Mat4d step_;  // one frame's motion in the start pose's axes
   Eigen::Quaterniond rotation_;
 };
-inline Mat4d sweepPose(const std::vector<Mat4d>& poses, int index, double alpha) {
-  return SweepMotion(poses, index).at(alpha);
-}
 
 // Mixed pixels at depth edges, on a cast image (pixel -> range, point, label, intensity; range <= 0 = no
 // return). A return whose neighbour (pixel +- stride; with wrap, modulo the image size) differs in range by

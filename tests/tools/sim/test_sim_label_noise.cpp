@@ -179,7 +179,7 @@ TEST(NetworkLabelNoise, MovingObjectsGetStaticIds) {
                               label::instanceOf(f.scan.labels[i]) == label::instanceOf(f.clean_labels[i]);
     }
   ASSERT_GT(moving, 500u);
-  EXPECT_LT(static_cast<double>(still_moving) / moving, 0.1);
+  EXPECT_EQ(still_moving, 0u);  // a single-scan network has no moving classes
   EXPECT_GT(static_cast<double>(static_same_instance) / moving, 0.5);
 }
 
