@@ -11,14 +11,9 @@ constexpr std::array<std::int8_t, 260> buildEvalLookup() {
   for (auto& v : t) v = -1;
   for (int k = 0; k < kEvalClasses; ++k) t[kEvalClassTable[k].id] = static_cast<std::int8_t>(k);
   // SemanticKITTI's learning map folds the moving classes onto their static ones for single-scan scoring.
-  t[252] = t[10];  // moving-car
-  t[254] = t[30];  // moving-person
-  t[256] = t[20];  // moving-on-rails -> other-vehicle
-  t[257] = t[20];  // moving-bus -> other-vehicle
-  t[258] = t[18];  // moving-truck
-  t[259] = t[20];  // moving-other-vehicle
-  t[13] = t[20];   // bus
-  t[16] = t[20];   // on-rails
+  for (std::uint32_t c = 252; c <= 259; ++c) t[c] = t[label::staticOf(c)];
+  t[13] = t[20];  // bus
+  t[16] = t[20];  // on-rails
   return t;
 }
 constexpr std::array<std::int8_t, 260> kEvalLookup = buildEvalLookup();

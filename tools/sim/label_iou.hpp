@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "sim/world.hpp"
+
 namespace sglc::sim {
 
 // The SemanticKITTI evaluation classes the simulator emits, in the benchmark's order.
@@ -15,21 +17,21 @@ struct EvalClass {
   std::uint32_t id;  // raw SemanticKITTI id of the static class
   const char* name;  // as in the benchmark tables
 };
-inline constexpr std::array<EvalClass, kEvalClasses> kEvalClassTable = {{{10, "car"},
-                                                                         {18, "truck"},
-                                                                         {20, "other-vehicle"},
-                                                                         {30, "person"},
-                                                                         {40, "road"},
-                                                                         {44, "parking"},
-                                                                         {48, "sidewalk"},
-                                                                         {49, "other-ground"},
-                                                                         {50, "building"},
-                                                                         {51, "fence"},
-                                                                         {70, "vegetation"},
-                                                                         {71, "trunk"},
-                                                                         {72, "terrain"},
-                                                                         {80, "pole"},
-                                                                         {81, "traffic-sign"}}};
+inline constexpr std::array<EvalClass, kEvalClasses> kEvalClassTable = {{{label::kCar, "car"},
+                                                                         {label::kTruck, "truck"},
+                                                                         {label::kOtherVehicle, "other-vehicle"},
+                                                                         {label::kPerson, "person"},
+                                                                         {label::kRoad, "road"},
+                                                                         {label::kParking, "parking"},
+                                                                         {label::kSidewalk, "sidewalk"},
+                                                                         {label::kOtherGround, "other-ground"},
+                                                                         {label::kBuilding, "building"},
+                                                                         {label::kFence, "fence"},
+                                                                         {label::kVegetation, "vegetation"},
+                                                                         {label::kTrunk, "trunk"},
+                                                                         {label::kTerrain, "terrain"},
+                                                                         {label::kPole, "pole"},
+                                                                         {label::kTrafficSign, "traffic-sign"}}};
 
 // Index into kEvalClassTable of a raw label (instance bits ignored, moving ids folded onto their static
 // class), or -1 for a class the benchmark ignores or the simulator never emits.

@@ -105,27 +105,6 @@ std::uint32_t withClass(std::uint32_t raw, int k) {
   return isThing(k) ? (id | (raw & 0xFFFF0000u)) : id;
 }
 
-std::uint32_t staticOf(std::uint32_t cls) {
-  switch (cls) {
-    case label::kMovingCar:
-      return label::kCar;
-    case label::kMovingPerson:
-      return label::kPerson;
-    case label::kMovingTruck:
-      return label::kTruck;
-    case 253:
-      return 31;  // moving-bicyclist -> bicyclist
-    case 255:
-      return 32;  // moving-motorcyclist -> motorcyclist
-    case 256:     // moving-on-rails
-    case 257:     // moving-bus
-    case label::kMovingOtherVehicle:
-      return label::kOtherVehicle;
-    default:
-      return cls;
-  }
-}
-
 // The frame's points on its grid, and each point's range.
 struct RangeImage : PointImage {
   std::vector<float> range;
@@ -139,7 +118,7 @@ struct RangeImage : PointImage {
 void foldMoving(std::vector<std::uint32_t>& labels) {
   for (auto& raw : labels) {
     const std::uint32_t cls = label::classOf(raw);
-    if (cls >= 252 && cls <= 259) raw = staticOf(cls) | (raw & 0xFFFF0000u);
+    if (cls >= 252 && cls <= 259) raw = label::staticOf(cls) | (raw & 0xFFFF0000u);
   }
 }
 

@@ -39,6 +39,28 @@ inline constexpr std::uint32_t kMovingOtherVehicle = 259;
 
 inline constexpr std::uint32_t classOf(std::uint32_t raw) { return raw & 0xFFFFu; }
 inline constexpr std::uint32_t instanceOf(std::uint32_t raw) { return raw >> 16; }
+// The static class of a moving one (252-259), as SemanticKITTI's single-scan benchmark folds them; any other
+// class unchanged.
+inline constexpr std::uint32_t staticOf(std::uint32_t cls) {
+  switch (cls) {
+    case kMovingCar:
+      return kCar;
+    case 253:
+      return 31;  // moving-bicyclist -> bicyclist
+    case kMovingPerson:
+      return kPerson;
+    case 255:
+      return 32;  // moving-motorcyclist -> motorcyclist
+    case 256:     // moving-on-rails
+    case 257:     // moving-bus
+    case kMovingOtherVehicle:
+      return kOtherVehicle;
+    case kMovingTruck:
+      return kTruck;
+    default:
+      return cls;
+  }
+}
 }  // namespace label
 
 enum class Shape : std::uint8_t { kBox = 0, kCylinder = 1, kEllipsoid = 2 };
