@@ -1,6 +1,7 @@
 #include "sglc/descriptors.hpp"
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 
 namespace sglc {
@@ -10,6 +11,20 @@ template <typename V>
 void l2normalise(V&& v) {
   const auto n = v.norm();
   if (n > 0) v /= n;
+}
+
+// Soft binning (ours): a distance's count is shared between the two nearest bin centres, so a neighbour whose
+// distance moves by a few decimetres (a car labelled in part, a new viewpoint) shifts weight smoothly instead
+// of jumping to the next bin. A NaN distance falls into the first bin rather than into undefined behaviour.
+struct SoftBin {
+  int lo, hi;
+  float w;  // weight of hi; lo gets 1 - w
+};
+
+SoftBin softBin(float d, float inv_bin, int bins) {
+  const float x = std::max(0.0f, d * inv_bin - 0.5f);
+  const int lo = std::min(static_cast<int>(x), bins - 1), hi = std::min(lo + 1, bins - 1);
+  return {lo, hi, std::min(1.0f, x - static_cast<float>(lo))};
 }
 
 }  // namespace
@@ -41,12 +56,7 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
     for (int j = i + 1; j < n; ++j) {
       const float d = (nodes[i].center - nodes[j].center).norm();
       if (d >= dmax) continue;
-      // Soft binning (ours): the count is shared between the two nearest bin centres, so a neighbour whose
-      // distance moves by a few decimetres (a car labelled in part, a new viewpoint) shifts weight smoothly
-      // instead of jumping to the next bin.
-      const float x = std::max(0.0f, d * inv_bin - 0.5f);
-      const int lo = std::min(static_cast<int>(x), layout.bins - 1), hi = std::min(lo + 1, layout.bins - 1);
-      const float w = std::min(1.0f, x - static_cast<float>(lo));
+      const auto [lo, hi, w] = softBin(d, inv_bin, layout.bins);
       f(i, nodes[j].cls * layout.bins + lo) += 1.0f - w;  // neighbour's class (the reference used its own)
       f(i, nodes[j].cls * layout.bins + hi) += w;
       f(j, nodes[i].cls * layout.bins + lo) += 1.0f - w;
@@ -83,11 +93,12 @@ std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vec
     for (std::size_t j = i + 1; j < nodes.size(); ++j) {
       const float d = (nodes[i].center - nodes[j].center).norm();
       if (d >= dmax) continue;
-      // Hard bins, unlike nodeDescriptors: the scan descriptor is stored with every map scan and indexed, so
-      // changing it would mix two definitions in maps written by earlier versions (soft bins here added about
-      // 0.05 relocalization Recall@1 in a trial; they need a migration of the stored descriptors first).
-      const int bin = std::min(static_cast<int>(d * inv_bin), layout.bins - 1);
-      edges[edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins + bin] += 1.0f;
+      // Soft bins as in nodeDescriptors. Fingerprint format 1 had hard bins here; its blobs are upgraded on
+      // load (deserialize) and map databases of schema 4 or older on open, so one map never mixes the two.
+      const auto [lo, hi, w] = softBin(d, inv_bin, layout.bins);
+      const int base = edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins;
+      edges[base + lo] += 1.0f - w;
+      edges[base + hi] += w;
     }
   }
   l2normalise(counts);
@@ -101,6 +112,12 @@ std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vec
   all << fg, bg;
   l2normalise(all);
   return std::vector<float>(all.data(), all.data() + all.size());
+}
+
+std::vector<float> storedRingKey(std::span<const float> descriptor, const DescriptorLayout& layout) {
+  const auto n = static_cast<std::size_t>(2 * layout.rings);
+  if (descriptor.size() < n) return std::vector<float>(n, 0.0f);
+  return {descriptor.end() - static_cast<std::ptrdiff_t>(n), descriptor.end()};
 }
 
 }  // namespace sglc

@@ -187,6 +187,10 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   fp.descriptor.resize(dim);
   for (auto& v : fp.descriptor) v = r.f32();
   if (!r.done()) throw InputError("fingerprint: trailing bytes after the payload");
+  // Format 1 binned the scan descriptor's edge histogram hard: recompute it as this build does, from the
+  // stored nodes and the stored ring key, so that old and new scans compare alike.
+  if (header[1] == 1)
+    fp.descriptor = scanDescriptor(fp.nodes, storedRingKey(fp.descriptor, fp.layout), fp.layout, fp.d_max, fp.d_i);
   fp.finalize();
   return fp;
 }

@@ -7,6 +7,8 @@
 #include <random>
 #include <vector>
 
+#include "sglc/fingerprint.hpp"
+
 namespace sglc::storage {
 namespace {
 
@@ -15,10 +17,50 @@ using Code = StorageError::Code;
 
 constexpr std::int32_t kApplicationId = 0x53474C43;  // "SGLC": marks our SQLite files
 
+// 4 -> 5: fingerprints of format 1 (scan descriptors with hard-binned edges) are rewritten in the current
+// format, and each scan's indexed descriptor with its blob. A blob that does not load is left as it is: reading
+// it reports it corrupt, as before. Maps' generations move, so index snapshots of old descriptors are rebuilt.
+void upgradeFingerprints(const sql::Db& db) {
+  std::vector<std::int64_t> ids;
+  {
+    sql::Stmt st(db, "SELECT scan_id FROM scan_blobs ORDER BY scan_id");
+    while (st.step()) ids.push_back(st.i64(0));
+  }
+  sql::Stmt read(db, "SELECT fingerprint FROM scan_blobs WHERE scan_id = ?");
+  sql::Stmt blob(db, "UPDATE scan_blobs SET fingerprint = ? WHERE scan_id = ?");
+  sql::Stmt row(db, "UPDATE scans SET descriptor = ?, fingerprint_bytes = ? WHERE id = ?");
+  for (const auto id : ids) {
+    read.reset();
+    read.bind(1, id);
+    if (!read.step()) continue;
+    Fingerprint fp;
+    try {
+      fp = deserialize(read.blob(0));
+    } catch (const InputError&) {
+      continue;
+    }
+    const auto bytes = serialize(fp);
+    blob.reset();
+    blob.bindBlob(1, bytes).bind(2, id).run();
+    const auto& d = fp.descriptor;
+    row.reset();
+    row.bindBlob(1, {reinterpret_cast<const std::uint8_t*>(d.data()), d.size() * sizeof(float)})
+        .bind(2, static_cast<std::int64_t>(bytes.size()))
+        .bind(3, id)
+        .run();
+  }
+  db.exec("UPDATE maps SET generation = generation + 1");
+}
+
+struct Migration {
+  const char* sql;                     // run first
+  void (*rewrite)(const sql::Db& db);  // then this, when set
+};
+
 // Forward migrations: kMigrations[v] upgrades a file from user_version v to v + 1.
-const std::vector<const char*> kMigrations = {
+const std::vector<Migration> kMigrations = {
     // 0 -> 1: the initial schema.
-    R"sql(
+    {R"sql(
     CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
     CREATE TABLE maps(
       id INTEGER PRIMARY KEY, name TEXT NOT NULL UNIQUE, descriptor_dim INTEGER NOT NULL,
@@ -40,8 +82,9 @@ const std::vector<const char*> kMigrations = {
     CREATE TABLE scan_blobs(
       scan_id INTEGER PRIMARY KEY REFERENCES scans(id), fingerprint BLOB NOT NULL, raw BLOB);
     )sql",
+     nullptr},
     // 1 -> 2: the pose graph (verified loops, optimised poses, session frames).
-    R"sql(
+    {R"sql(
     CREATE TABLE loops(
       id INTEGER PRIMARY KEY AUTOINCREMENT, map_id INTEGER NOT NULL REFERENCES maps(id),
       query_scan INTEGER NOT NULL REFERENCES scans(id), candidate_scan INTEGER NOT NULL REFERENCES scans(id),
@@ -54,14 +97,19 @@ const std::vector<const char*> kMigrations = {
       session_id INTEGER PRIMARY KEY REFERENCES sessions(id), t BLOB NOT NULL, connected INTEGER NOT NULL);
     ALTER TABLE maps ADD COLUMN graph_version INTEGER NOT NULL DEFAULT 0;
     )sql",
+     nullptr},
     // 2 -> 3: the information matrix of each loop's pose (36 doubles; NULL for loops recorded before).
-    R"sql(
+    {R"sql(
     ALTER TABLE loops ADD COLUMN information BLOB;
     )sql",
+     nullptr},
     // 3 -> 4: the last loop the stored optimised poses account for (0: unknown, all loops are new).
-    R"sql(
+    {R"sql(
     ALTER TABLE maps ADD COLUMN graph_loop INTEGER NOT NULL DEFAULT 0;
     )sql",
+     nullptr},
+    // 4 -> 5: soft-binned scan descriptors (fingerprint format 2).
+    {"", upgradeFingerprints},
 };
 
 // The file may be opened for writing: the path is a file (or can become one) in a writable place.
@@ -134,7 +182,9 @@ void configure(const sql::Db& db, const StoreOptions& options) {
 void migrate(const sql::Db& db, std::int64_t version) {
   for (auto v = version; v < kSchemaVersion; ++v) {
     sql::Transaction tx(db);
-    db.exec(kMigrations[static_cast<std::size_t>(v)]);
+    const auto& step = kMigrations[static_cast<std::size_t>(v)];
+    db.exec(step.sql);
+    if (step.rewrite) step.rewrite(db);
     if (v == 0) {
       std::random_device rd;
       const auto token = (static_cast<std::uint64_t>(rd()) << 32) ^ rd();

@@ -279,21 +279,53 @@ TEST(Descriptors, ScanDescriptorUnitNormAndFinite) {
 }
 
 TEST(Descriptors, ScanDescriptorHandChecked) {
-  // Edges use hard bins (stored descriptors must keep one definition; see scanDescriptor).
-  // Two class-0 nodes 5 m apart and one class-2 node 13 m from the first, 13.93 m from the second; no ring key.
+  // Two class-0 nodes 5 m apart and one class-2 node 13 m from the first, hypot(5, 13) = 13.93 m from the
+  // second; no ring key. Edges are soft-binned: 5 m and 13 m sit on the centres of bins 2 and 6, 13.93 m
+  // shares its count between bins 6 and 7.
   const std::vector<Node> nodes{node(0, 0, 0, 0), node(5, 0, 0, 0), node(0, 13, 0, 2)};
   const DescriptorLayout l = layoutFor(3, 60.0);
   const auto d = scanDescriptor(nodes, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
   ASSERT_EQ(d.size(), 231u);
-  // counts (2, 0, 1) / sqrt5; edges: type(0,0)=0 bin 2, type(0,2)=2 bin 6 twice -> (1, 2) / sqrt5.
+  const double w = std::hypot(5.0, 13.0) / 2.0 - 0.5 - 6.0;  // 0.465: bin 7's share
+  // counts (2, 0, 1) / sqrt5; edges: type(0,0)=0 bin 2: 1; type(0,2)=2 bin 6: 1 + (1 - w), bin 7: w.
   // fg = [counts | edges] has norm sqrt2 -> each / sqrt2; ring key zero -> stays zero.
-  const double k = 1.0 / std::sqrt(5.0) / std::sqrt(2.0);
+  const double ne = std::sqrt(1.0 + (2.0 - w) * (2.0 - w) + w * w);
+  const double kc = 1.0 / std::sqrt(5.0) / std::sqrt(2.0), ke = 1.0 / ne / std::sqrt(2.0);
   std::vector<double> expected(231, 0.0);
-  expected[0] = 2 * k;
-  expected[2] = 1 * k;
-  expected[3 + 0 * 30 + 2] = 1 * k;
-  expected[3 + 2 * 30 + 6] = 2 * k;
+  expected[0] = 2 * kc;
+  expected[2] = 1 * kc;
+  expected[3 + 0 * 30 + 2] = 1 * ke;
+  expected[3 + 2 * 30 + 6] = (2.0 - w) * ke;
+  expected[3 + 2 * 30 + 7] = w * ke;
   for (int i = 0; i < 231; ++i) EXPECT_NEAR(d[i], expected[i], 1e-6) << i;
+}
+
+// Moving one node a little moves the scan descriptor a little: no jump where a distance crosses a bin edge.
+TEST(Descriptors, ScanDescriptorMovesSmoothlyWithDistance) {
+  const DescriptorLayout l = layoutFor(2, 60.0);
+  std::vector<float> previous;
+  for (double d = 9.0; d <= 11.0 + 1e-9; d += 0.1) {  // across the edge between bins 4 and 5 at 10 m
+    const auto now = scanDescriptor({node(0, 0, 0, 0), node(d, 0, 0, 1)}, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
+    if (!previous.empty()) {
+      double step = 0;
+      for (std::size_t k = 0; k < now.size(); ++k) step += (now[k] - previous[k]) * (now[k] - previous[k]);
+      EXPECT_LT(std::sqrt(step), 0.1) << d;
+    }
+    previous = now;
+  }
+}
+
+// The descriptor can be recomputed from stored nodes and the stored descriptor's ring part.
+TEST(Descriptors, StoredRingKeyRecomputesTheDescriptor) {
+  const DescriptorLayout l = layoutFor(3, 60.0);
+  const auto nodes = randomLayout(30, 5, 60.0, 2.0);
+  std::vector<float> ring(48, 0.0f);
+  for (int k = 1; k < 48; k += 5) ring[k] = static_cast<float>(k);
+  const auto d = scanDescriptor(nodes, ring, l, 60.0, 2.0);
+  const auto again = scanDescriptor(nodes, storedRingKey(d, l), l, 60.0, 2.0);
+  ASSERT_EQ(again.size(), d.size());
+  for (std::size_t k = 0; k < d.size(); ++k) EXPECT_NEAR(again[k], d[k], 1e-6) << k;
+  EXPECT_EQ(storedRingKey(std::vector<float>(3, 1.0f), l), std::vector<float>(48, 0.0f));  // too short: none
 }
 
 TEST(Descriptors, ScanDescriptorZeroRingKeyNoNaN) {

@@ -262,6 +262,29 @@ TEST_F(FingerprintBlob, BadMagicAndVersions) {
   EXPECT_NO_THROW(deserialize(t));
 }
 
+// A format-1 blob (hard-binned edge histogram in its scan descriptor) loads with the descriptor recomputed
+// from its nodes and its ring key; everything else is as stored, and it serialises in the current format.
+TEST_F(FingerprintBlob, Version1BlobGetsTheCurrentDescriptor) {
+  std::vector<std::uint8_t> t = *blob_;
+  const auto dim = fp_->descriptor.size();
+  const auto rings = static_cast<std::size_t>(2 * fp_->layout.rings);
+  ASSERT_GT(dim, rings);
+  // An old descriptor: a different graph part (all equal values), the same ring part scaled.
+  std::vector<float> old(dim, 0.05f);
+  for (std::size_t k = dim - rings; k < dim; ++k) old[k] = 0.5f * fp_->descriptor[k];
+  std::memcpy(t.data() + t.size() - 4 * dim, old.data(), 4 * dim);
+  setHeaderWord(t, 1, 1);
+  fixChecksum(t);
+  const Fingerprint loaded = deserialize(t);
+  ASSERT_EQ(loaded.descriptor.size(), dim);
+  for (std::size_t k = 0; k < dim; ++k) EXPECT_NEAR(loaded.descriptor[k], fp_->descriptor[k], 1e-6) << k;
+  EXPECT_EQ(loaded.nodes.size(), fp_->nodes.size());
+  EXPECT_EQ(headerWord(serialize(loaded), 1), kFingerprintVersion);
+  // The same bytes labelled as the current format keep the descriptor as written.
+  setHeaderWord(t, 1, kFingerprintVersion);
+  EXPECT_EQ(deserialize(t).descriptor, old);
+}
+
 // Single-byte changes of the payload (with a recomputed checksum) either load or throw InputError; nothing else
 // (no crash, no other exception type). Every byte of the fixed fields, the node records and the section counts
 // is mutated (see below), and a sample of the bulk arrays. The four geometry floats (d_max, d_i, background_cell,

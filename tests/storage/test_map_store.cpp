@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -729,6 +730,78 @@ TEST(MapStore, MigratesAVersion1FileForward) {
   EXPECT_EQ(store->loops("m").size(), 1u);
   for (const auto& s : all) EXPECT_EQ(serialize(*store->fingerprint(s.id)), serialize(s.fp));
   EXPECT_EQ(store->integrityCheck(), "ok");
+}
+
+// Rewrites scan `id`'s blob behind the store's back: `bytes`, or bytes of fingerprint format 1 made from `fp`.
+void setBlob(const std::string& path, std::int64_t id, std::vector<std::uint8_t> bytes) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE scan_blobs SET fingerprint = ? WHERE scan_id = ?", -1, &st, nullptr),
+            SQLITE_OK);
+  sqlite3_bind_blob(st, 1, bytes.data(), static_cast<int>(bytes.size()), SQLITE_TRANSIENT);
+  sqlite3_bind_int64(st, 2, id);
+  EXPECT_EQ(sqlite3_step(st), SQLITE_DONE) << sqlite3_errmsg(db);
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+}
+
+std::vector<std::uint8_t> formatOneBlob(const Fingerprint& fp) {
+  auto bytes = serialize(fp);
+  const std::uint32_t one = 1;
+  std::memcpy(bytes.data() + 4, &one, 4);  // the checksum covers the payload only
+  return bytes;
+}
+
+std::uint32_t blobVersion(const std::string& path, std::int64_t id) {
+  sqlite3* db = nullptr;
+  EXPECT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  sqlite3_prepare_v2(db, "SELECT fingerprint FROM scan_blobs WHERE scan_id = ?", -1, &st, nullptr);
+  sqlite3_bind_int64(st, 1, id);
+  std::uint32_t version = 0;
+  if (sqlite3_step(st) == SQLITE_ROW && sqlite3_column_bytes(st, 0) >= 8)
+    std::memcpy(&version, static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 0)) + 4, 4);
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  return version;
+}
+
+// A schema-4 file holds fingerprints of format 1, whose scan descriptors had hard-binned edges. Opening it
+// recomputes every descriptor, in the blob and in the index (a saved index snapshot of the old ones is not
+// used), and leaves a blob that does not load as it was.
+TEST(MapStore, MigratesVersion4FingerprintsToTheCurrentDescriptor) {
+  TempDir dir;
+  const auto path = dir.file("map.db");
+  std::vector<Stored> all;
+  {
+    auto store = MapStore::open(options(path));  // snapshot_index: the close saves an index of the old values
+    all = fill(*store, 1, 1, 5);
+  }
+  for (std::size_t k = 0; k + 1 < all.size(); ++k) setBlob(path, all[k].id, formatOneBlob(all[k].fp));
+  setBlob(path, all.back().id, {1, 2, 3});
+  execSql(path, "PRAGMA user_version=4;");
+  auto store = MapStore::open(options(path));
+  for (std::size_t k = 0; k + 1 < all.size(); ++k) {
+    const auto& old = all[k].fp;
+    const auto expected =
+        scanDescriptor(old.nodes, storedRingKey(old.descriptor, old.layout), old.layout, old.d_max, old.d_i);
+    const auto fp = store->fingerprint(all[k].id);
+    ASSERT_TRUE(fp);
+    ASSERT_EQ(fp->descriptor.size(), expected.size());
+    for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(fp->descriptor[i], expected[i], 1e-6) << i;
+    EXPECT_EQ(blobVersion(path, all[k].id), kFingerprintVersion);
+    SearchRequest q;
+    q.map = "m";
+    q.descriptor = fp->descriptor;
+    q.k = 1;
+    const auto hits = store->search(q);
+    ASSERT_EQ(hits.size(), 1u);
+    EXPECT_EQ(hits[0].scan_id, all[k].id);
+    EXPECT_LT(hits[0].distance, 1e-3f);
+  }
+  EXPECT_EQ(errorCode([&] { store->fingerprint(all.back().id); }), StorageError::Code::kCorrupt);
+  EXPECT_EQ(store->stats("m").scans, static_cast<std::int64_t>(all.size()));
 }
 
 Mat6d someInformation() {

@@ -1,6 +1,7 @@
 // Node descriptors (local edge histogram + spectral embedding) and the scan descriptor for retrieval.
 #pragma once
 
+#include <span>
 #include <vector>
 
 #include "sglc/config.hpp"
@@ -29,7 +30,12 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
 int edgeType(int a, int b, int num_classes);
 
 // scanDim() floats: L2([L2([L2(node counts) | L2(edge histogram)]) | L2(ring key)]). ring_key may be all zero.
+// The edge histogram is soft-binned by distance like the node descriptors.
 std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& ring_key,
                                   const DescriptorLayout& layout, double d_max, double d_i);
+
+// The ring-key part of a scan descriptor (its last 2 * rings values, up to scale), enough to recompute the
+// descriptor from stored nodes with scanDescriptor: the ring key's own normalisation removes the scale.
+std::vector<float> storedRingKey(std::span<const float> descriptor, const DescriptorLayout& layout);
 
 }  // namespace sglc

@@ -43,10 +43,13 @@ struct Fingerprint {
   void finalize();
 };
 
-inline constexpr std::uint32_t kFingerprintVersion = 1;
+// 2: the scan descriptor's edge histogram is soft-binned. Version 1 blobs are read and their descriptor
+// recomputed, so a loaded fingerprint is always of the current definition (serialize writes version 2).
+inline constexpr std::uint32_t kFingerprintVersion = 2;
 
 std::vector<std::uint8_t> serialize(const Fingerprint& fp);
-// Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob.
+// Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob. A version-1 blob
+// comes back with its scan descriptor recomputed (and so serialises to different bytes).
 Fingerprint deserialize(std::span<const std::uint8_t> bytes);
 
 }  // namespace sglc

@@ -255,6 +255,6 @@ class MapStore {
 };
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 4;
+inline constexpr int kSchemaVersion = 5;
 
 }  // namespace sglc::storage
