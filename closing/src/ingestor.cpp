@@ -19,7 +19,7 @@ void Ingestor::requireSameScan(std::int64_t id, const Fingerprint& fp, const Ing
   const auto info = store_.scanInfo(id);
   const auto stored = store_.fingerprint(id);
   const auto& pose = input.odometry_pose;
-  const bool same = info && stored && serialize(*stored) == serialize(fp) && info->stamp == input.stamp &&
+  const bool same = info && stored && sameScan(*stored, fp) && info->stamp == input.stamp &&
                     info->odometry_pose.has_value() == pose.has_value() && (!pose || *info->odometry_pose == *pose) &&
                     info->has_raw == input.store_raw;
   if (!same)

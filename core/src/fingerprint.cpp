@@ -2,6 +2,7 @@
 
 #include <zlib.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -193,6 +194,18 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
     fp.descriptor = scanDescriptor(fp.nodes, storedRingKey(fp.descriptor, fp.layout), fp.layout, fp.d_max, fp.d_i);
   fp.finalize();
   return fp;
+}
+
+bool sameScan(const Fingerprint& a, const Fingerprint& b) {
+  const auto& da = a.descriptor;
+  const auto& db = b.descriptor;
+  if (da.size() != db.size()) return false;
+  for (std::size_t k = 0; k < da.size(); ++k)
+    if (!(std::abs(da[k] - db[k]) <= 1e-6f)) return false;
+  // The rest compares as written: the descriptor is the payload's last field, the checksum covers it.
+  const auto sa = serialize(a), sb = serialize(b);
+  const auto tail = static_cast<std::ptrdiff_t>(sizeof(float) * da.size());
+  return sa.size() == sb.size() && std::equal(sa.begin() + kHeaderBytes, sa.end() - tail, sb.begin() + kHeaderBytes);
 }
 
 }  // namespace sglc

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -280,9 +281,30 @@ TEST_F(FingerprintBlob, Version1BlobGetsTheCurrentDescriptor) {
   for (std::size_t k = 0; k < dim; ++k) EXPECT_NEAR(loaded.descriptor[k], fp_->descriptor[k], 1e-6) << k;
   EXPECT_EQ(loaded.nodes.size(), fp_->nodes.size());
   EXPECT_EQ(headerWord(serialize(loaded), 1), kFingerprintVersion);
+  EXPECT_TRUE(sameScan(loaded, *fp_));  // so an identical ingest retry across the upgrade still answers OK
   // The same bytes labelled as the current format keep the descriptor as written.
   setHeaderWord(t, 1, kFingerprintVersion);
   EXPECT_EQ(deserialize(t).descriptor, old);
+}
+
+TEST_F(FingerprintBlob, SameScanToleratesOnlyDescriptorRounding) {
+  const Fingerprint& fp = *fp_;
+  EXPECT_TRUE(sameScan(fp, fp));
+  Fingerprint nudged = fp;
+  nudged.descriptor[3] = std::nextafter(nudged.descriptor[3], 2.0f);
+  EXPECT_TRUE(sameScan(fp, nudged));
+  Fingerprint other = fp;
+  other.descriptor[3] += 0.01f;
+  EXPECT_FALSE(sameScan(fp, other));
+  Fingerprint moved = fp;
+  moved.nodes[0].center.x() += 0.01f;
+  EXPECT_FALSE(sameScan(fp, moved));
+  Fingerprint counted = fp;
+  counted.num_points += 1;
+  EXPECT_FALSE(sameScan(fp, counted));
+  Fingerprint shorter = fp;
+  shorter.planes.pop_back();
+  EXPECT_FALSE(sameScan(fp, shorter));
 }
 
 // Single-byte changes of the payload (with a recomputed checksum) either load or throw InputError; nothing else

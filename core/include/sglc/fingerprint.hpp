@@ -52,4 +52,9 @@ std::vector<std::uint8_t> serialize(const Fingerprint& fp);
 // comes back with its scan descriptor recomputed (and so serialises to different bytes).
 Fingerprint deserialize(std::span<const std::uint8_t> bytes);
 
+// Whether two fingerprints describe the same scan: equal in everything stored, and scan descriptors equal
+// within float rounding (one read from format 1 had its descriptor recomputed, which can differ from a fresh
+// computation in the last bits).
+bool sameScan(const Fingerprint& a, const Fingerprint& b);
+
 }  // namespace sglc
