@@ -113,7 +113,10 @@ std::vector<std::uint8_t> serialize(const Fingerprint& fp) {
   return std::move(out);
 }
 
-Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
+namespace {
+
+// The header's format version, once magic, version, length and checksum are checked.
+std::uint32_t checkedVersion(std::span<const std::uint8_t> bytes) {
   if (bytes.size() < kHeaderBytes)
     throw InputError("fingerprint: " + std::to_string(bytes.size()) + " bytes is shorter than its header");
   std::uint32_t header[4];
@@ -127,8 +130,14 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
                      std::to_string(header[2]));
   if (static_cast<std::uint32_t>(crc32(0L, bytes.data() + kHeaderBytes, header[2])) != header[3])
     throw InputError("fingerprint: checksum mismatch (corrupted data)");
+  return header[1];
+}
 
-  Reader r(bytes.data() + kHeaderBytes, header[2]);
+}  // namespace
+
+Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
+  const auto version = checkedVersion(bytes);
+  Reader r(bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes);
   Fingerprint fp;
   fp.layout.num_classes = r.get<std::uint8_t>();
   fp.layout.bins = r.get<std::uint16_t>();
@@ -190,7 +199,7 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   if (!r.done()) throw InputError("fingerprint: trailing bytes after the payload");
   // Format 1 binned the scan descriptor's edge histogram hard: recompute it as this build does, from the
   // stored nodes and the stored ring key, so that old and new scans compare alike.
-  if (header[1] == 1)
+  if (version == 1)
     fp.descriptor = scanDescriptor(fp.nodes, storedRingKey(fp.descriptor, fp.layout), fp.layout, fp.d_max, fp.d_i);
   fp.finalize();
   return fp;
