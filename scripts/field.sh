@@ -44,10 +44,14 @@ sequence() {
   cp "$WORK/$1/sim_info.json" "$OUT/$1/sim_info.json"
   rm -rf "${WORK:?}/$1"
 }
-# relocalize MAP NAME: the queries of $WORK/NAME against the map $WORK/MAP, into $OUT/NAME.
+# relocalize MAP NAME: the queries of $WORK/NAME against the map $WORK/MAP, into $OUT/NAME. A relocalizing
+# robot asks once, not at its keyframe rate, so each query verifies RELOC_CANDIDATES descriptor neighbours
+# (QueryOptions.candidates; the service allows up to 200).
+RELOC_CANDIDATES=${RELOC_CANDIDATES:-100}
 relocalize() {
   rm -rf "${OUT:?}/$2"
   "$EVAL" --protocol relocalization --map-data "$WORK/$1" --data "$WORK/$2" --out "$OUT/$2" \
+    --candidates "$RELOC_CANDIDATES" \
     --title "field: $2 against $1" --no-plots > /dev/null
   cp "$WORK/$2/sim_info.json" "$OUT/$2/sim_info.json"
   rm -rf "${WORK:?}/$2"

@@ -73,6 +73,7 @@ def reloc_rows(root):
             precision = mark(s["precision"], 0.98) if answered else "**-** (nothing verified)"
             posed = s.get("registered", 0) > 0
             rows.append(f"| {what} | {seed(info)} | {s['queries']} ({s['queries_with_true_place']}) | {miou(info)} | "
+                        f"{s.get('candidates', '-')} | "
                         f"{mark(s['recall_at_1'], floor)} | {precision} | "
                         f"{mark(s.get('precision_all_verified'), 0.98)} ({s['verified_true']} / {s['verified_false']}) | "
                         f"{f3(s['rte_median']) if posed else '-'} | {f3(s['rre_median']) if posed else '-'} |")
@@ -105,9 +106,10 @@ def section(root):
         w("Relocalization against a map of every 4th frame of KITTI 00's path (HDL-64, day 0, realistic preset); "
           "queries: every 8th frame from frame 2 of another drive, realistic preset:")
         w("")
-        w("| queries | seed | count (with a true place) | label mIoU | Recall@1 | precision (operating threshold) | "
-          "precision, every verified top-1 (true / false) | RTE median (m) | RRE median (deg) |")
-        w("|---|---|---|---|---|---|---|---|---|")
+        w("| queries | seed | count (with a true place) | label mIoU | candidates verified per query | Recall@1 | "
+          "precision (operating threshold) | precision, every verified top-1 (true / false) | RTE median (m) | "
+          "RRE median (deg) |")
+        w("|---|---|---|---|---|---|---|---|---|---|")
         out.extend(rel)
         w("")
     w(END)
