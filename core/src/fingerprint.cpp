@@ -205,6 +205,13 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   return fp;
 }
 
+std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes) {
+  if (bytes.size() < kHeaderBytes) return 0;
+  std::uint32_t header[2];
+  std::memcpy(header, bytes.data(), sizeof(header));
+  return header[0] == kMagic ? header[1] : 0;
+}
+
 bool sameScan(const Fingerprint& a, const Fingerprint& b) {
   const auto& da = a.descriptor;
   const auto& db = b.descriptor;

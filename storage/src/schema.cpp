@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <iterator>
 #include <random>
 #include <vector>
 
@@ -17,37 +18,31 @@ using Code = StorageError::Code;
 
 constexpr std::int32_t kApplicationId = 0x53474C43;  // "SGLC": marks our SQLite files
 
-// 4 -> 5: fingerprints of format 1 (scan descriptors with hard-binned edges) are rewritten in the current
-// format, and each scan's indexed descriptor with its blob. A blob that does not load is left as it is: reading
-// it reports it corrupt, as before. Maps' generations move, so index snapshots of old descriptors are rebuilt.
-void upgradeFingerprints(const sql::Db& db) {
-  std::vector<std::int64_t> ids;
+// 4 -> 5: scans whose fingerprint is of format 1 (hard-binned scan-descriptor edges) get the current descriptor
+// in their indexed column. The blob itself stays: deserialize recomputes its descriptor whenever it is read, so
+// only the small rows are written. A blob that does not load, or whose descriptor does not fit its map, is left
+// as it was (reading it reports it, as before). Maps' generations move, so index snapshots are rebuilt.
+void upgradeDescriptors(const sql::Db& db) {
+  std::vector<std::pair<std::int64_t, std::int64_t>> scans;  // scan id, its map's descriptor dimension
   {
-    sql::Stmt st(db, "SELECT scan_id FROM scan_blobs ORDER BY scan_id");
-    while (st.step()) ids.push_back(st.i64(0));
+    sql::Stmt st(db, "SELECT s.id, m.descriptor_dim FROM scans s JOIN maps m ON m.id = s.map_id ORDER BY s.id");
+    while (st.step()) scans.emplace_back(st.i64(0), st.i64(1));
   }
   sql::Stmt read(db, "SELECT fingerprint FROM scan_blobs WHERE scan_id = ?");
-  sql::Stmt blob(db, "UPDATE scan_blobs SET fingerprint = ? WHERE scan_id = ?");
-  sql::Stmt row(db, "UPDATE scans SET descriptor = ?, fingerprint_bytes = ? WHERE id = ?");
-  for (const auto id : ids) {
+  sql::Stmt write(db, "UPDATE scans SET descriptor = ? WHERE id = ?");
+  for (const auto& [id, dim] : scans) {
     read.reset();
     read.bind(1, id);
-    if (!read.step()) continue;
-    Fingerprint fp;
+    if (!read.step() || fingerprintFormat(read.blob(0)) != 1) continue;
+    std::vector<float> d;
     try {
-      fp = deserialize(read.blob(0));
-    } catch (const InputError&) {
+      d = deserialize(read.blob(0)).descriptor;
+    } catch (const std::exception&) {  // InputError, or bad_alloc for an absurd node count
       continue;
     }
-    const auto bytes = serialize(fp);
-    blob.reset();
-    blob.bindBlob(1, bytes).bind(2, id).run();
-    const auto& d = fp.descriptor;
-    row.reset();
-    row.bindBlob(1, {reinterpret_cast<const std::uint8_t*>(d.data()), d.size() * sizeof(float)})
-        .bind(2, static_cast<std::int64_t>(bytes.size()))
-        .bind(3, id)
-        .run();
+    if (static_cast<std::int64_t>(d.size()) != dim) continue;
+    write.reset();
+    write.bindBlob(1, {reinterpret_cast<const std::uint8_t*>(d.data()), d.size() * sizeof(float)}).bind(2, id).run();
   }
   db.exec("UPDATE maps SET generation = generation + 1");
 }
@@ -58,7 +53,7 @@ struct Migration {
 };
 
 // Forward migrations: kMigrations[v] upgrades a file from user_version v to v + 1.
-const std::vector<Migration> kMigrations = {
+const Migration kMigrations[] = {
     // 0 -> 1: the initial schema.
     {R"sql(
     CREATE TABLE meta(key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -108,9 +103,10 @@ const std::vector<Migration> kMigrations = {
     ALTER TABLE maps ADD COLUMN graph_loop INTEGER NOT NULL DEFAULT 0;
     )sql",
      nullptr},
-    // 4 -> 5: soft-binned scan descriptors (fingerprint format 2).
-    {"", upgradeFingerprints},
+    // 4 -> 5: soft-binned scan descriptors (fingerprint format 2) in the index.
+    {"", upgradeDescriptors},
 };
+static_assert(std::size(kMigrations) == kSchemaVersion, "one migration per schema version");
 
 // The file may be opened for writing: the path is a file (or can become one) in a writable place.
 void checkPath(const std::string& file) {

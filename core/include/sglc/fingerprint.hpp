@@ -52,6 +52,10 @@ std::vector<std::uint8_t> serialize(const Fingerprint& fp);
 // comes back with its scan descriptor recomputed (and so serialises to different bytes).
 Fingerprint deserialize(std::span<const std::uint8_t> bytes);
 
+// The format version a blob's header names (0 when it is too short or not a fingerprint). Nothing is checked
+// beyond the magic: deserialize does that.
+std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes);
+
 // Whether two fingerprints describe the same scan: equal in everything stored, and scan descriptors equal
 // within float rounding (one read from format 1 had its descriptor recomputed, which can differ from a fresh
 // computation in the last bits).
