@@ -3,7 +3,7 @@
 # come and go within the drive, per-laser calibration offsets, mixed pixels), then one day later, with other
 # sensors and on look-alike streets. Writes docs/results/field/*/summary.json and splices the "Field
 # conditions" section at the top of docs/RESULTS.md (tools/eval/field_md.py).
-#   scripts/field.sh                         # everything (about an hour on 2 cores)
+#   scripts/field.sh                         # everything (about 25 minutes on 2 cores)
 #   PARTS="reloc sensors" scripts/field.sh   # some parts: sequence, iid, reloc, sensors, aliasing
 #   SEED=12 SEQS=05 scripts/field.sh         # another world, one path
 # Simulated scans go to a fresh directory under $WORK (default /tmp), deleted after each run and at exit; about
