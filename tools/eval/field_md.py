@@ -28,6 +28,8 @@ def runs(root, prefix):
     """(name, summary, sim_info) of the runs whose directory starts with prefix, by name."""
     out = []
     for name in sorted(os.listdir(root)):
+        if not os.path.isdir(os.path.join(root, name)):  # a stray file among the runs
+            continue
         s = load(os.path.join(root, name, "summary.json"))
         if name.startswith(prefix) and s is not None:
             out.append((name, s, load(os.path.join(root, name, "sim_info.json")) or {}))
