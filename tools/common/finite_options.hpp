@@ -14,15 +14,18 @@
 
 namespace sglc::tools {
 
-// The first given value that reads in full as a NaN or infinite number, named with its option, or "".
+// The first value given to a floating-point option (CLI11's type name FLOAT) that reads in full as a NaN or
+// infinite number, named with its option, or "". Text options are not looked at: "nan" is a fine directory name.
 inline std::string nonFiniteValue(const CLI::App& app) {
-  for (const CLI::Option* opt : app.get_options())
+  for (const CLI::Option* opt : app.get_options()) {
+    if (opt->get_type_name().rfind("FLOAT", 0) != 0) continue;
     for (const std::string& text : opt->results()) {
       char* end = nullptr;
       const double v = std::strtod(text.c_str(), &end);
       if (end != text.c_str() && *end == '\0' && !std::isfinite(v))
         return opt->get_name() + " must be a finite number, got '" + text + "'";
     }
+  }
   return "";
 }
 

@@ -229,6 +229,10 @@ with tempfile.TemporaryDirectory() as tmp:
         check(p.returncode == code, f"{args}: exit {code} (got {p.returncode})")
         check(len(lines) == 1 and lines[0].startswith("sglc-sim: error:") and word in lines[0],
               f"{args}: one error line mentioning '{word}' (got {p.stderr.strip()!r})")
+    # Only numbers are refused as NaN: a directory may be called "nan".
+    p = run("--route", "loop", "--frames", "0:1", "--out", os.path.join(tmp, "nan"), "--quiet", *SMALL)
+    check(p.returncode == 0 and os.path.isdir(os.path.join(tmp, "nan", "velodyne")),
+          f"--out nan is a directory name (got {p.returncode}: {p.stderr.strip()})")
     p = run("--help")
     check(p.returncode == 0 and "--poses" in p.stdout and "--frames" in p.stdout, "--help lists the options")
 
