@@ -21,11 +21,13 @@ GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions o
   for (const auto& m : store_.listMaps())
     if (!store_.loops(m.name, 0, 1).empty()) due_[m.name] = now;
   worker_ = std::thread([this] { run(); });
+  global_worker_ = std::thread([this] { runGlobal(); });
 }
 
 GraphOptimiser::~GraphOptimiser() {
   stop();
   if (worker_.joinable()) worker_.join();
+  if (global_worker_.joinable()) global_worker_.join();
 }
 
 void GraphOptimiser::stop() {
@@ -33,8 +35,10 @@ void GraphOptimiser::stop() {
     std::lock_guard lock(mutex_);
     stop_ = true;
   }
+  cancel_ = true;  // a background global solve stops at its next iteration
   wake_.notify_all();
   changed_.notify_all();
+  global_wake_.notify_all();
 }
 
 bool GraphOptimiser::stopping() const {
@@ -64,6 +68,8 @@ void GraphOptimiser::mapDeleted(const std::string& map, std::int64_t map_id) {
     std::lock_guard lock(mutex_);
     ++deletions_[map];  // solves begun before now publish nothing
     due_.erase(map);
+    global_at_.erase(map);
+    global_done_.erase(map);
     latest_.erase(map);
     stale_.insert(map);
     forget_.insert(map);  // the worker frees the map's graph (it owns graphs_)
@@ -115,7 +121,7 @@ void GraphOptimiser::run() {
     const std::string map = next->first;
     due_.erase(next);
     lock.unlock();
-    optimise(map);  // never throws: a failure becomes the map's failed event
+    optimise(map, Scope::kAuto);  // never throws: a failure becomes the map's failed event
     lock.lock();
   }
 }
@@ -129,9 +135,9 @@ bool GraphOptimiser::sameMap(const std::string& map, std::int64_t map_id) const 
   }
 }
 
-GraphEvent GraphOptimiser::optimiseNow(const std::string& map) { return optimise(map); }
+GraphEvent GraphOptimiser::optimiseNow(const std::string& map, Scope scope) { return optimise(map, scope); }
 
-GraphEvent GraphOptimiser::optimise(const std::string& map) {
+GraphEvent GraphOptimiser::optimise(const std::string& map, Scope scope) {
   std::lock_guard one(optimise_mutex_);
   std::uint64_t gen = 0;
   {
@@ -148,7 +154,7 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
       return event;
     }
     map_id = info->id;
-    return solve(map, map_id, gen);
+    return solve(map, map_id, gen, scope);
   } catch (const std::exception& e) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
     graphs_.erase(map);
@@ -178,19 +184,23 @@ GraphEvent GraphOptimiser::optimise(const std::string& map) {
   }
 }
 
-GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, std::uint64_t generation) {
-  const auto t0 = Clock::now();
+MapGraph& GraphOptimiser::graphOf(const std::string& map, std::int64_t map_id) {
   auto& slot = graphs_[map];
   {
     std::lock_guard lock(mutex_);
     if (stale_.erase(map) || slot.map_id != map_id) slot.graph.reset();
   }
   slot.map_id = map_id;
-  if (!slot.graph) slot.graph = std::make_unique<MapGraph>();
-  MapGraph& g = *slot.graph;
+  if (!slot.graph) {
+    slot.graph = std::make_unique<MapGraph>();
+    slot.lineage = ++next_lineage_;  // a global solve of the graph it replaces is not for this one
+  }
+  return *slot.graph;
+}
 
-  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped above). Loops are
-  // read before scans: ingest stores a scan before its loops, so every loop read here finds its scans among the
+GraphOptimiser::Rows GraphOptimiser::readRows(const std::string& map, MapGraph& g) {
+  // New rows since the last optimisation (after a deletion, all rows: the graph was dropped). Loops are read
+  // before scans: ingest stores a scan before its loops, so every loop read here finds its scans among the
   // nodes read after it (read the other way round, a scan and its loop stored between the two reads would give
   // a loop without its node, skipped and never read again).
   const auto loops = store_.loops(map, g.lastLoop());
@@ -198,45 +208,77 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, st
   // Loops with ids up to solved_through are reflected in the poses the solve starts from: the last solve's,
   // or, for a fresh graph (server start, after a deletion), the poses kept in the database, so that a restart
   // continues from where the last run stopped.
-  std::int64_t solved_through = g.lastLoop();
-  const bool fresh = g.empty();
+  Rows rows;
+  rows.solved_through = g.lastLoop();
+  rows.fresh = g.empty();
   std::unordered_map<std::int64_t, Mat4d> kept;
-  if (fresh) {
+  if (rows.fresh) {
     for (const auto& p : store_.optimisedPoses(map, "", "", 0, std::numeric_limits<std::int64_t>::max()))
       if (!rigidMotionError(p.pose)) kept[p.scan_id] = orthonormalised(p.pose);  // else start from odometry
-    solved_through = store_.optimisedThroughLoop(map);
+    rows.solved_through = store_.optimisedThroughLoop(map);
   }
-  const bool changed = g.absorb(map, loops, nodes, kept);
+  rows.changed = g.absorb(map, loops, nodes, kept);
+  return rows;
+}
+
+GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, std::uint64_t generation, Scope scope) {
+  const auto t0 = Clock::now();
+  MapGraph& g = graphOf(map, map_id);
+  auto rows = readRows(map, g);
+  // A global solve finished in the background since: its poses, and what arrived meanwhile solved around it.
+  const auto adopted = adoptGlobal(map, g);
+  if (adopted) rows.solved_through = *adopted;
+  const bool global = rows.fresh || scope == Scope::kGlobal;
+  const bool background = !global && !adopted && globalDue(map);
   // A solved graph with nothing new would only be solved again to the same poses: report the last event, no new
-  // version (a request queued while an optimisation was running is often already covered by it).
-  if (!fresh && !changed && g.converged()) {
+  // version (a request queued while an optimisation was running is often already covered by it). A global
+  // solve due for it starts in the background.
+  if (!rows.fresh && !rows.changed && g.converged() && !global && !adopted) {
+    if (background) startGlobal(map, generation);
     std::lock_guard lock(mutex_);
     const auto it = latest_.find(map);
     if (it != latest_.end()) return it->second;
   }
+  if (global) graphs_[map].lineage = ++next_lineage_;  // a background solve still running is outdated now
 
-  const auto solution = g.solve(options_, solved_through);
+  // After an adopted global solve with nothing new, there is nothing to solve: every pose is new.
+  const bool settled = adopted && !g.hasNew(rows.solved_through);
+  auto solution = settled ? g.settledSolution() : g.solve(options_, rows.solved_through, !global);
+  solution.global = solution.global || adopted;
   GraphEvent event;
-  event.graph_version = store_.saveOptimised(map, map_id, g.poses(), g.frames(), g.lastLoop());
+  // A local solve moved only its free nodes: only theirs are written.
+  event.graph_version =
+      store_.saveOptimised(map, map_id, solution.global ? g.poses() : g.movedPoses(), g.frames(), g.lastLoop());
   event.loops = static_cast<std::int64_t>(g.loopCount());
   event.nodes = static_cast<std::int64_t>(g.nodeCount());
   event.rejected_loops = solution.rejected_loops;
   event.optimise_ms = msSince(t0);
   event.converged = solution.converged;
+  event.global = solution.global;
+  event.free_nodes = static_cast<std::int64_t>(solution.free_nodes);
   event.map_id = map_id;
-  g.countSolve(changed);  // new rows: a new problem
+  g.countSolve(rows.changed);  // new rows: a new problem
+  // Settled: no global solve pending; else one follows within the interval (started now when due).
+  if (background) startGlobal(map, generation);
+  scheduleGlobal(map, generation, solution.global && (!adopted || settled));
   continueIfUnconverged(map, g, generation);
+  logEvent(map, event, solution.iterations);
+  publish(map, event, generation);
+  return event;
+}
+
+void GraphOptimiser::logEvent(const std::string& map, const GraphEvent& event, std::size_t iterations) const {
   spdlog::info("{}", logging::logLine({{"event", "optimised"},
                                        {"map", map},
                                        {"version", event.graph_version},
                                        {"nodes", event.nodes},
                                        {"loops", event.loops},
                                        {"rejected", event.rejected_loops},
-                                       {"iterations", solution.iterations},
+                                       {"iterations", iterations},
                                        {"converged", event.converged},
+                                       {"global", event.global},
+                                       {"free", event.free_nodes},
                                        {"ms", std::round(event.optimise_ms * 10) / 10}}));
-  publish(map, event, generation);
-  return event;
 }
 
 // Stopped at a bound: carry on from here soon (the worker; optimiseNow callers see converged = false), but not
@@ -246,7 +288,36 @@ void GraphOptimiser::continueIfUnconverged(const std::string& map, const MapGrap
   {
     std::lock_guard lock(mutex_);
     if (this->generation(map) != generation) return;  // deleted meanwhile
-    if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+    const auto at = Clock::now() + options_.debounce;
+    const auto due = due_.find(map);
+    if (due == due_.end() || due->second > at) due_[map] = at;
+  }
+  wake_.notify_all();
+}
+
+bool GraphOptimiser::globalDue(const std::string& map) const {
+  std::lock_guard lock(mutex_);
+  const auto it = global_at_.find(map);
+  return it != global_at_.end() && it->second <= Clock::now();
+}
+
+// A global solve settles what local ones left pending; after a local one, the next global solve is due at most
+// global_interval_s later (not pushed back by further local ones: the rate is bounded, not starved).
+void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global) {
+  {
+    std::lock_guard lock(mutex_);
+    if (this->generation(map) != generation) return;  // deleted meanwhile
+    if (global_running_.count(map)) return;           // its adoption solves what came meanwhile, and schedules
+    if (was_global) {
+      global_at_.erase(map);
+      return;
+    }
+    const auto at = global_at_
+                        .try_emplace(map, Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                                             std::chrono::duration<double>(options_.global_interval_s)))
+                        .first->second;
+    const auto due = due_.find(map);
+    if (due == due_.end() || due->second > at) due_[map] = at;
   }
   wake_.notify_all();
 }

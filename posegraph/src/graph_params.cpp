@@ -19,6 +19,10 @@ Table<Options> makeTable() {
   t.add(field<Options>(SGLC_KEY(max_continuations), closed(0, 1000),
                        "solves that go on from an unconverged one without new scans or loops"));
   t.add(field<Options>(SGLC_KEY(loss_scale), above(0), "Cauchy loss scale on whitened loop residuals"));
+  t.add(field<Options>(SGLC_KEY(local_window), closed(0, 100000),
+                       "per loop event, free only this many nodes either side of each new loop's ends (0: global)"));
+  t.add(field<Options>(SGLC_KEY(global_interval_s), closed(0, 86400),
+                       "after a local solve, solve the whole graph within this many seconds"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_m), atLeast(0), "odometry: per-axis sigma per step (m)"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_per_m), atLeast(0), "odometry: added per metre driven (m/m)"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_deg), atLeast(0), "odometry: per-axis sigma per step (deg)"));

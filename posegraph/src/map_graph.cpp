@@ -9,6 +9,7 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "graph_problem.hpp"
 #include "relative_pose_error.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/rigid.hpp"
@@ -31,72 +32,18 @@ std::optional<std::string> loopError(const storage::LoopRecord& l) {
   return std::nullopt;
 }
 
-// The least-squares problem over the nodes' poses (per node: quaternion x, y, z, w, then translation).
-struct Problem {
-  ceres::Problem problem;
-  std::vector<std::array<double, 7>> x;
-  std::vector<RelativePoseError> loop_edges;
-  std::vector<std::pair<std::size_t, std::size_t>> loop_nodes;
-  std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
-
-  void addEdge(std::size_t a, std::size_t b, const RelativePoseError& e, ceres::LossFunction* loss) {
-    problem.AddResidualBlock(relativePoseCost(e), loss, x[a].data(), x[b].data());
-  }
-  // Whitened residual of loop k at the current poses, squared.
-  double loopError2(std::size_t k) {
-    Eigen::Matrix<double, 6, 1> r;
-    loop_edges[k](x[loop_nodes[k].first].data(), x[loop_nodes[k].second].data(), r.data());
-    return r.squaredNorm();
-  }
-  void setLoopLoss(double scale) {
-    for (auto* loss : loop_losses) loss->Reset(new ceres::CauchyLoss(scale), ceres::TAKE_OWNERSHIP);
-  }
-  // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.
-  void requireFinite(const char* what) const {
-    for (const auto& xi : x)
-      for (double v : xi)
-        if (!std::isfinite(v)) throw std::runtime_error(what);
-  }
-};
-
-ceres::Solver::Options solverOptions(const GraphOptimiserOptions& o) {
-  ceres::Solver::Options so;
-  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  so.max_num_iterations = o.max_iterations;
-  so.max_solver_time_in_seconds = o.max_seconds;
-  so.num_threads = 1;  // deterministic
-  so.logging_type = ceres::SILENT;
-  return so;
+// The solver's parameters of a pose.
+std::array<double, 7> parameters(const Pose& pose) {
+  return {pose.q.x(), pose.q.y(), pose.q.z(), pose.q.w(), pose.t.x(), pose.t.y(), pose.t.z()};
 }
 
-// Checks the problem is finite (Ceres aborts the process otherwise), then solves it: with a wide loop loss
-// first when `wide`, then the nominal one.
-MapGraph::Solution runSolver(Problem& p, const GraphOptimiserOptions& options, bool wide, bool empty) {
-  p.requireFinite("a node's initial pose is not finite");
-  if (!empty) {
-    double cost = 0;
-    if (!p.problem.Evaluate(ceres::Problem::EvaluateOptions(), &cost, nullptr, nullptr, nullptr) ||
-        !std::isfinite(cost))
-      throw std::runtime_error("the graph's initial cost is not finite");
-  }
-  MapGraph::Solution solution;
-  solution.converged = empty;  // nothing to solve is solved
-  if (!empty) {
-    const auto so = solverOptions(options);
-    if (wide) {
-      ceres::Solver::Summary first;
-      p.setLoopLoss(kWideLoss * options.loss_scale);
-      ceres::Solve(so, &p.problem, &first);
-      p.setLoopLoss(options.loss_scale);
-      solution.iterations += first.iterations.size();
-    }
-    ceres::Solver::Summary last;
-    ceres::Solve(so, &p.problem, &last);
-    if (!last.IsSolutionUsable()) throw std::runtime_error("the solver failed: " + last.message);
-    solution.converged = last.termination_type == ceres::CONVERGENCE;
-    solution.iterations += last.iterations.size();
-  }
-  return solution;
+// The loop's edge: the registration's information plus a floor covariance, or (loops recorded without one) a
+// sigma from the refinement's residual.
+RelativePoseError loopEdge(const MapGraph::Loop& l, const GraphOptimiserOptions& options) {
+  const double floor_r = options.loop_sigma_deg * kRadPerDeg;
+  if (l.information) return relativePoseError(l.T, loopSqrtInformation(*l.information, options.loop_sigma_m, floor_r));
+  const double st = std::max(options.loop_sigma_m, l.rmse);
+  return relativePoseError(l.T, diagonalSqrtInformation(st, floor_r * st / options.loop_sigma_m));
 }
 
 }  // namespace
@@ -168,9 +115,12 @@ void MapGraph::layout() {
   sessions_.clear();
   parent_.clear();
   for (std::size_t i = 0; i < nodes_.size(); ++i) sessions_[nodes_[i].session_id].push_back(i);
-  for (auto& [sid, idx] : sessions_)
+  position_.assign(nodes_.size(), 0);
+  for (auto& [sid, idx] : sessions_) {
     std::stable_sort(idx.begin(), idx.end(),
                      [&](std::size_t a, std::size_t b) { return nodes_[a].seq < nodes_[b].seq; });
+    for (std::size_t k = 0; k < idx.size(); ++k) position_[idx[k]] = k;
+  }
   for (const auto& [sid, idx] : sessions_) parent_[sid] = sid;
   for (const auto& l : loops_) {
     const auto a = root(nodes_[index_[l.a]].session_id), b = root(nodes_[index_[l.b]].session_id);
@@ -230,73 +180,174 @@ void MapGraph::initialise() {
   for (const auto& [sid, idx] : sessions_) initialiseSession(sid, Mat4d::Identity());
 }
 
-MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::int64_t solved_through) {
+bool MapGraph::newLoopFarOff(const GraphOptimiserOptions& options, std::int64_t solved_through) const {
+  const double limit = std::pow(kWideLoss * options.loss_scale, 2);
+  for (const auto& l : loops_) {
+    if (l.id <= solved_through) continue;
+    const auto a = parameters(nodes_[index_.at(l.a)].pose), b = parameters(nodes_[index_.at(l.b)].pose);
+    Eigen::Matrix<double, 6, 1> r;
+    loopEdge(l, options)(a.data(), b.data(), r.data());
+    if (!r.allFinite() || r.squaredNorm() > limit) return true;
+  }
+  return false;
+}
+
+std::vector<char> MapGraph::localScope(const GraphOptimiserOptions& options, std::int64_t solved_through) const {
+  std::vector<char> free(nodes_.size(), 0);
+  std::size_t count = 0;
+  const auto mark = [&](std::size_t i) {
+    count += !free[i];
+    free[i] = 1;
+  };
+  for (std::size_t i = solved_nodes_; i < nodes_.size(); ++i) mark(i);
+  const auto w = static_cast<std::size_t>(options.local_window);
+  for (const auto& l : loops_) {
+    if (l.id <= solved_through) continue;
+    for (const auto scan : {l.a, l.b}) {
+      const auto i = index_.at(scan);
+      const auto& idx = sessions_.at(nodes_[i].session_id);
+      const auto p = position_[i];
+      for (std::size_t k = p > w ? p - w : 0; k <= std::min(idx.size() - 1, p + w); ++k) mark(idx[k]);
+    }
+  }
+  if (count == 0 || 2 * count > nodes_.size()) return {};
+  return free;
+}
+
+void MapGraph::buildProblem(GraphProblem& p, const GraphOptimiserOptions& options, const std::vector<char>& free) {
+  const bool all = free.empty();
+  const auto isFree = [&](std::size_t i) { return all || free[i] != 0; };
+  // Slots: the free nodes and every node an edge of theirs reaches.
+  constexpr auto kNone = static_cast<std::size_t>(-1);
+  std::vector<std::size_t> slot(nodes_.size(), kNone);
+  const auto use = [&](std::size_t i) {
+    if (slot[i] == kNone) {
+      slot[i] = p.node.size();
+      p.node.push_back(i);
+    }
+  };
+  std::vector<std::pair<std::size_t, std::size_t>> odometry;
+  for (const auto& [sid, idx] : sessions_)
+    for (std::size_t k = 1; k < idx.size(); ++k)
+      if (isFree(idx[k - 1]) || isFree(idx[k])) odometry.emplace_back(idx[k - 1], idx[k]);
+  std::vector<std::size_t> loops;
+  for (std::size_t k = 0; k < loops_.size(); ++k)
+    if (isFree(index_[loops_[k].a]) || isFree(index_[loops_[k].b])) loops.push_back(k);
+  for (std::size_t i = 0; i < nodes_.size(); ++i)
+    if (isFree(i)) use(i);
+  for (const auto& [a, b] : odometry) use(a), use(b);
+  for (const auto k : loops) use(index_[loops_[k].a]), use(index_[loops_[k].b]);
+  p.x.reserve(p.node.size());  // edges point into x: it must not move once they are added
+  for (const auto i : p.node) p.x.push_back(parameters(nodes_[i].pose));
+
+  // Odometry: trusted (no robust loss), sigmas growing with the distance driven.
+  for (const auto& [a, b] : odometry) {
+    const Mat4d step = nodes_[a].odometry.inverse() * nodes_[b].odometry;
+    const double d = step.block<3, 1>(0, 3).norm();
+    p.addEdge(
+        slot[a], slot[b],
+        relativePoseError(step, diagonalSqrtInformation(
+                                    options.odometry_sigma_m + options.odometry_sigma_per_m * d,
+                                    (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg)),
+        nullptr);
+  }
+  // Loops: a robust loss discounts false ones.
+  for (const auto k : loops)
+    p.addLoopEdge(k, slot[index_[loops_[k].a]], slot[index_[loops_[k].b]], loopEdge(loops_[k], options),
+                  options.loss_scale);
+  for (std::size_t s = 0; s < p.node.size(); ++s) {
+    p.problem.AddParameterBlock(
+        p.x[s].data(), 7, new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
+    if (!isFree(p.node[s])) p.problem.SetParameterBlockConstant(p.x[s].data());
+  }
+  // The root session's first node anchors its component (the map frame for the map session's).
+  for (const auto& [sid, idx] : sessions_) {
+    const auto anchor = sessions_[root(sid)].front();
+    if (slot[anchor] != kNone) p.problem.SetParameterBlockConstant(p.x[slot[anchor]].data());
+  }
+}
+
+MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::int64_t solved_through, bool allow_local,
+                                   const std::atomic<bool>* cancel) {
   layout();
   initialise();
-  Problem p;
-  p.x.resize(nodes_.size());
-  for (std::size_t i = 0; i < nodes_.size(); ++i) {
-    const auto& pose = nodes_[i].pose;
-    p.x[i] = {pose.q.x(), pose.q.y(), pose.q.z(), pose.q.w(), pose.t.x(), pose.t.y(), pose.t.z()};
-  }
-  // Odometry: trusted (no robust loss), sigmas growing with the distance driven.
-  for (const auto& [sid, idx] : sessions_)
-    for (std::size_t k = 1; k < idx.size(); ++k) {
-      const Mat4d step = nodes_[idx[k - 1]].odometry.inverse() * nodes_[idx[k]].odometry;
-      const double d = step.block<3, 1>(0, 3).norm();
-      p.addEdge(idx[k - 1], idx[k],
-                relativePoseError(
-                    step, diagonalSqrtInformation(
-                              options.odometry_sigma_m + options.odometry_sigma_per_m * d,
-                              (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg)),
-                nullptr);
-    }
-  // Loops: the registration's information plus a floor covariance, or (loops recorded without one) a sigma from
-  // the refinement's residual; a robust loss discounts false ones.
-  const double floor_r = options.loop_sigma_deg * kRadPerDeg;
-  for (const auto& l : loops_) {
-    if (l.information) {
-      p.loop_edges.push_back(
-          relativePoseError(l.T, loopSqrtInformation(*l.information, options.loop_sigma_m, floor_r)));
-    } else {
-      const double st = std::max(options.loop_sigma_m, l.rmse);
-      p.loop_edges.push_back(relativePoseError(l.T, diagonalSqrtInformation(st, floor_r * st / options.loop_sigma_m)));
-    }
-    p.loop_nodes.emplace_back(index_[l.a], index_[l.b]);
-    p.loop_losses.push_back(
-        new ceres::LossFunctionWrapper(new ceres::CauchyLoss(options.loss_scale), ceres::TAKE_OWNERSHIP));
-    p.addEdge(index_[l.a], index_[l.b], p.loop_edges.back(), p.loop_losses.back());
-  }
   // Graduated: when a new loop is far off the current poses (a first optimisation from odometry, a long drift
-  // corrected at once), a tight Cauchy loss would discount it along with false ones: solve with a wide loss
-  // first, then the nominal one. Loops that agree with the warm-started graph need only the second solve.
-  bool wide = false;
-  for (std::size_t k = 0; k < loops_.size() && !wide; ++k)
-    wide = loops_[k].id > solved_through && p.loopError2(k) > std::pow(kWideLoss * options.loss_scale, 2);
-  for (auto& xi : p.x)
-    p.problem.AddParameterBlock(
-        xi.data(), 7, new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
-  // The root session's first node anchors its component (the map frame for the map session's).
-  std::set<std::int64_t> fixed_roots;
-  for (const auto& [sid, idx] : sessions_)
-    if (fixed_roots.insert(root(sid)).second)
-      p.problem.SetParameterBlockConstant(p.x[sessions_[root(sid)].front()].data());
+  // corrected at once), a tight Cauchy loss would discount it along with false ones: solve the whole graph with
+  // a wide loss first, then the nominal one. Loops that agree with the warm-started graph need only the second
+  // solve, and only around them when the caller allows.
+  const bool far_off = newLoopFarOff(options, solved_through);
+  const auto free =
+      allow_local && options.local_window > 0 && !far_off ? localScope(options, solved_through) : std::vector<char>{};
+  GraphProblem p;
+  buildProblem(p, options, free);
+  const auto run = runSolver(p, options, far_off, kWideLoss * options.loss_scale, cancel);
 
-  auto out = runSolver(p, options, wide, nodes_.empty());
-  p.requireFinite("the solution is not finite");
-  for (std::size_t i = 0; i < nodes_.size(); ++i) {
-    nodes_[i].pose.q = Eigen::Quaterniond(p.x[i][3], p.x[i][0], p.x[i][1], p.x[i][2]).normalized();
-    nodes_[i].pose.t = Eigen::Vector3d(p.x[i][4], p.x[i][5], p.x[i][6]);
+  Solution out;
+  out.converged = run.converged;
+  out.iterations = run.iterations;
+  out.global = free.empty();
+  moved_.clear();
+  for (std::size_t s = 0; s < p.node.size(); ++s) {
+    const auto i = p.node[s];
+    if (!free.empty() && !free[i]) continue;
+    nodes_[i].pose.q = Eigen::Quaterniond(p.x[s][3], p.x[s][0], p.x[s][1], p.x[s][2]).normalized();
+    nodes_[i].pose.t = Eigen::Vector3d(p.x[s][4], p.x[s][5], p.x[s][6]);
+    moved_.push_back(i);
   }
-  for (std::size_t k = 0; k < loops_.size(); ++k)
-    out.rejected_loops += p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
+  out.free_nodes = moved_.size();
+  for (std::size_t k = 0; k < p.loop.size(); ++k)
+    loops_[p.loop[k]].rejected = p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
+  out.rejected_loops = rejectedLoops();
+  solved_nodes_ = nodes_.size();
   converged_ = out.converged;
   return out;
+}
+
+int MapGraph::rejectedLoops() const {
+  return static_cast<int>(std::count_if(loops_.begin(), loops_.end(), [](const Loop& l) { return l.rejected; }));
+}
+
+bool MapGraph::adopt(const MapGraph& solved) {
+  if (solved.nodes_.size() > nodes_.size()) return false;
+  for (std::size_t i = 0; i < solved.nodes_.size(); ++i)
+    if (solved.nodes_[i].scan_id != nodes_[i].scan_id) return false;
+  for (std::size_t i = 0; i < solved.nodes_.size(); ++i) {
+    nodes_[i].pose = solved.nodes_[i].pose;
+    nodes_[i].initialised = true;
+  }
+  std::unordered_map<std::int64_t, bool> rejected;
+  for (const auto& l : solved.loops_) rejected[l.id] = l.rejected;
+  for (auto& l : loops_)
+    if (const auto it = rejected.find(l.id); it != rejected.end()) l.rejected = it->second;
+  solved_nodes_ = solved.nodes_.size();
+  converged_ = solved.converged_;
+  moved_.clear();
+  return true;
+}
+
+bool MapGraph::hasNew(std::int64_t solved_through) const {
+  return nodes_.size() > solved_nodes_ ||
+         std::any_of(loops_.begin(), loops_.end(), [&](const Loop& l) { return l.id > solved_through; });
+}
+
+MapGraph::Solution MapGraph::settledSolution() const {
+  Solution s;
+  s.converged = converged_;
+  s.global = true;
+  s.free_nodes = nodes_.size();
+  s.rejected_loops = rejectedLoops();
+  return s;
 }
 
 std::vector<storage::OptimisedPose> MapGraph::poses() const {
   std::vector<storage::OptimisedPose> out;
   for (const auto& n : nodes_) out.push_back({n.scan_id, n.pose.matrix()});
+  return out;
+}
+
+std::vector<storage::OptimisedPose> MapGraph::movedPoses() const {
+  std::vector<storage::OptimisedPose> out;
+  for (const auto i : moved_) out.push_back({nodes_[i].scan_id, nodes_[i].pose.matrix()});
   return out;
 }
 

@@ -123,7 +123,8 @@ std::unique_ptr<Metrics> newServerMetrics() {
   m->histogram(kStageSeconds,
                "Time per engine stage of an ingest or query (fingerprint, store, search, verify, "
                "refine), seconds");
-  m->histogram(kSolveSeconds, "Pose-graph solve time by result (converged, bounded, failed), seconds");
+  m->histogram(kSolveSeconds,
+               "Pose-graph solve time by result (converged, bounded, failed) and scope (local, global), seconds");
   return m;
 }
 
@@ -165,7 +166,8 @@ void observeStages(Metrics& m, const v1::Timing& t) {
 void observeSolve(Metrics& m, const posegraph::GraphEvent& event) {
   if (event.deleted) return;  // a deletion, not a solve
   const char* result = event.failed ? "failed" : event.converged ? "converged" : "bounded";
-  m.observe(kSolveSeconds, {{"result", result}}, event.optimise_ms / 1000);
+  m.observe(kSolveSeconds, {{"result", result}, {"scope", event.global ? "global" : "local"}},
+            event.optimise_ms / 1000);
 }
 
 }  // namespace sglc::server

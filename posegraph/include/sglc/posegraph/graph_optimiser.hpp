@@ -12,6 +12,7 @@
 // map's graph failed (GraphEvent::failed) and keeps its last good poses, while every other map carries on.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -40,6 +41,10 @@ struct GraphEvent {
   // The solve ended by convergence. False when it stopped at its iteration or time bound: the worker then
   // goes on from these poses (up to GraphOptimiserOptions::max_continuations times) until it converges.
   bool converged = false;
+  // Every node was free. False: a local solve around the new loops and scans (the rest held fixed), of
+  // `free_nodes` nodes; a global solve follows within GraphOptimiserOptions::global_interval_s.
+  bool global = true;
+  std::int64_t free_nodes = 0;
   // The solve failed (non-finite or diverged): the map keeps its last good poses (graph_version is theirs) and
   // `error` says what happened. The next successful solve clears it.
   bool failed = false;
@@ -56,6 +61,13 @@ struct GraphOptimiserOptions {
   int max_iterations = 100;
   int max_continuations = 10;  // solves that go on from an unconverged one without new scans or loops
   double loss_scale = 1.0;     // Cauchy loss scale on whitened loop residuals
+  // Bounded cost per loop event: a solve frees only the scans added since the last one and this many nodes on
+  // either side (in their session) of each end of every new loop, the rest held fixed (0: every solve is
+  // global). A new loop far off the current poses, or a window over half the graph, still solves globally.
+  int local_window = 100;
+  // After a local solve, the whole graph is solved again within this many seconds (one global solve for
+  // however many local ones came meanwhile), so that corrections spread beyond the windows.
+  double global_interval_s = 30.0;
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.
   double odometry_sigma_m = 0.01, odometry_sigma_per_m = 0.015;
@@ -89,7 +101,10 @@ class GraphOptimiser {
                                            std::chrono::milliseconds timeout);
   // Optimises now on the calling thread (tests, tools); returns the event. A graph already solved to
   // convergence with no new scans or loops is not solved again: its last event comes back, no new version.
-  GraphEvent optimiseNow(const std::string& map);
+  // kAuto solves locally or globally as the worker would; kGlobal solves the whole graph (and counts as the
+  // pending global solve).
+  enum class Scope { kAuto, kGlobal };
+  GraphEvent optimiseNow(const std::string& map, Scope scope = Scope::kAuto);
   // The map's last event (failed or not), if any.
   std::optional<GraphEvent> latest(const std::string& map) const;
   // Listeners get every new event (a new graph version, a failure, or the map's deletion) of every map, on the
@@ -104,8 +119,27 @@ class GraphOptimiser {
 
  private:
   void run();
-  GraphEvent optimise(const std::string& map);
-  GraphEvent solve(const std::string& map, std::int64_t map_id, std::uint64_t generation);
+  GraphEvent optimise(const std::string& map, Scope scope);
+  GraphEvent solve(const std::string& map, std::int64_t map_id, std::uint64_t generation, Scope scope);
+  // The map's in-memory graph, rebuilt when stale or when the name is a new map.
+  MapGraph& graphOf(const std::string& map, std::int64_t map_id);
+  struct Rows {
+    bool fresh = false, changed = false;
+    std::int64_t solved_through = 0;  // loops up to this id are reflected in the graph's poses
+  };
+  Rows readRows(const std::string& map, MapGraph& g);
+  void logEvent(const std::string& map, const GraphEvent& event, std::size_t iterations) const;
+  // Background global solves (background_global.cpp): the worker hands a copy of the map's graph to a thread
+  // of their own, and adopts the solved poses on its next solve of the map, solving around whatever arrived
+  // meanwhile. Returns the last loop the adopted solve accounts for, or nullopt when there is none to adopt.
+  void startGlobal(const std::string& map, std::uint64_t generation);
+  std::optional<std::int64_t> adoptGlobal(const std::string& map, MapGraph& g);
+  void runGlobal();
+  // Whether the map's pending global solve is due (then this solve is global).
+  bool globalDue(const std::string& map) const;
+  // After a local solve: make sure a global one follows within global_interval_s; after a global one: none is
+  // pending.
+  void scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global);
   // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
   void continueIfUnconverged(const std::string& map, const MapGraph& graph, std::uint64_t generation);
   // Publishes the event of a solve begun at `generation` of the name, unless the map was deleted since.
@@ -121,15 +155,32 @@ class GraphOptimiser {
   std::condition_variable changed_;                                   // watchers
   std::map<std::string, std::chrono::steady_clock::time_point> due_;  // maps to optimise, and when
   std::map<std::string, GraphEvent> latest_;
+  std::map<std::string, std::chrono::steady_clock::time_point> global_at_;  // pending global solves, and when
   std::set<std::string> stale_;                     // maps whose in-memory graph must be rebuilt
   std::set<std::string> forget_;                    // deleted maps whose in-memory graph the worker drops
   std::map<std::string, std::uint64_t> deletions_;  // per name: how often a map of it was deleted
   struct Slot {
     std::int64_t map_id = 0;  // the map (MapInfo::id) the graph was built from: a name created again is a new map
     std::unique_ptr<MapGraph> graph;
+    // Changes when the graph is rebuilt or solved globally in place: a background solve begun before is stale.
+    std::uint64_t lineage = 0;
   };
   std::map<std::string, Slot> graphs_;  // only the worker / optimiseNow touch these
-  std::mutex optimise_mutex_;           // one optimisation at a time
+  std::uint64_t next_lineage_ = 0;
+  struct GlobalJob {
+    std::string map;
+    std::uint64_t generation = 0, lineage = 0;
+    std::unique_ptr<MapGraph> graph;  // a copy of the map's graph, solved in place
+    std::string error;                // why the solve failed
+    double ms = 0;
+  };
+  std::vector<GlobalJob> global_todo_;            // mutex_ held
+  std::map<std::string, GlobalJob> global_done_;  // mutex_ held
+  std::set<std::string> global_running_;          // mutex_ held: handed over and not yet done
+  std::condition_variable global_wake_;
+  std::atomic<bool> cancel_{false};  // stops a background solve at its next iteration (on stop())
+  std::thread global_worker_;
+  std::mutex optimise_mutex_;  // one optimisation at a time
   bool stop_ = false;
   std::mutex listeners_mutex_;  // held while listeners run
   std::map<std::uint64_t, Listener> listeners_;

@@ -1,0 +1,50 @@
+// The least-squares problem of one solve over part or all of a map's pose graph, and the solver run on it.
+// MapGraph decides which nodes are free (map_graph.hpp); this holds their parameters, the edges touching them
+// and the nodes those edges reach (held constant), and runs Ceres with the checks that keep it from aborting.
+#pragma once
+
+#include <ceres/ceres.h>
+
+#include <array>
+#include <atomic>
+#include <cstddef>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "relative_pose_error.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
+
+namespace sglc::posegraph {
+
+struct GraphProblem {
+  ceres::Problem problem;
+  std::vector<std::size_t> node;         // slot -> graph node index
+  std::vector<std::array<double, 7>> x;  // per slot: quaternion x, y, z, w, then translation
+  std::vector<std::size_t> loop;         // loop edge -> index into the graph's loops
+  std::vector<RelativePoseError> loop_edges;
+  std::vector<std::pair<std::size_t, std::size_t>> loop_slots;
+  std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
+
+  void addEdge(std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e, ceres::LossFunction* loss);
+  void addLoopEdge(std::size_t loop_index, std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e,
+                   double loss_scale);
+  // Whitened residual of loop edge k at the current parameters, squared.
+  double loopError2(std::size_t k) const;
+  void setLoopLoss(double scale);
+  // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.
+  void requireFinite(const char* what) const;
+};
+
+struct SolverRun {
+  bool converged = false;
+  std::size_t iterations = 0;
+};
+
+// Checks the problem is finite, then solves it: with a wide loop loss (`wide_scale`) first when `wide`, then
+// the nominal one. A set `cancel` aborts at the next iteration. Throws std::runtime_error on non-finite input, a
+// failed or an aborted solve.
+SolverRun runSolver(GraphProblem& p, const GraphOptimiserOptions& options, bool wide, double wide_scale,
+                    const std::atomic<bool>* cancel = nullptr);
+
+}  // namespace sglc::posegraph

@@ -1,0 +1,192 @@
+// Bounded cost per loop event: a new loop that agrees with the solved graph frees only the nodes around it
+// (the rest keep their stored poses exactly), one far off the graph still solves everything, and the worker
+// follows local solves with a global one within its interval, ending where global solves alone end.
+#include <gtest/gtest.h>
+
+#include <chrono>
+
+#include "drive.hpp"
+#include "map_graph.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
+
+namespace sglc::posegraph {
+namespace {
+
+using storage::testing::options;
+using storage::testing::TempDir;
+using testing::drive;
+using testing::Drive;
+using testing::optimised;
+using testing::pose;
+
+constexpr int kWindow = 5;
+
+// The drive's odometry model; a window small enough for the 240-node drive to solve locally.
+GraphOptimiserOptions localOptions() {
+  GraphOptimiserOptions o;
+  o.debounce = std::chrono::hours(1);  // only optimiseNow solves, apart from the worker's start-up solve
+  o.odometry_sigma_m = 0.0;
+  o.odometry_sigma_per_m = 0.015;
+  o.odometry_sigma_deg = 0.0;
+  o.odometry_sigma_deg_per_m = 0.03;
+  o.local_window = kWindow;
+  o.global_interval_s = 3600;
+  return o;
+}
+
+// An exact loop from scan i (second lap) to scan i - 120 (first lap); the drive's loops use every third i from
+// 125, so these are new pairs.
+void addLoop(storage::MapStore& store, const Drive& d, int i) {
+  ASSERT_NE((i - 125) % 3, 0) << "the drive has a loop from scan " << i << " already";
+  const auto j = static_cast<std::size_t>(i - 120), k = static_cast<std::size_t>(i);
+  ASSERT_GT(store.addLoop("m", {0, d.ids[k], d.ids[j], d.gt[k].inverse() * d.gt[j], 0.8, 0.9, 0.02, 20}), 0);
+}
+
+double maxShift(const std::vector<Mat4d>& a, const std::vector<Mat4d>& b) {
+  double m = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, (a[i].block<3, 1>(0, 3) - b[i].block<3, 1>(0, 3)).norm());
+  return m;
+}
+
+TEST(LocalSolve, AnAgreeingLoopMovesOnlyTheNodesAroundIt) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  GraphOptimiser graph(*store, localOptions());
+  const auto d = drive(*store);
+  const auto first = graph.optimiseNow("m");
+  ASSERT_FALSE(first.failed) << first.error;
+  EXPECT_TRUE(first.global);  // a new graph is solved whole
+  const auto before = optimised(*store);
+
+  addLoop(*store, d, 201);
+  const auto e = graph.optimiseNow("m");
+  ASSERT_FALSE(e.failed) << e.error;
+  EXPECT_FALSE(e.global);
+  // Scans 196..206 and 76..86: the loop's ends and kWindow on either side.
+  EXPECT_EQ(e.free_nodes, 2 * (2 * kWindow + 1));
+  EXPECT_EQ(e.loops, first.loops + 1);
+  EXPECT_GT(e.graph_version, first.graph_version);
+  const auto after = optimised(*store);
+  ASSERT_EQ(after.size(), before.size());
+  int moved = 0;
+  for (std::size_t i = 0; i < after.size(); ++i) {
+    const bool in_window = (i >= 196 && i <= 206) || (i >= 76 && i <= 86);
+    if (!in_window) EXPECT_EQ(after[i], before[i]) << "scan " << i << " is outside the windows";
+    moved += after[i] != before[i];
+  }
+  EXPECT_GT(moved, 0);
+  EXPECT_LT(maxShift(after, before), 0.2);
+}
+
+TEST(LocalSolve, ALoopFarOffTheGraphIsSolvedGlobally) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  GraphOptimiser graph(*store, localOptions());
+  const auto d = drive(*store);
+  ASSERT_FALSE(graph.optimiseNow("m").failed);
+  // Scan 200 claimed to be 1 m from scan 20: they are ~70 m apart. The graduated global solve discounts it.
+  store->addLoop("m", {0, d.ids[200], d.ids[20], pose(0.0, 1.0, 0.0), 0.9, 0.9, 0.02, 30});
+  const auto e = graph.optimiseNow("m");
+  ASSERT_FALSE(e.failed) << e.error;
+  EXPECT_TRUE(e.global);
+  EXPECT_EQ(e.free_nodes, 240);
+  EXPECT_GE(e.rejected_loops, 1);
+}
+
+TEST(LocalSolve, AWindowOfZeroSolvesEveryEventGlobally) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  auto o = localOptions();
+  o.local_window = 0;
+  GraphOptimiser graph(*store, o);
+  const auto d = drive(*store);
+  ASSERT_FALSE(graph.optimiseNow("m").failed);
+  addLoop(*store, d, 201);
+  const auto e = graph.optimiseNow("m");
+  EXPECT_TRUE(e.global);
+  EXPECT_EQ(e.free_nodes, 240);
+}
+
+// Local events and then one global solve end where a global solve per event ends.
+TEST(LocalSolve, LocalEventsThenAGlobalSolveMatchGlobalSolvesAlone) {
+  TempDir dir;
+  auto local_store = storage::MapStore::open(options(dir.file("local.db")));
+  auto global_store = storage::MapStore::open(options(dir.file("global.db")));
+  auto global_options = localOptions();
+  global_options.local_window = 0;
+  GraphOptimiser local(*local_store, localOptions()), global(*global_store, global_options);
+  const auto dl = drive(*local_store), dg = drive(*global_store);
+  ASSERT_FALSE(local.optimiseNow("m").failed);
+  ASSERT_FALSE(global.optimiseNow("m").failed);
+  int local_events = 0;
+  for (const int i : {201, 210, 216, 222, 231}) {
+    addLoop(*local_store, dl, i);
+    addLoop(*global_store, dg, i);
+    local_events += !local.optimiseNow("m").global;
+    ASSERT_TRUE(global.optimiseNow("m").global);
+  }
+  EXPECT_EQ(local_events, 5);
+  const auto settled = local.optimiseNow("m", GraphOptimiser::Scope::kGlobal);
+  EXPECT_TRUE(settled.global);
+  EXPECT_LT(maxShift(optimised(*local_store), optimised(*global_store)), 1e-3);
+}
+
+// The worker follows a local solve with a global one once global_interval_s has passed, with nothing new.
+TEST(LocalSolve, TheWorkerSolvesGloballySoonAfterALocalSolve) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  auto o = localOptions();
+  o.debounce = std::chrono::milliseconds(10);
+  o.global_interval_s = 0.05;
+  const auto d = drive(*store);
+  GraphOptimiser graph(*store, o);
+  const auto start = graph.waitForVersion("m", 0, std::chrono::seconds(60));  // the start-up solve
+  ASSERT_TRUE(start.has_value());
+  EXPECT_TRUE(start->global);
+  addLoop(*store, d, 201);
+  graph.loopsAdded("m");
+  const auto local = graph.waitForVersion("m", start->graph_version, std::chrono::seconds(60));
+  ASSERT_TRUE(local.has_value());
+  EXPECT_FALSE(local->global);
+  const auto settled = graph.waitForVersion("m", local->graph_version, std::chrono::seconds(60));
+  ASSERT_TRUE(settled.has_value());
+  EXPECT_TRUE(settled->global);
+  EXPECT_EQ(settled->loops, local->loops);
+  // Settled: nothing more to solve.
+  EXPECT_FALSE(graph.waitForVersion("m", settled->graph_version, std::chrono::milliseconds(300)).has_value());
+  graph.stop();
+}
+
+// The worker adopts a background global solve of a copy of the graph: the copy's poses, with what arrived
+// meanwhile still to solve; a copy of another graph is refused.
+TEST(LocalSolve, AGlobalSolveOfACopyIsAdoptedWithWhatArrivedMeanwhileStillNew) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  const auto d = drive(*store);
+  const auto o = localOptions();
+  MapGraph g;
+  ASSERT_TRUE(g.absorb("m", store->loops("m"), store->graphNodes("m"), {}));
+  g.solve(o, 0, false);
+  MapGraph copy = g;
+  addLoop(*store, d, 201);  // arrives while the copy is being solved
+  copy.solve(o, copy.lastLoop(), false);
+  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  const auto through = copy.lastLoop();
+  EXPECT_FALSE(g.hasNew(g.lastLoop()));
+  ASSERT_TRUE(g.adopt(copy));
+  EXPECT_TRUE(g.hasNew(through));  // the new loop
+  const auto poses = g.poses(), solved = copy.poses();
+  for (std::size_t i = 0; i < solved.size(); ++i) EXPECT_EQ(poses[i].pose, solved[i].pose);
+  const auto s = g.solve(o, through, true);
+  EXPECT_FALSE(s.global);
+  EXPECT_EQ(s.free_nodes, 2 * (2 * kWindow + 1));
+
+  MapGraph other;  // another graph (its first node is a different scan) is not adopted
+  auto nodes = store->graphNodes("m");
+  nodes.erase(nodes.begin());
+  ASSERT_TRUE(other.absorb("m", {}, nodes, {}));
+  EXPECT_FALSE(g.adopt(other));
+}
+
+}  // namespace
+}  // namespace sglc::posegraph
