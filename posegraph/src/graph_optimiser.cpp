@@ -260,7 +260,7 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, st
   g.countSolve(rows.changed);  // new rows: a new problem
   // Settled: no global solve pending; else one follows within the interval (started now when due).
   if (background) startGlobal(map, generation);
-  scheduleGlobal(map, generation, solution.global && (!adopted || settled));
+  scheduleGlobal(map, generation, solution.global && (!adopted || settled), solution.strained);
   continueIfUnconverged(map, g, generation);
   logEvent(map, event, solution.iterations);
   publish(map, event, generation);
@@ -303,7 +303,7 @@ bool GraphOptimiser::globalDue(const std::string& map) const {
 
 // A global solve settles what local ones left pending; after a local one, the next global solve is due at most
 // global_interval_s later (not pushed back by further local ones: the rate is bounded, not starved).
-void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global) {
+void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global, bool strained) {
   {
     std::lock_guard lock(mutex_);
     if (this->generation(map) != generation) return;  // deleted meanwhile
@@ -312,10 +312,12 @@ void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t genera
       global_at_.erase(map);
       return;
     }
-    const auto at = global_at_
-                        .try_emplace(map, Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                                             std::chrono::duration<double>(options_.global_interval_s)))
-                        .first->second;
+    // Strained: the local window could not absorb the correction, so the whole graph is due now (still one
+    // global solve at a time).
+    const auto delay = strained ? 0.0 : options_.global_interval_s;
+    const auto soon = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(delay));
+    auto& at = global_at_.try_emplace(map, soon).first->second;
+    at = std::min(at, soon);
     const auto due = due_.find(map);
     if (due == due_.end() || due->second > at) due_[map] = at;
   }

@@ -1,5 +1,6 @@
 #include "graph_problem.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -22,6 +23,16 @@ double GraphProblem::loopError2(std::size_t k) const {
   Eigen::Matrix<double, 6, 1> r;
   loop_edges[k](x[loop_slots[k].first].data(), x[loop_slots[k].second].data(), r.data());
   return r.squaredNorm();
+}
+
+double GraphProblem::maxBoundaryError2() const {
+  double m = 0;
+  for (std::size_t k = 0; k < boundary_edges.size(); ++k) {
+    Eigen::Matrix<double, 6, 1> r;
+    boundary_edges[k](x[boundary_slots[k].first].data(), x[boundary_slots[k].second].data(), r.data());
+    m = std::max(m, r.squaredNorm());
+  }
+  return m;
 }
 
 void GraphProblem::setLoopLoss(double scale) {

@@ -25,12 +25,18 @@ struct GraphProblem {
   std::vector<RelativePoseError> loop_edges;
   std::vector<std::pair<std::size_t, std::size_t>> loop_slots;
   std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
+  // Odometry edges between a free and a fixed node (a local solve's boundary): their whitened error tells
+  // whether the window could absorb what is new.
+  std::vector<std::pair<std::size_t, std::size_t>> boundary_slots;
+  std::vector<RelativePoseError> boundary_edges;
 
   void addEdge(std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e, ceres::LossFunction* loss);
   void addLoopEdge(std::size_t loop_index, std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e,
                    double loss_scale);
   // Whitened residual of loop edge k at the current parameters, squared.
   double loopError2(std::size_t k) const;
+  // The largest whitened error, squared, of the boundary edges (0 without any).
+  double maxBoundaryError2() const;
   void setLoopLoss(double scale);
   // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.
   void requireFinite(const char* what) const;

@@ -244,12 +244,15 @@ void MapGraph::buildProblem(GraphProblem& p, const GraphOptimiserOptions& option
   for (const auto& [a, b] : odometry) {
     const Mat4d step = nodes_[a].odometry.inverse() * nodes_[b].odometry;
     const double d = step.block<3, 1>(0, 3).norm();
-    p.addEdge(
-        slot[a], slot[b],
-        relativePoseError(step, diagonalSqrtInformation(
-                                    options.odometry_sigma_m + options.odometry_sigma_per_m * d,
-                                    (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg)),
-        nullptr);
+    const auto edge = relativePoseError(
+        step,
+        diagonalSqrtInformation(options.odometry_sigma_m + options.odometry_sigma_per_m * d,
+                                (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg));
+    p.addEdge(slot[a], slot[b], edge, nullptr);
+    if (isFree(a) != isFree(b)) {
+      p.boundary_slots.emplace_back(slot[a], slot[b]);
+      p.boundary_edges.push_back(edge);
+    }
   }
   // Loops: a robust loss discounts false ones.
   for (const auto k : loops)
@@ -298,6 +301,12 @@ MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::in
   for (std::size_t k = 0; k < p.loop.size(); ++k)
     loops_[p.loop[k]].rejected = p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
   out.rejected_loops = rejectedLoops();
+  // Strained: the window could not absorb what is new (an edge at its boundary, or a loop in it, is off by
+  // more than the 99.9 % point): the correction reaches beyond it, and a global solve should follow soon.
+  const double limit = kRejectChi2 * options.loss_scale * options.loss_scale;
+  out.strained =
+      !out.global && (p.maxBoundaryError2() > limit ||
+                      std::any_of(p.loop.begin(), p.loop.end(), [&](std::size_t k) { return loops_[k].rejected; }));
   solved_nodes_ = nodes_.size();
   converged_ = out.converged;
   return out;

@@ -52,6 +52,7 @@ class MapGraph {
     std::size_t iterations = 0;
     std::size_t free_nodes = 0;
     int rejected_loops = 0;  // loops of the whole graph the robust loss discounts (each as of its last solve)
+    bool strained = false;   // a local solve whose window could not absorb what is new (see solve)
   };
 
   // Adds the rows stored since the last call (loops read before nodes, see GraphOptimiser::solve). New nodes

@@ -157,6 +157,30 @@ TEST(LocalSolve, TheWorkerSolvesGloballySoonAfterALocalSolve) {
   graph.stop();
 }
 
+// A loop the window cannot absorb (here 0.3 m off the truth: within the graduated solve's bound, beyond what
+// ten nodes either side can take up) strains the local solve, and the global solve follows at once, not after
+// global_interval_s.
+TEST(LocalSolve, AStrainedLocalSolveIsFollowedByAGlobalOneAtOnce) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  auto o = localOptions();
+  o.debounce = std::chrono::milliseconds(10);
+  const auto d = drive(*store);
+  GraphOptimiser graph(*store, o);
+  const auto start = graph.waitForVersion("m", 0, std::chrono::seconds(60));
+  ASSERT_TRUE(start.has_value());
+  const Mat4d off = d.gt[201].inverse() * d.gt[81] * pose(0.0, 0.3, 0.0);
+  ASSERT_GT(store->addLoop("m", {0, d.ids[201], d.ids[81], off, 0.8, 0.9, 0.02, 20}), 0);
+  graph.loopsAdded("m");
+  const auto local = graph.waitForVersion("m", start->graph_version, std::chrono::seconds(60));
+  ASSERT_TRUE(local.has_value());
+  EXPECT_FALSE(local->global);
+  const auto settled = graph.waitForVersion("m", local->graph_version, std::chrono::seconds(60));
+  ASSERT_TRUE(settled.has_value()) << "no global solve followed the strained local one";
+  EXPECT_TRUE(settled->global);
+  graph.stop();
+}
+
 // The worker adopts a background global solve of a copy of the graph: the copy's poses, with what arrived
 // meanwhile still to solve; a copy of another graph is refused.
 TEST(LocalSolve, AGlobalSolveOfACopyIsAdoptedWithWhatArrivedMeanwhileStillNew) {

@@ -42,7 +42,8 @@ struct GraphEvent {
   // goes on from these poses (up to GraphOptimiserOptions::max_continuations times) until it converges.
   bool converged = false;
   // Every node was free. False: a local solve around the new loops and scans (the rest held fixed), of
-  // `free_nodes` nodes; a global solve follows within GraphOptimiserOptions::global_interval_s.
+  // `free_nodes` nodes; a global solve follows within GraphOptimiserOptions::global_interval_s, at once when
+  // the local solve was strained (its window could not absorb the correction).
   bool global = true;
   std::int64_t free_nodes = 0;
   // The solve failed (non-finite or diverged): the map keeps its last good poses (graph_version is theirs) and
@@ -66,7 +67,9 @@ struct GraphOptimiserOptions {
   // global). A new loop far off the current poses, or a window over half the graph, still solves globally.
   int local_window = 100;
   // After a local solve, the whole graph is solved again within this many seconds (one global solve for
-  // however many local ones came meanwhile), so that corrections spread beyond the windows.
+  // however many local ones came meanwhile), so that corrections spread beyond the windows; at once (in the
+  // background, one at a time) after a local solve that left an edge at its window's boundary or a loop in it
+  // beyond the 99.9 % point of its error.
   double global_interval_s = 30.0;
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.
@@ -139,7 +142,7 @@ class GraphOptimiser {
   bool globalDue(const std::string& map) const;
   // After a local solve: make sure a global one follows within global_interval_s; after a global one: none is
   // pending.
-  void scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global);
+  void scheduleGlobal(const std::string& map, std::uint64_t generation, bool was_global, bool strained);
   // After an unconverged solve: solve the map again soon, unless it has been continued often enough.
   void continueIfUnconverged(const std::string& map, const MapGraph& graph, std::uint64_t generation);
   // Publishes the event of a solve begun at `generation` of the name, unless the map was deleted since.
