@@ -12,6 +12,10 @@
 namespace sglc::posegraph {
 
 void GraphOptimiser::startGlobal(const std::string& map, std::uint64_t generation) {
+  {
+    std::lock_guard lock(mutex_);
+    if (global_running_.count(map) || this->generation(map) != generation) return;  // before copying the graph
+  }
   const auto& slot = graphs_.at(map);
   GlobalJob job{map, generation, slot.lineage, std::make_unique<MapGraph>(*slot.graph), {}, 0};
   {
@@ -72,7 +76,15 @@ std::optional<std::int64_t> GraphOptimiser::adoptGlobal(const std::string& map, 
                                        {"nodes", job.graph->nodeCount()},
                                        {"outcome", outcome},
                                        {"ms", std::round(job.ms * 10) / 10}}));
-  if (outcome != "adopted") return std::nullopt;
+  if (outcome != "adopted") {
+    // Local solves since the last global one still want one (those made while this ran have scheduled theirs).
+    std::lock_guard lock(mutex_);
+    global_at_.try_emplace(map, Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                                   std::chrono::duration<double>(options_.global_interval_s)));
+    const auto due = due_.find(map);
+    if (due == due_.end() || due->second > global_at_[map]) due_[map] = global_at_[map];
+    return std::nullopt;
+  }
   return job.graph->lastLoop();
 }
 

@@ -49,7 +49,10 @@ bool GraphOptimiser::stopping() const {
 void GraphOptimiser::loopsAdded(const std::string& map) {
   {
     std::lock_guard lock(mutex_);
-    if (!due_.count(map)) due_[map] = Clock::now() + options_.debounce;
+    // Sooner than a global solve already scheduled for it, never later than one already due.
+    const auto at = Clock::now() + options_.debounce;
+    const auto due = due_.find(map);
+    if (due == due_.end() || due->second > at) due_[map] = at;
   }
   wake_.notify_all();
 }
@@ -232,19 +235,23 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, st
   const bool background = !global && !adopted && globalDue(map);
   // A solved graph with nothing new would only be solved again to the same poses: report the last event, no new
   // version (a request queued while an optimisation was running is often already covered by it). A global
-  // solve due for it starts in the background.
-  if (!rows.fresh && !rows.changed && g.converged() && !global && !adopted) {
+  // solve due for it (converged or not) starts in the background instead.
+  if (!rows.fresh && !rows.changed && !global && !adopted && (g.converged() || background)) {
     if (background) startGlobal(map, generation);
     std::lock_guard lock(mutex_);
     const auto it = latest_.find(map);
     if (it != latest_.end()) return it->second;
   }
-  if (global) graphs_[map].lineage = ++next_lineage_;  // a background solve still running is outdated now
 
   // After an adopted global solve with nothing new, there is nothing to solve: every pose is new.
   const bool settled = adopted && !g.hasNew(rows.solved_through);
   auto solution = settled ? g.settledSolution() : g.solve(options_, rows.solved_through, !global);
-  solution.global = solution.global || adopted;
+  const bool whole = solution.global;  // every pose is now a global solve's (of everything new too)
+  if (whole && !settled) graphs_[map].lineage = ++next_lineage_;  // a background copy from before is outdated
+  if (adopted) {  // every pose is the background solve's, what arrived meanwhile solved around them
+    solution.global = true;
+    solution.free_nodes = g.nodeCount();
+  }
   GraphEvent event;
   // A local solve moved only its free nodes: only theirs are written.
   event.graph_version =
@@ -258,10 +265,12 @@ GraphEvent GraphOptimiser::solve(const std::string& map, std::int64_t map_id, st
   event.free_nodes = static_cast<std::int64_t>(solution.free_nodes);
   event.map_id = map_id;
   g.countSolve(rows.changed);  // new rows: a new problem
-  // Settled: no global solve pending; else one follows within the interval (started now when due).
+  // An adopted global solve that stopped at its bound goes on in the background, not on this thread.
+  const bool hand_back = settled && !solution.converged && g.continuations() < options_.max_continuations;
   if (background) startGlobal(map, generation);
-  scheduleGlobal(map, generation, solution.global && (!adopted || settled), solution.strained);
-  continueIfUnconverged(map, g, generation);
+  // Whole: no global solve pending; else one follows within the interval (at once when strained or handed back).
+  scheduleGlobal(map, generation, whole && !hand_back, solution.strained || hand_back);
+  if (!settled) continueIfUnconverged(map, g, generation);
   logEvent(map, event, solution.iterations);
   publish(map, event, generation);
   return event;
@@ -307,7 +316,6 @@ void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t genera
   {
     std::lock_guard lock(mutex_);
     if (this->generation(map) != generation) return;  // deleted meanwhile
-    if (global_running_.count(map)) return;           // its adoption solves what came meanwhile, and schedules
     if (was_global) {
       global_at_.erase(map);
       return;

@@ -210,6 +210,8 @@ std::vector<char> MapGraph::localScope(const GraphOptimiserOptions& options, std
       for (std::size_t k = p > w ? p - w : 0; k <= std::min(idx.size() - 1, p + w); ++k) mark(idx[k]);
     }
   }
+  // Nothing new after a local solve stopped at its bound: go on with the same nodes.
+  if (count == 0 && !converged_ && last_free_.size() == nodes_.size()) return last_free_;
   if (count == 0 || 2 * count > nodes_.size()) return {};
   return free;
 }
@@ -298,6 +300,7 @@ MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::in
     moved_.push_back(i);
   }
   out.free_nodes = moved_.size();
+  last_free_ = free;
   for (std::size_t k = 0; k < p.loop.size(); ++k)
     loops_[p.loop[k]].rejected = p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
   out.rejected_loops = rejectedLoops();
@@ -331,6 +334,7 @@ bool MapGraph::adopt(const MapGraph& solved) {
   solved_nodes_ = solved.nodes_.size();
   converged_ = solved.converged_;
   moved_.clear();
+  last_free_.clear();
   return true;
 }
 
