@@ -75,7 +75,9 @@ TEST(LocalSolve, AnAgreeingLoopMovesOnlyTheNodesAroundIt) {
   int moved = 0;
   for (std::size_t i = 0; i < after.size(); ++i) {
     const bool in_window = (i >= 196 && i <= 206) || (i >= 76 && i <= 86);
-    if (!in_window) EXPECT_EQ(after[i], before[i]) << "scan " << i << " is outside the windows";
+    if (!in_window) {
+      EXPECT_EQ(after[i], before[i]) << "scan " << i << " is outside the windows";
+    }
     moved += after[i] != before[i];
   }
   EXPECT_GT(moved, 0);
