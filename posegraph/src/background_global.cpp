@@ -78,11 +78,7 @@ std::optional<std::int64_t> GraphOptimiser::adoptGlobal(const std::string& map, 
                                        {"ms", std::round(job.ms * 10) / 10}}));
   if (outcome != "adopted") {
     // Local solves since the last global one still want one (those made while this ran have scheduled theirs).
-    std::lock_guard lock(mutex_);
-    global_at_.try_emplace(map, Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                                   std::chrono::duration<double>(options_.global_interval_s)));
-    const auto due = due_.find(map);
-    if (due == due_.end() || due->second > global_at_[map]) due_[map] = global_at_[map];
+    scheduleGlobal(map, job.generation, false, false);
     return std::nullopt;
   }
   return job.graph->lastLoop();

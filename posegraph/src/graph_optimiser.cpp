@@ -49,10 +49,7 @@ bool GraphOptimiser::stopping() const {
 void GraphOptimiser::loopsAdded(const std::string& map) {
   {
     std::lock_guard lock(mutex_);
-    // Sooner than a global solve already scheduled for it, never later than one already due.
-    const auto at = Clock::now() + options_.debounce;
-    const auto due = due_.find(map);
-    if (due == due_.end() || due->second > at) due_[map] = at;
+    dueBy(map, Clock::now() + options_.debounce);  // sooner than a global solve scheduled for it
   }
   wake_.notify_all();
 }
@@ -297,11 +294,14 @@ void GraphOptimiser::continueIfUnconverged(const std::string& map, const MapGrap
   {
     std::lock_guard lock(mutex_);
     if (this->generation(map) != generation) return;  // deleted meanwhile
-    const auto at = Clock::now() + options_.debounce;
-    const auto due = due_.find(map);
-    if (due == due_.end() || due->second > at) due_[map] = at;
+    dueBy(map, Clock::now() + options_.debounce);
   }
   wake_.notify_all();
+}
+
+void GraphOptimiser::dueBy(const std::string& map, Clock::time_point at) {
+  const auto due = due_.find(map);
+  if (due == due_.end() || due->second > at) due_[map] = at;
 }
 
 bool GraphOptimiser::globalDue(const std::string& map) const {
@@ -326,8 +326,7 @@ void GraphOptimiser::scheduleGlobal(const std::string& map, std::uint64_t genera
     const auto soon = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(delay));
     auto& at = global_at_.try_emplace(map, soon).first->second;
     at = std::min(at, soon);
-    const auto due = due_.find(map);
-    if (due == due_.end() || due->second > at) due_[map] = at;
+    dueBy(map, at);
   }
   wake_.notify_all();
 }

@@ -13,25 +13,14 @@ void GraphProblem::addEdge(std::size_t a, std::size_t b, const RelativePoseError
 void GraphProblem::addLoopEdge(std::size_t loop_index, std::size_t a, std::size_t b, const RelativePoseError& e,
                                double loss_scale) {
   loop.push_back(loop_index);
-  loop_edges.push_back(e);
-  loop_slots.emplace_back(a, b);
+  loop_edges.push_back({a, b, e});
   loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(loss_scale), ceres::TAKE_OWNERSHIP));
   addEdge(a, b, e, loop_losses.back());
 }
 
-double GraphProblem::loopError2(std::size_t k) const {
-  Eigen::Matrix<double, 6, 1> r;
-  loop_edges[k](x[loop_slots[k].first].data(), x[loop_slots[k].second].data(), r.data());
-  return r.squaredNorm();
-}
-
 double GraphProblem::maxBoundaryError2() const {
   double m = 0;
-  for (std::size_t k = 0; k < boundary_edges.size(); ++k) {
-    Eigen::Matrix<double, 6, 1> r;
-    boundary_edges[k](x[boundary_slots[k].first].data(), x[boundary_slots[k].second].data(), r.data());
-    m = std::max(m, r.squaredNorm());
-  }
+  for (const auto& e : boundary_edges) m = std::max(m, error2(e));
   return m;
 }
 

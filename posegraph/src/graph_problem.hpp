@@ -18,24 +18,27 @@
 namespace sglc::posegraph {
 
 struct GraphProblem {
+  // An edge between two slots, kept to read its error after the solve.
+  struct Edge {
+    std::size_t a, b;
+    RelativePoseError error;
+  };
   ceres::Problem problem;
   std::vector<std::size_t> node;         // slot -> graph node index
   std::vector<std::array<double, 7>> x;  // per slot: quaternion x, y, z, w, then translation
   std::vector<std::size_t> loop;         // loop edge -> index into the graph's loops
-  std::vector<RelativePoseError> loop_edges;
-  std::vector<std::pair<std::size_t, std::size_t>> loop_slots;
+  std::vector<Edge> loop_edges;
   std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
   // Odometry edges between a free and a fixed node (a local solve's boundary): their whitened error tells
   // whether the window could absorb what is new.
-  std::vector<std::pair<std::size_t, std::size_t>> boundary_slots;
-  std::vector<RelativePoseError> boundary_edges;
+  std::vector<Edge> boundary_edges;
 
   void addEdge(std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e, ceres::LossFunction* loss);
   void addLoopEdge(std::size_t loop_index, std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e,
                    double loss_scale);
-  // Whitened residual of loop edge k at the current parameters, squared.
-  double loopError2(std::size_t k) const;
-  // The largest whitened error, squared, of the boundary edges (0 without any).
+  // Whitened error of an edge at the current parameters, squared.
+  double error2(const Edge& e) const { return e.error.squaredError(x[e.a].data(), x[e.b].data()); }
+  // The largest of the boundary edges' (0 without any).
   double maxBoundaryError2() const;
   void setLoopLoss(double scale);
   // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.

@@ -150,10 +150,14 @@ void MapGraph::initialiseSession(std::int64_t sid, const Mat4d& T_frame) {
 void MapGraph::initialise() {
   std::set<std::int64_t> placed;
   for (const auto& [sid, idx] : sessions_) {
-    const bool any = std::any_of(idx.begin(), idx.end(), [&](std::size_t i) { return nodes_[i].initialised; });
-    if (any || root(sid) == sid) {
-      const auto& first = nodes_[idx.front()];
-      initialiseSession(sid, any ? Mat4d(first.pose.matrix() * first.odometry.inverse()) : Mat4d::Identity());
+    // The session's frame from a node already placed (not necessarily its first: a scan of lower sequence
+    // number can arrive late), else its own odometry frame when it roots its component.
+    const auto placed_node = std::find_if(idx.begin(), idx.end(), [&](std::size_t i) { return nodes_[i].initialised; });
+    if (placed_node != idx.end() || root(sid) == sid) {
+      const auto frame = placed_node == idx.end()
+                             ? Mat4d::Identity()
+                             : Mat4d(nodes_[*placed_node].pose.matrix() * nodes_[*placed_node].odometry.inverse());
+      initialiseSession(sid, frame);
       placed.insert(sid);
     }
   }
@@ -185,9 +189,8 @@ bool MapGraph::newLoopFarOff(const GraphOptimiserOptions& options, std::int64_t 
   for (const auto& l : loops_) {
     if (l.id <= solved_through) continue;
     const auto a = parameters(nodes_[index_.at(l.a)].pose), b = parameters(nodes_[index_.at(l.b)].pose);
-    Eigen::Matrix<double, 6, 1> r;
-    loopEdge(l, options)(a.data(), b.data(), r.data());
-    if (!r.allFinite() || r.squaredNorm() > limit) return true;
+    const double e2 = loopEdge(l, options).squaredError(a.data(), b.data());
+    if (!std::isfinite(e2) || e2 > limit) return true;
   }
   return false;
 }
@@ -251,10 +254,7 @@ void MapGraph::buildProblem(GraphProblem& p, const GraphOptimiserOptions& option
         diagonalSqrtInformation(options.odometry_sigma_m + options.odometry_sigma_per_m * d,
                                 (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg));
     p.addEdge(slot[a], slot[b], edge, nullptr);
-    if (isFree(a) != isFree(b)) {
-      p.boundary_slots.emplace_back(slot[a], slot[b]);
-      p.boundary_edges.push_back(edge);
-    }
+    if (isFree(a) != isFree(b)) p.boundary_edges.push_back({slot[a], slot[b], edge});
   }
   // Loops: a robust loss discounts false ones.
   for (const auto k : loops)
@@ -291,25 +291,26 @@ MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::in
   out.converged = run.converged;
   out.iterations = run.iterations;
   out.global = free.empty();
-  moved_.clear();
   for (std::size_t s = 0; s < p.node.size(); ++s) {
     const auto i = p.node[s];
     if (!free.empty() && !free[i]) continue;
     nodes_[i].pose.q = Eigen::Quaterniond(p.x[s][3], p.x[s][0], p.x[s][1], p.x[s][2]).normalized();
     nodes_[i].pose.t = Eigen::Vector3d(p.x[s][4], p.x[s][5], p.x[s][6]);
-    moved_.push_back(i);
+    ++out.free_nodes;
   }
-  out.free_nodes = moved_.size();
   last_free_ = free;
-  for (std::size_t k = 0; k < p.loop.size(); ++k)
-    loops_[p.loop[k]].rejected = p.loopError2(k) > kRejectChi2 * options.loss_scale * options.loss_scale;
-  out.rejected_loops = rejectedLoops();
-  // Strained: the window could not absorb what is new (an edge at its boundary, or a loop in it, is off by
-  // more than the 99.9 % point): the correction reaches beyond it, and a global solve should follow soon.
   const double limit = kRejectChi2 * options.loss_scale * options.loss_scale;
-  out.strained =
-      !out.global && (p.maxBoundaryError2() > limit ||
-                      std::any_of(p.loop.begin(), p.loop.end(), [&](std::size_t k) { return loops_[k].rejected; }));
+  bool new_rejected = false;
+  for (std::size_t k = 0; k < p.loop.size(); ++k) {
+    auto& l = loops_[p.loop[k]];
+    l.rejected = p.error2(p.loop_edges[k]) > limit;
+    new_rejected = new_rejected || (l.rejected && l.id > solved_through);
+  }
+  out.rejected_loops = rejectedLoops();
+  // Strained: the window could not absorb what is new (an edge at its boundary, or a new loop in it, is off by
+  // more than the 99.9 % point): the correction reaches beyond it, and a global solve should follow soon. A loop
+  // discounted before does not count: it would bring every solve near it forward.
+  out.strained = !out.global && (new_rejected || p.maxBoundaryError2() > limit);
   solved_nodes_ = nodes_.size();
   converged_ = out.converged;
   return out;
@@ -333,7 +334,6 @@ bool MapGraph::adopt(const MapGraph& solved) {
     if (const auto it = rejected.find(l.id); it != rejected.end()) l.rejected = it->second;
   solved_nodes_ = solved.nodes_.size();
   converged_ = solved.converged_;
-  moved_.clear();
   last_free_.clear();
   return true;
 }
@@ -360,7 +360,8 @@ std::vector<storage::OptimisedPose> MapGraph::poses() const {
 
 std::vector<storage::OptimisedPose> MapGraph::movedPoses() const {
   std::vector<storage::OptimisedPose> out;
-  for (const auto i : moved_) out.push_back({nodes_[i].scan_id, nodes_[i].pose.matrix()});
+  for (std::size_t i = 0; i < nodes_.size(); ++i)
+    if (last_free_.empty() || last_free_[i]) out.push_back({nodes_[i].scan_id, nodes_[i].pose.matrix()});
   return out;
 }
 

@@ -122,9 +122,8 @@ class MapGraph {
   std::int64_t map_session_ = -1;  // the session whose odometry frame is the map frame
   bool converged_ = false;
   int continuations_ = 0;
-  std::size_t solved_nodes_ = 0;    // nodes_ [0, solved_nodes_) have been in a solve
-  std::vector<std::size_t> moved_;  // nodes the last solve left free
-  std::vector<char> last_free_;     // the last solve's free nodes when it was local, else empty
+  std::size_t solved_nodes_ = 0;  // nodes_ [0, solved_nodes_) have been in a solve
+  std::vector<char> last_free_;   // the last solve's free nodes when it was local, else empty (all)
   std::map<std::int64_t, std::vector<std::size_t>> sessions_;  // session -> its nodes in sequence order
   std::vector<std::size_t> position_;                          // node -> its place in its session's list
   std::map<std::int64_t, std::int64_t> parent_;                // union-find over sessions linked by loops

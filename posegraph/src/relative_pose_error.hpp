@@ -38,6 +38,11 @@ struct RelativePoseError {
     Eigen::Map<Eigen::Matrix<T, 6, 1>> out(r);
     out = sqrt_info.template cast<T>() * e;
     return true;
+  }  // The whitened error at poses a and b, squared.
+  double squaredError(const double* a, const double* b) const {
+    Eigen::Matrix<double, 6, 1> r;
+    (*this)(a, b, r.data());
+    return r.squaredNorm();
   }
 };
 

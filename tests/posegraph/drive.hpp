@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "../storage/storage_test_util.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
 
 namespace sglc::posegraph::testing {
@@ -63,6 +64,16 @@ inline Drive drive(storage::MapStore& store) {
     store.addLoop("m", {0, d.ids[i], d.ids[j], d.gt[i].inverse() * d.gt[j], 0.8, 0.9, 0.02, 20});
   }
   return d;
+}
+
+// The optimiser's odometry model matching the drive's drift: 3 cm per axis and 0.057 deg per 2.1 m step.
+inline GraphOptimiserOptions driveOptions() {
+  GraphOptimiserOptions o;
+  o.odometry_sigma_m = 0.0;
+  o.odometry_sigma_per_m = 0.015;
+  o.odometry_sigma_deg = 0.0;
+  o.odometry_sigma_deg_per_m = 0.03;
+  return o;
 }
 
 inline std::vector<Mat4d> optimised(const storage::MapStore& store) {

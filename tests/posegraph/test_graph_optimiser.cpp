@@ -20,6 +20,7 @@ using storage::testing::randomFingerprint;
 using storage::testing::TempDir;
 using testing::ate;
 using testing::drive;
+using testing::driveOptions;
 using testing::optimised;
 using testing::pose;
 
@@ -27,13 +28,7 @@ TEST(GraphOptimiser, LoopsRemoveDriftAndAFalseLoopIsDiscounted) {
   TempDir dir;
   auto store = storage::MapStore::open(options(dir.file("map.db")));
   const auto d = drive(*store);
-  // The optimiser's odometry model matches this drive's drift: 3 cm per axis and 0.057 deg per 2.1 m step.
-  GraphOptimiserOptions o;
-  o.odometry_sigma_m = 0.0;
-  o.odometry_sigma_per_m = 0.015;
-  o.odometry_sigma_deg = 0.0;
-  o.odometry_sigma_deg_per_m = 0.03;
-  GraphOptimiser graph(*store, o);
+  GraphOptimiser graph(*store, driveOptions());
   const auto e = graph.optimiseNow("m");
   EXPECT_EQ(e.nodes, 240);
   EXPECT_GE(e.graph_version, 1);
@@ -59,11 +54,7 @@ TEST(GraphOptimiser, LoopsRemoveDriftAndAFalseLoopIsDiscounted) {
 // direction must neither pull the graph nor count as rejected. The same error with isotropic information is an
 // outlier.
 TEST(GraphOptimiser, LoopInformationLeavesFreeDirectionsFree) {
-  GraphOptimiserOptions o;
-  o.odometry_sigma_m = 0.0;
-  o.odometry_sigma_per_m = 0.015;
-  o.odometry_sigma_deg = 0.0;
-  o.odometry_sigma_deg_per_m = 0.03;
+  const auto o = driveOptions();
   Mat6d corridor = Mat6d::Zero();  // 2 mm / 0.02 deg in every direction but the loop's own x
   corridor.diagonal() << 0.0, 2.5e5, 2.5e5, 8e6, 8e6, 8e6;
   double ate_reference = 0;

@@ -5,6 +5,8 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <map>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <vector>
@@ -27,12 +29,8 @@ constexpr int kWindow = 5;
 
 // The drive's odometry model; a window small enough for the 240-node drive to solve locally.
 GraphOptimiserOptions localOptions() {
-  GraphOptimiserOptions o;
+  auto o = testing::driveOptions();
   o.debounce = std::chrono::hours(1);  // only optimiseNow solves, apart from the worker's start-up solve
-  o.odometry_sigma_m = 0.0;
-  o.odometry_sigma_per_m = 0.015;
-  o.odometry_sigma_deg = 0.0;
-  o.odometry_sigma_deg_per_m = 0.03;
   o.local_window = kWindow;
   o.global_interval_s = 3600;
   return o;
@@ -169,55 +167,73 @@ class Events {
   std::vector<GraphEvent> events_;
 };
 
+// The drive in a map database with the optimiser's worker running on it (debounce 10 ms) and every event it
+// publishes collected; start() returns once the worker's start-up solve is done.
+class Worker : public ::testing::Test {
+ protected:
+  void start(GraphOptimiserOptions o) {
+    store = storage::MapStore::open(options(dir.file("map.db")));
+    d = drive(*store);
+    o.debounce = std::chrono::milliseconds(10);
+    graph = std::make_unique<GraphOptimiser>(*store, o);
+    events = std::make_unique<Events>(*graph);
+    ASSERT_TRUE(graph->waitForVersion("m", 0, std::chrono::seconds(60)).has_value());
+  }
+  // The next event (after those already returned) that satisfies `what`, waiting up to 60 s.
+  template <typename What>
+  std::optional<GraphEvent> next(What what) {
+    return events->next(seen, what);
+  }
+
+  TempDir dir;
+  std::unique_ptr<storage::MapStore> store;
+  Drive d;
+  std::unique_ptr<GraphOptimiser> graph;  // after the store: stopped before it closes
+  std::unique_ptr<Events> events;         // after the optimiser: unsubscribed before it stops
+  std::size_t seen = 0;
+};
+
+bool localWith(const GraphEvent& e, std::int64_t loops) { return !e.global && e.loops == loops; }
+
 // A loop arriving after a local solve is solved after the debounce, not held back until the global solve that
 // the local one scheduled is due.
-TEST(LocalSolve, ALoopAfterALocalSolveIsNotHeldBackUntilTheGlobalSolve) {
-  TempDir dir;
-  auto store = storage::MapStore::open(options(dir.file("map.db")));
-  auto o = localOptions();
-  o.debounce = std::chrono::milliseconds(10);
-  o.global_interval_s = 3600;
-  const auto d = drive(*store);
-  GraphOptimiser graph(*store, o);
-  Events events(graph);
-  const auto start = graph.waitForVersion("m", 0, std::chrono::seconds(60));  // the start-up solve
-  ASSERT_TRUE(start.has_value());
-  std::size_t seen = 0;
+TEST_F(Worker, ALoopAfterALocalSolveIsNotHeldBackUntilTheGlobalSolve) {
+  start(localOptions());  // the global solve an hour away
   addLoop(*store, d, 201);
-  graph.loopsAdded("m");
-  const auto first = events.next(seen, [](const GraphEvent& e) { return e.loops == 40; });
-  ASSERT_TRUE(first.has_value());
-  EXPECT_FALSE(first->global);
+  graph->loopsAdded("m");
+  ASSERT_TRUE(next([](const GraphEvent& e) { return localWith(e, 40); }).has_value());
   addLoop(*store, d, 210);
-  graph.loopsAdded("m");
-  const auto second = events.next(seen, [](const GraphEvent& e) { return e.loops == 41; });
-  ASSERT_TRUE(second.has_value()) << "the second loop waited for the global solve (an hour away)";
-  EXPECT_FALSE(second->global);
-  graph.stop();
+  graph->loopsAdded("m");
+  EXPECT_TRUE(next([](const GraphEvent& e) { return localWith(e, 41); }).has_value())
+      << "the second loop waited for the global solve";
 }
 
 // The worker follows a local solve with a global one once global_interval_s has passed, with nothing new.
-TEST(LocalSolve, TheWorkerSolvesGloballySoonAfterALocalSolve) {
-  TempDir dir;
-  auto store = storage::MapStore::open(options(dir.file("map.db")));
+TEST_F(Worker, TheWorkerSolvesGloballySoonAfterALocalSolve) {
   auto o = localOptions();
-  o.debounce = std::chrono::milliseconds(10);
   o.global_interval_s = 0.05;
-  const auto d = drive(*store);
-  GraphOptimiser graph(*store, o);
-  Events events(graph);
-  const auto start = graph.waitForVersion("m", 0, std::chrono::seconds(60));  // the start-up solve
-  ASSERT_TRUE(start.has_value());
-  std::size_t seen = 0;
+  start(o);
   addLoop(*store, d, 201);
-  graph.loopsAdded("m");
-  const auto local = events.next(seen, [](const GraphEvent& e) { return e.loops == 40 && !e.global; });
-  ASSERT_TRUE(local.has_value());
-  const auto settled = events.next(seen, [](const GraphEvent& e) { return e.global; });
+  graph->loopsAdded("m");
+  ASSERT_TRUE(next([](const GraphEvent& e) { return localWith(e, 40); }).has_value());
+  const auto settled = next([](const GraphEvent& e) { return e.global; });
   ASSERT_TRUE(settled.has_value()) << "no global solve followed the local one";
-  EXPECT_EQ(settled->loops, local->loops);
+  EXPECT_EQ(settled->loops, 40);
   EXPECT_EQ(settled->free_nodes, 240);
-  graph.stop();
+}
+
+// A loop the window cannot absorb (here 0.3 m off the truth: within the graduated solve's bound, beyond what
+// ten nodes either side can take up) strains the local solve, and the global solve follows at once, not after
+// global_interval_s (an hour).
+TEST_F(Worker, AStrainedLocalSolveIsFollowedByAGlobalOneAtOnce) {
+  start(localOptions());
+  const Mat4d off = d.gt[201].inverse() * d.gt[81] * pose(0.0, 0.3, 0.0);
+  ASSERT_GT(store->addLoop("m", {0, d.ids[201], d.ids[81], off, 0.8, 0.9, 0.02, 20}), 0);
+  graph->loopsAdded("m");
+  ASSERT_TRUE(next([](const GraphEvent& e) { return localWith(e, 40); }).has_value());
+  const auto settled = next([](const GraphEvent& e) { return e.global; });
+  ASSERT_TRUE(settled.has_value()) << "no global solve followed the strained local one";
+  EXPECT_EQ(settled->loops, 40);
 }
 
 // A local solve stopped at its iteration bound goes on locally, with the same nodes free.
@@ -239,28 +255,62 @@ TEST(LocalSolve, AnUnconvergedLocalSolveIsContinuedLocally) {
   EXPECT_EQ(c.free_nodes, e.free_nodes);
 }
 
-// A loop the window cannot absorb (here 0.3 m off the truth: within the graduated solve's bound, beyond what
-// ten nodes either side can take up) strains the local solve, and the global solve follows at once, not after
-// global_interval_s.
-TEST(LocalSolve, AStrainedLocalSolveIsFollowedByAGlobalOneAtOnce) {
+// A scan of lower sequence number than its session's first arrives late: it is placed in its session's frame
+// (taken from the session's placed scans, not from itself), so a loop arriving with it agrees with the graph
+// and is solved locally. Placed in its raw odometry frame, 50 m off, the loop was far off and solved globally.
+TEST(LocalSolve, ALateFirstScanIsPlacedInItsSessionsFrame) {
   TempDir dir;
   auto store = storage::MapStore::open(options(dir.file("map.db")));
-  auto o = localOptions();
-  o.debounce = std::chrono::milliseconds(10);
+  GraphOptimiser graph(*store, localOptions());
   const auto d = drive(*store);
-  GraphOptimiser graph(*store, o);
-  const auto start = graph.waitForVersion("m", 0, std::chrono::seconds(60));
-  ASSERT_TRUE(start.has_value());
-  const Mat4d off = d.gt[201].inverse() * d.gt[81] * pose(0.0, 0.3, 0.0);
-  ASSERT_GT(store->addLoop("m", {0, d.ids[201], d.ids[81], off, 0.8, 0.9, 0.02, 20}), 0);
-  graph.loopsAdded("m");
-  const auto local = graph.waitForVersion("m", start->graph_version, std::chrono::seconds(60));
-  ASSERT_TRUE(local.has_value());
-  EXPECT_FALSE(local->global);
-  const auto settled = graph.waitForVersion("m", local->graph_version, std::chrono::seconds(60));
-  ASSERT_TRUE(settled.has_value()) << "no global solve followed the strained local one";
-  EXPECT_TRUE(settled->global);
-  graph.stop();
+  ASSERT_FALSE(graph.optimiseNow("m").failed);
+  // Robot x drives the first lap's scans 10..29 again, in an odometry frame of its own, with exact loops.
+  const Mat4d unrelated = pose(1.0, 50.0, -20.0);
+  std::map<int, std::int64_t> x;
+  const auto addX = [&](int i) {
+    const auto fp = storage::testing::randomFingerprint(900 + i);
+    const Mat4d odometry = unrelated * d.gt[static_cast<std::size_t>(i)];
+    x[i] = store->addScan(
+        {.map = "m", .robot = "x", .session = "s", .seq = i, .odometry_pose = odometry, .fingerprint = &fp});
+    ASSERT_GT(store->addLoop("m", {0, x[i], d.ids[static_cast<std::size_t>(i)], Mat4d::Identity(), 0.8, 0.9, 0.02, 20}),
+              0);
+  };
+  for (int i = 11; i < 30; ++i) addX(i);
+  ASSERT_FALSE(graph.optimiseNow("m").failed);
+  addX(10);  // late, and first of its session
+  const auto e = graph.optimiseNow("m");
+  ASSERT_FALSE(e.failed) << e.error;
+  EXPECT_FALSE(e.global);
+  std::map<std::int64_t, Mat4d> poses;
+  for (const auto& p : store->optimisedPoses("m", "", "", 0, 100000)) poses[p.scan_id] = p.pose;
+  EXPECT_LT((poses.at(x[10]).block<3, 1>(0, 3) - poses.at(d.ids[10]).block<3, 1>(0, 3)).norm(), 0.2);
+}
+
+// A loop discounted earlier (false) does not strain every later local solve near it: only new loops and the
+// window's boundary do.
+TEST(LocalSolve, AnOldRejectedLoopDoesNotStrainLocalSolvesNearIt) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  const auto d = drive(*store);
+  const auto o = localOptions();
+  MapGraph g;
+  ASSERT_TRUE(g.absorb("m", store->loops("m"), store->graphNodes("m"), {}));
+  g.solve(o, 0, false);
+  // Scan 202 claimed to be 1 m from scan 22 (they are ~70 m apart): discounted by the global solve.
+  const auto through = g.lastLoop();
+  store->addLoop("m", {0, d.ids[202], d.ids[22], pose(0.0, 1.0, 0.0), 0.9, 0.9, 0.02, 30});
+  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  const auto with_false = g.solve(o, through, true);
+  ASSERT_TRUE(with_false.global);
+  ASSERT_EQ(with_false.rejected_loops, 1);
+  // A true loop whose window holds the false loop's end.
+  const auto before_true = g.lastLoop();
+  addLoop(*store, d, 204);
+  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  const auto s = g.solve(o, before_true, true);
+  EXPECT_FALSE(s.global);
+  EXPECT_EQ(s.rejected_loops, 1);
+  EXPECT_FALSE(s.strained);
 }
 
 // The worker adopts a background global solve of a copy of the graph: the copy's poses, with what arrived

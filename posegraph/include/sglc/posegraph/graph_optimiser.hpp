@@ -68,7 +68,7 @@ struct GraphOptimiserOptions {
   int local_window = 100;
   // After a local solve, the whole graph is solved again within this many seconds (one global solve for
   // however many local ones came meanwhile), so that corrections spread beyond the windows; at once (in the
-  // background, one at a time) after a local solve that left an edge at its window's boundary or a loop in it
+  // background, one at a time) after a local solve that left an edge at its window's boundary or a new loop in it
   // beyond the 99.9 % point of its error.
   double global_interval_s = 30.0;
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
@@ -138,7 +138,9 @@ class GraphOptimiser {
   void startGlobal(const std::string& map, std::uint64_t generation);
   std::optional<std::int64_t> adoptGlobal(const std::string& map, MapGraph& g);
   void runGlobal();
-  // Whether the map's pending global solve is due (then this solve is global).
+  // Solve `map` by `at` at the latest (a time already sooner stays). mutex_ held.
+  void dueBy(const std::string& map, std::chrono::steady_clock::time_point at);
+  // Whether the map's pending global solve is due (then it starts in the background).
   bool globalDue(const std::string& map) const;
   // After a local solve: make sure a global one follows within global_interval_s; after a global one: none is
   // pending.
