@@ -44,6 +44,19 @@ void addLoop(storage::MapStore& store, const Drive& d, int i) {
   ASSERT_GT(store.addLoop("m", {0, d.ids[k], d.ids[j], d.gt[k].inverse() * d.gt[j], 0.8, 0.9, 0.02, 20}), 0);
 }
 
+// The drive's graph in memory, solved whole.
+MapGraph solvedGraph(const storage::MapStore& store) {
+  MapGraph g;
+  EXPECT_TRUE(g.absorb("m", store.loops("m"), store.graphNodes("m"), {}));
+  g.solve(localOptions(), 0, false);
+  return g;
+}
+
+// Takes the loops stored since the graph last read them.
+void absorbNewLoops(MapGraph& g, const storage::MapStore& store) {
+  ASSERT_TRUE(g.absorb("m", store.loops("m", g.lastLoop()), {}, {}));
+}
+
 double maxShift(const std::vector<Mat4d>& a, const std::vector<Mat4d>& b) {
   double m = 0;
   for (std::size_t i = 0; i < a.size(); ++i) m = std::max(m, (a[i].block<3, 1>(0, 3) - b[i].block<3, 1>(0, 3)).norm());
@@ -293,20 +306,18 @@ TEST(LocalSolve, AnOldRejectedLoopDoesNotStrainLocalSolvesNearIt) {
   auto store = storage::MapStore::open(options(dir.file("map.db")));
   const auto d = drive(*store);
   const auto o = localOptions();
-  MapGraph g;
-  ASSERT_TRUE(g.absorb("m", store->loops("m"), store->graphNodes("m"), {}));
-  g.solve(o, 0, false);
+  auto g = solvedGraph(*store);
   // Scan 202 claimed to be 1 m from scan 22 (they are ~70 m apart): discounted by the global solve.
   const auto through = g.lastLoop();
   store->addLoop("m", {0, d.ids[202], d.ids[22], pose(0.0, 1.0, 0.0), 0.9, 0.9, 0.02, 30});
-  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  absorbNewLoops(g, *store);
   const auto with_false = g.solve(o, through, true);
   ASSERT_TRUE(with_false.global);
   ASSERT_EQ(with_false.rejected_loops, 1);
   // A true loop whose window holds the false loop's end.
   const auto before_true = g.lastLoop();
   addLoop(*store, d, 204);
-  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  absorbNewLoops(g, *store);
   const auto s = g.solve(o, before_true, true);
   EXPECT_FALSE(s.global);
   EXPECT_EQ(s.rejected_loops, 1);
@@ -320,13 +331,11 @@ TEST(LocalSolve, AGlobalSolveOfACopyIsAdoptedWithWhatArrivedMeanwhileStillNew) {
   auto store = storage::MapStore::open(options(dir.file("map.db")));
   const auto d = drive(*store);
   const auto o = localOptions();
-  MapGraph g;
-  ASSERT_TRUE(g.absorb("m", store->loops("m"), store->graphNodes("m"), {}));
-  g.solve(o, 0, false);
+  auto g = solvedGraph(*store);
   MapGraph copy = g;
   addLoop(*store, d, 201);  // arrives while the copy is being solved
   copy.solve(o, copy.lastLoop(), false);
-  ASSERT_TRUE(g.absorb("m", store->loops("m", g.lastLoop()), {}, {}));
+  absorbNewLoops(g, *store);
   const auto through = copy.lastLoop();
   EXPECT_FALSE(g.hasNew(g.lastLoop()));
   ASSERT_TRUE(g.adopt(copy));
