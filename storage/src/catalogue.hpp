@@ -34,6 +34,9 @@ struct MapState {
   MapInfo info() const;
 };
 
+// The wall clock in seconds (created_at columns).
+double nowSeconds();
+
 // Throws StorageError kInvalidArgument ("<what> name ...") unless `name` follows the name rule (sglc/names.hpp).
 void checkName(const std::string& what, const std::string& name);
 

@@ -55,6 +55,14 @@ class DescriptorIndex {
   void add(const IndexEntry& entry, const float* vector);
   // Marks entries deleted; returns how many were live.
   std::int64_t remove(const std::unordered_set<std::int64_t>& scan_ids);
+  // The scan ids of the live entries `keep` accepts.
+  template <typename Pred>
+  std::unordered_set<std::int64_t> liveIds(Pred keep) const {
+    std::unordered_set<std::int64_t> out;
+    for (const auto& e : entries_)
+      if (!e.deleted && keep(e)) out.insert(e.scan_id);
+    return out;
+  }
 
   // Nearest k live entries accepted by the filter, sorted by (distance, scan id).
   std::vector<SearchHit> search(const float* query, int k, const SearchFilter& filter) const;

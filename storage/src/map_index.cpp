@@ -63,9 +63,7 @@ void load(StoreCore& core, MapState& m) {
   rebuild(core, m);
 }
 
-std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& req) {
-  std::shared_lock lock(core.state_mutex);
-  const MapState& m = core.catalogue.map(req.map);
+std::vector<SearchHit> searchMap(const MapState& m, const SearchRequest& req) {
   if (static_cast<int>(req.descriptor.size()) != m.dim)
     throw StorageError(Code::kInvalidArgument, "query descriptor has " + std::to_string(req.descriptor.size()) +
                                                    " values, map '" + req.map + "' needs " + std::to_string(m.dim));
@@ -73,6 +71,11 @@ std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& req) {
     if (!std::isfinite(v)) throw StorageError(Code::kInvalidArgument, "query descriptor is not finite");
   if (req.k <= 0 || req.k > 10000) throw StorageError(Code::kInvalidArgument, "k must be 1..10000");
   return m.index->search(req.descriptor.data(), req.k, filterOf(m, req));
+}
+
+std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& req) {
+  std::shared_lock lock(core.state_mutex);
+  return searchMap(core.catalogue.map(req.map), req);
 }
 
 void snapshot(StoreCore& core) {

@@ -12,6 +12,9 @@ namespace sglc::storage::map_index {
 // scan rows. Called while opening, before any other thread sees the store.
 void load(StoreCore& core, MapState& m);
 std::vector<SearchHit> search(const StoreCore& core, const SearchRequest& request);
+// The search of one map's index (the caller holds the lock that guards it): checks the request, turns its
+// names into the map's ids, searches.
+std::vector<SearchHit> searchMap(const MapState& m, const SearchRequest& request);
 // Writes every map's snapshot; a map with deletions since its index was built gets none (the next open
 // rebuilds it without the deleted scans).
 void snapshot(StoreCore& core);

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "blob_codec.hpp"
+#include "validate.hpp"
 
 namespace sglc::storage::pose_graph_tables {
 namespace {
@@ -21,10 +22,7 @@ std::int64_t mapRowValue(const StoreCore& core, const std::string& map, const ch
 }  // namespace
 
 std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& loop) {
-  if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse) ||
-      (loop.information && !loop.information->allFinite()))
-    throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
-  if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
+  validate::loop(loop);
   std::lock_guard write(core.write_mutex);
   const auto map_id = core.mapId(map);
   const auto& db = core.writer();
@@ -112,10 +110,7 @@ std::vector<GraphNodeRecord> nodes(const StoreCore& core, const std::string& map
 std::int64_t saveOptimised(StoreCore& core, const std::string& map, std::int64_t expected_map_id,
                            const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames,
                            std::int64_t through_loop) {
-  for (const auto& p : poses)
-    if (!p.pose.allFinite()) throw StorageError(Code::kInvalidArgument, "optimised pose is not finite");
-  for (const auto& f : frames)
-    if (!f.T_map_session.allFinite()) throw StorageError(Code::kInvalidArgument, "session frame is not finite");
+  validate::optimised(poses, frames);
   std::lock_guard write(core.write_mutex);
   const auto map_id = core.mapId(map);
   if (map_id != expected_map_id)  // a solve of a deleted map whose name was created again: not this map's poses

@@ -4,22 +4,12 @@
 
 #include "blob_codec.hpp"
 #include "sglc/fingerprint.hpp"
+#include "validate.hpp"
 
 namespace sglc::storage::scan_table {
 namespace {
 
 using Code = StorageError::Code;
-
-void checkScan(const NewScan& scan) {
-  if (!scan.fingerprint) throw StorageError(Code::kInvalidArgument, "scan has no fingerprint");
-  checkName("robot", scan.robot);
-  checkName("session", scan.session);
-  if (scan.stamp && !std::isfinite(*scan.stamp)) throw StorageError(Code::kInvalidArgument, "stamp is not finite");
-  if (scan.odometry_pose && !scan.odometry_pose->allFinite())
-    throw StorageError(Code::kInvalidArgument, "odometry pose is not finite");
-  for (float v : scan.fingerprint->descriptor)
-    if (!std::isfinite(v)) throw StorageError(Code::kInvalidArgument, "descriptor is not finite");
-}
 
 // The scan's robot and session ids, inserting the rows of new ones (inside the caller's transaction; the
 // catalogue learns of them after the commit).
@@ -87,7 +77,7 @@ std::int64_t insertRow(const sql::Db& db, std::int64_t map_id, const Owner& o, c
 }  // namespace
 
 std::int64_t add(StoreCore& core, const NewScan& scan) {
-  checkScan(scan);
+  validate::scan(scan);
   const auto& descriptor = scan.fingerprint->descriptor;
   const auto fingerprint = serialize(*scan.fingerprint);
   const auto raw = scan.raw ? blob::fromRawScan(*scan.raw) : std::vector<std::uint8_t>();

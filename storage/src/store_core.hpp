@@ -33,7 +33,4 @@ struct StoreCore {
   mutable FingerprintCache cache;
 };
 
-// The wall clock in seconds (created_at columns).
-double nowSeconds();
-
 }  // namespace sglc::storage

@@ -1,0 +1,42 @@
+#include "validate.hpp"
+
+#include <cmath>
+
+#include "catalogue.hpp"
+
+namespace sglc::storage::validate {
+
+using Code = StorageError::Code;
+
+void scan(const NewScan& scan) {
+  if (!scan.fingerprint) throw StorageError(Code::kInvalidArgument, "scan has no fingerprint");
+  checkName("robot", scan.robot);
+  checkName("session", scan.session);
+  if (scan.stamp && !std::isfinite(*scan.stamp)) throw StorageError(Code::kInvalidArgument, "stamp is not finite");
+  if (scan.odometry_pose && !scan.odometry_pose->allFinite())
+    throw StorageError(Code::kInvalidArgument, "odometry pose is not finite");
+  for (float v : scan.fingerprint->descriptor)
+    if (!std::isfinite(v)) throw StorageError(Code::kInvalidArgument, "descriptor is not finite");
+}
+
+void loop(const LoopRecord& loop) {
+  if (!loop.T.allFinite() || !std::isfinite(loop.score) || !std::isfinite(loop.fitness) || !std::isfinite(loop.rmse) ||
+      (loop.information && !loop.information->allFinite()))
+    throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
+  if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
+}
+
+void optimised(const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames) {
+  for (const auto& p : poses)
+    if (!p.pose.allFinite()) throw StorageError(Code::kInvalidArgument, "optimised pose is not finite");
+  for (const auto& f : frames)
+    if (!f.T_map_session.allFinite()) throw StorageError(Code::kInvalidArgument, "session frame is not finite");
+}
+
+void newMap(const std::string& name, int dim) {
+  checkName("map", name);
+  if (dim <= 0 || dim > kMaxDescriptorDim)
+    throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1.." + std::to_string(kMaxDescriptorDim));
+}
+
+}  // namespace sglc::storage::validate
