@@ -9,6 +9,8 @@ PACKAGES=(
   libeigen3-dev libyaml-cpp-dev nlohmann-json3-dev libcli11-dev zlib1g-dev
   # map database: SQLite + FAISS (OpenBLAS makes FAISS's BLAS calls far faster than the reference BLAS)
   libsqlite3-dev libfaiss-dev libopenblas0-pthread
+  # the PostgreSQL map store: libpq to build; the server and its client programs (pg_dump) to test and back up
+  libpq-dev postgresql-15 postgresql-client-15
   # PCD and PLY scans (sglc_io links PCL's io and common modules only)
   libpcl-dev
   # service

@@ -28,6 +28,7 @@ grpc::StatusCode toGrpc(StorageError::Code code) {
     case StorageError::Code::kBusy:
       return grpc::StatusCode::UNAVAILABLE;
     case StorageError::Code::kReadOnly:
+    case StorageError::Code::kUnavailable:
       return grpc::StatusCode::UNAVAILABLE;
     case StorageError::Code::kCorrupt:
       return grpc::StatusCode::DATA_LOSS;

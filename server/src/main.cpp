@@ -117,7 +117,7 @@ std::unique_ptr<sglc::storage::MapStore> openStore(const Settings& s, grpc::Serv
   }
   const auto st = store->stats();
   spdlog::info("{}", sglc::logging::logLine({{"event", "serving"},
-                                             {"db", s.db},
+                                             {"db", sglc::storage::printableLocation(s.db)},
                                              {"maps", st.maps},
                                              {"scans", st.scans},
                                              {"load_ms", std::round(sglc::msSince(t0) * 10) / 10}}));

@@ -16,7 +16,8 @@ using namespace params;
   "server." #name, [](auto& s) -> auto& { return s.name; }
 
 void addServer(Table<Settings>& t) {
-  t.add(field<Settings>(SGLC_KEY(db), {}, "map database (SQLite file; created with its directory if missing)"));
+  t.add(field<Settings>(SGLC_KEY(db), {},
+                        "map database: a SQLite file (created with its directory if missing) or a postgresql:// URL"));
   t.add(field<Settings>(SGLC_KEY(listen), {}, "address to serve on (host:port)"));
   t.add(field<Settings>(SGLC_KEY(metrics_listen), {},
                         "serve Prometheus metrics over HTTP at host:port/metrics (empty: off; no TLS, no tokens: "
@@ -42,7 +43,8 @@ void addServer(Table<Settings>& t) {
   t.add(field<Settings>(SGLC_KEY(tls_cert), {}, "PEM certificate chain (TLS, with tls_key)"));
   t.add(field<Settings>(SGLC_KEY(tls_key), {}, "PEM private key"));
   t.add(field<Settings>(SGLC_KEY(backup_dir), {},
-                        "where the Backup call writes (plain file names only; empty: backups/ beside the database)"));
+                        "where the Backup call writes (plain file names only; empty: backups/ beside a SQLite "
+                        "database, var/backups for PostgreSQL)"));
   t.add(field<Settings>(SGLC_KEY(shutdown_grace_s), closed(0, 3600),
                         "on SIGTERM, calls in flight get this long to finish (s)"));
   t.rule({"server.tls_cert", "server.tls_key"}, "given together",
@@ -94,7 +96,9 @@ Settings settingsFrom(const std::string& config_path,
 
 Settings resolved(Settings s) {
   if (s.threads == 0) s.threads = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
-  if (s.backup_dir.empty()) s.backup_dir = (std::filesystem::path(s.db).parent_path() / "backups").string();
+  if (s.backup_dir.empty())
+    s.backup_dir =
+        storage::isPostgresUrl(s.db) ? "var/backups" : (std::filesystem::path(s.db).parent_path() / "backups").string();
   s.store.path = s.db;
   return s;
 }

@@ -9,9 +9,12 @@
 
 #include "admin.hpp"
 #include "map_index.hpp"
+#include "pg_store.hpp"
 #include "pose_graph_tables.hpp"
+#include "postgres.hpp"
 #include "scan_table.hpp"
 #include "store_core.hpp"
+#include "validate.hpp"
 
 namespace sglc::storage {
 
@@ -121,9 +124,7 @@ class SqliteMapStore final : public MapStore {
 };
 
 MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
-  checkName("map", name);
-  if (dim <= 0 || dim > kMaxDescriptorDim)
-    throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1.." + std::to_string(kMaxDescriptorDim));
+  validate::newMap(name, dim);
   std::lock_guard write(core_.write_mutex);
   {
     std::shared_lock lock(core_.state_mutex);
@@ -204,7 +205,11 @@ std::vector<SessionInfo> SqliteMapStore::listSessions(const std::string& map, co
 
 }  // namespace
 
+bool isPostgresUrl(const std::string& path) { return pg::isUrl(path); }
+std::string printableLocation(const std::string& path) { return pg::isUrl(path) ? pg::redacted(path) : path; }
+
 std::unique_ptr<MapStore> MapStore::open(const StoreOptions& options) {
+  if (pg::isUrl(options.path)) return pg::open(options);
   return std::make_unique<SqliteMapStore>(options);
 }
 

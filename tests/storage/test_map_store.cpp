@@ -9,11 +9,13 @@
 #include <map>
 #include <set>
 
+#include "backend.hpp"
 #include "storage_test_util.hpp"
 
 namespace sglc::storage {
 namespace {
 
+using testing::OnBothBackends;
 using testing::options;
 using testing::randomFingerprint;
 using testing::TempDir;
@@ -93,9 +95,8 @@ std::vector<std::int64_t> ids(const std::vector<SearchHit>& hits) {
   return out;
 }
 
-TEST(MapStore, StoresAndFindsItsOwnDescriptorFirst) {
-  TempDir dir;
-  auto store = MapStore::open(options(dir.file("map.db")));
+TEST_P(OnBothBackends, StoresAndFindsItsOwnDescriptorFirst) {
+  auto store = MapStore::open(db().options());
   const auto all = fill(*store, 2, 2, 10);
   for (const auto& s : {all[0], all[17], all[39]}) {
     SearchRequest req;
@@ -126,15 +127,13 @@ TEST(MapStore, StoresAndFindsItsOwnDescriptorFirst) {
   EXPECT_EQ(st.maps, 1);
 }
 
-TEST(MapStore, RoundTripAcrossReopenWithAndWithoutSnapshot) {
-  TempDir dir;
-  const auto path = dir.file("map.db");
+TEST_P(OnBothBackends, RoundTripAcrossReopenWithAndWithoutSnapshot) {
   std::vector<Stored> all;
   std::vector<std::vector<std::int64_t>> before;
   Mat4d pose = Mat4d::Identity();
   pose.topRightCorner<3, 1>() = Vec3d(1.5, -2.25, 0.125);
   {
-    auto store = MapStore::open(options(path));
+    auto store = MapStore::open(db().options());
     all = fill(*store, 2, 1, 15);
     NewScan ns;
     Fingerprint fp = randomFingerprint(424242);
@@ -150,8 +149,8 @@ TEST(MapStore, RoundTripAcrossReopenWithAndWithoutSnapshot) {
     }
   }
   for (int pass = 0; pass < 2; ++pass) {
-    if (pass == 1) std::filesystem::remove_all(path + ".index");  // force a rebuild from SQLite
-    auto store = MapStore::open(options(path));
+    if (pass == 1) db().forgetSnapshots();  // force a rebuild from SQLite
+    auto store = MapStore::open(db().options());
     EXPECT_EQ(store->stats().index_entries, static_cast<std::int64_t>(all.size()));
     for (std::size_t i = 0; i < all.size(); ++i) {
       const auto fp = store->fingerprint(all[i].id);
@@ -166,9 +165,8 @@ TEST(MapStore, RoundTripAcrossReopenWithAndWithoutSnapshot) {
   }
 }
 
-TEST(MapStore, FiltersKeepTheFullTopK) {
-  TempDir dir;
-  auto store = MapStore::open(options(dir.file("map.db")));
+TEST_P(OnBothBackends, FiltersKeepTheFullTopK) {
+  auto store = MapStore::open(db().options());
   const auto all = fill(*store, 3, 2, 12);
   const auto& q = all[5];
   const int k = 10;
@@ -232,9 +230,8 @@ TEST(MapStore, FiltersKeepTheFullTopK) {
 
 // Sequence numbers come from clients and may span the whole int64 range: the recent-scan exclusion measures
 // their distance without overflow (it wrapped, so the scans at the two ends counted as 1 apart).
-TEST(MapStore, RecentExclusionHoldsAtTheEndsOfTheSequenceRange) {
-  TempDir dir;
-  auto store = MapStore::open(options(dir.file("map.db")));
+TEST_P(OnBothBackends, RecentExclusionHoldsAtTheEndsOfTheSequenceRange) {
+  auto store = MapStore::open(db().options());
   const auto fp = randomFingerprint(3);
   store->createMap("m", static_cast<int>(fp.descriptor.size()));
   constexpr auto kMin = std::numeric_limits<std::int64_t>::min(), kMax = std::numeric_limits<std::int64_t>::max();
@@ -256,9 +253,8 @@ TEST(MapStore, RecentExclusionHoldsAtTheEndsOfTheSequenceRange) {
   EXPECT_EQ(seqsFound(2), (std::set<std::int64_t>{kMin, kMin + 3, kMax - 3, kMax}));
 }
 
-TEST(MapStore, RejectsBadWritesAndLeavesNothingBehind) {
-  TempDir dir;
-  auto store = MapStore::open(options(dir.file("map.db")));
+TEST_P(OnBothBackends, RejectsBadWritesAndLeavesNothingBehind) {
+  auto store = MapStore::open(db().options());
   const auto all = fill(*store, 1, 1, 3);
   Fingerprint fp = randomFingerprint(99);
   NewScan ns{.map = "m", .robot = "r0", .session = "s0", .seq = 1, .fingerprint = &fp};
@@ -293,12 +289,10 @@ TEST(MapStore, RejectsBadWritesAndLeavesNothingBehind) {
   EXPECT_EQ(store->integrityCheck(), "ok");
 }
 
-TEST(MapStore, DeletesSessionsAndRobotsFromIndexAndDatabase) {
-  TempDir dir;
-  const auto path = dir.file("map.db");
+TEST_P(OnBothBackends, DeletesSessionsAndRobotsFromIndexAndDatabase) {
   std::vector<Stored> all;
   {
-    auto store = MapStore::open(options(path));
+    auto store = MapStore::open(db().options());
     all = fill(*store, 2, 2, 5);
     EXPECT_EQ(store->deleteSession("m", "r0", "s1"), 5);
     EXPECT_EQ(store->deleteRobot("m", "r1"), 10);
@@ -313,7 +307,7 @@ TEST(MapStore, DeletesSessionsAndRobotsFromIndexAndDatabase) {
     store->deleteRobot("m", "r9");
   }
   for (int pass = 0; pass < 2; ++pass) {
-    auto store = MapStore::open(options(path));
+    auto store = MapStore::open(db().options());
     const auto st = store->stats("m");
     EXPECT_EQ(st.scans, 5);
     EXPECT_EQ(st.index_entries, 5);
@@ -331,13 +325,12 @@ TEST(MapStore, DeletesSessionsAndRobotsFromIndexAndDatabase) {
   }
 }
 
-TEST(MapStore, BackupIsACompleteMapAndNeverOverwrites) {
-  TempDir dir;
-  auto store = MapStore::open(options(dir.file("map.db")));
+TEST_P(OnBothBackends, BackupIsACompleteMapAndNeverOverwrites) {
+  auto store = MapStore::open(db().options());
   const auto all = fill(*store, 1, 2, 6);
-  store->backup(dir.file("backup.db"));
-  EXPECT_EQ(errorCode([&] { store->backup(dir.file("backup.db")); }), StorageError::Code::kAlreadyExists);
-  auto copy = MapStore::open(options(dir.file("backup.db")));
+  store->backup(db().file("backup.db"));
+  EXPECT_EQ(errorCode([&] { store->backup(db().file("backup.db")); }), StorageError::Code::kAlreadyExists);
+  auto copy = MapStore::open(db().restored(db().file("backup.db")));
   EXPECT_EQ(copy->stats().scans, 12);
   for (const auto& s : all) {
     const auto fp = copy->fingerprint(s.id);
@@ -422,9 +415,8 @@ TEST(MapStore, RefusesForeignCorruptAndNewerFilesWithoutTouchingThem) {
   EXPECT_EQ(errorCode([&] { MapStore::open(options(dir.file("adir"))); }), StorageError::Code::kInvalidArgument);
 }
 
-TEST(MapStore, FullDiskFailsTheWriteAndKeepsEverythingBefore) {
-  TempDir dir;
-  auto opts = options(dir.file("map.db"));
+TEST_P(OnBothBackends, FullDiskFailsTheWriteAndKeepsEverythingBefore) {
+  auto opts = db().options();
   opts.max_db_mb = 0.5;  // a quota is how SQLite reports a full disk (SQLITE_FULL)
   opts.sync = StoreOptions::Sync::kFull;
   std::vector<std::int64_t> stored;
@@ -489,9 +481,8 @@ TEST(MapStore, ReadOnlyDirectoryAndFileGiveAClearError) {
   EXPECT_EQ(fileBytes(ro_dir + "/existing.db"), before);
 }
 
-TEST(MapStore, CacheServesRepeatsAndStaysWithinItsBudget) {
-  TempDir dir;
-  auto opts = options(dir.file("map.db"));
+TEST_P(OnBothBackends, CacheServesRepeatsAndStaysWithinItsBudget) {
+  auto opts = db().options();
   opts.cache_mb = 0.05;  // room for a handful of fingerprints
   auto store = MapStore::open(opts);
   const auto all = fill(*store, 1, 1, 30);
@@ -504,9 +495,8 @@ TEST(MapStore, CacheServesRepeatsAndStaysWithinItsBudget) {
   EXPECT_GT(store->stats().cache_mb, 0.0);
 }
 
-TEST(MapStore, ApproximateIndexAgreesWithExactSearch) {
-  TempDir dir;
-  auto opts = options(dir.file("map.db"));
+TEST_P(OnBothBackends, ApproximateIndexAgreesWithExactSearch) {
+  auto opts = db().options();
   std::vector<Stored> all;
   {
     auto store = MapStore::open(opts);
@@ -568,13 +558,11 @@ TEST(MapStore, DamagedRowsAreCorruptNotServed) {
   EXPECT_EQ(errorCode([&] { MapStore::open(options(path)); }), StorageError::Code::kCorrupt);
 }
 
-TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
-  TempDir dir;
-  const auto path = dir.file("map.db");
+TEST_P(OnBothBackends, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
   std::vector<Stored> all;
   std::int64_t old_id = 0, old_session = 0;
   {
-    auto store = MapStore::open(options(path));
+    auto store = MapStore::open(db().options());
     store->createMap("other", DescriptorLayout{}.scanDim());
     Fingerprint keep = randomFingerprint(4242);
     store->addScan({.map = "other", .robot = "x", .session = "s", .seq = 0, .fingerprint = &keep});
@@ -600,7 +588,7 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
   for (int i = 0; i < 12; ++i) fresh.push_back(randomFingerprint(90000 + static_cast<std::uint64_t>(i)));
   std::vector<std::int64_t> fresh_ids;
   {
-    auto o = options(path);
+    auto o = db().options();
     o.snapshot_index = false;
     auto store = MapStore::open(o);
     store->createMap("m", DescriptorLayout{}.scanDim());
@@ -615,7 +603,7 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
       fresh_ids.push_back(
           store->addScan({.map = "m", .robot = "n", .session = "s", .seq = i, .fingerprint = &fresh[i]}));
   }
-  auto store = MapStore::open(options(path));  // reopened: from the database and whatever snapshots remain
+  auto store = MapStore::open(db().options());  // reopened: from the database and whatever snapshots remain
   const auto nodes = store->graphNodes("m");
   EXPECT_EQ(errorCode([&] {
               store->saveOptimised("m", old_id, {{fresh_ids[0], rigid(0.2, 1, 0)}},
@@ -640,13 +628,11 @@ TEST(MapStore, DeletesAWholeMapAndANewOneOfTheNameStartsEmpty) {
   EXPECT_EQ(store->integrityCheck(), "ok");
 }
 
-TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
-  TempDir dir;
-  const auto path = dir.file("map.db");
+TEST_P(OnBothBackends, PoseGraphRowsPersistAndFollowDeletes) {
   std::vector<Stored> all;
   std::int64_t id_a2 = 0;
   {
-    auto store = MapStore::open(options(path));
+    auto store = MapStore::open(db().options());
     all = fill(*store, 2, 1, 3);  // r0/s0: all[0..2], r1/s0: all[3..5]
     EXPECT_EQ(store->graphVersion("m"), 0);
     EXPECT_EQ(store->optimisedThroughLoop("m"), 0);
@@ -681,7 +667,7 @@ TEST(MapStore, PoseGraphRowsPersistAndFollowDeletes) {
     EXPECT_EQ(store->saveOptimised("m", map_id, poses, frames, id_a2), 2);
   }
   {
-    auto store = MapStore::open(options(path));  // everything survives a reopen
+    auto store = MapStore::open(db().options());  // everything survives a reopen
     EXPECT_EQ(store->graphVersion("m"), 2);
     EXPECT_EQ(store->optimisedThroughLoop("m"), id_a2);
     const auto loops = store->loops("m");
@@ -844,6 +830,15 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
   EXPECT_TRUE((loops[1].information->array() == info.array()).all());  // bit-exact
   EXPECT_EQ(store->integrityCheck(), "ok");
 }
+
+}  // namespace
+}  // namespace sglc::storage
+
+namespace sglc::storage {
+namespace {
+
+INSTANTIATE_TEST_SUITE_P(MapStore, OnBothBackends, ::testing::Values("sqlite", "postgresql"),
+                         [](const ::testing::TestParamInfo<std::string>& info) { return info.param; });
 
 }  // namespace
 }  // namespace sglc::storage

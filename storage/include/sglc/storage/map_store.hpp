@@ -33,6 +33,7 @@ class StorageError : public std::runtime_error {
     kFull,             // disk full
     kBusy,             // locked by another process for longer than the busy timeout
     kIo,               // any other I/O failure
+    kUnavailable,      // the database server cannot be reached (PostgreSQL); worth a retry
   };
   StorageError(Code code, const std::string& message) : std::runtime_error(message), code_(code) {}
   // A failure of the database engine: `message` says what it means for the caller (no SQL, no paths), `detail`
@@ -56,7 +57,10 @@ struct IndexOptions {
 };
 
 struct StoreOptions {
-  std::string path;  // SQLite file; created (with its directory) if missing
+  // A SQLite file, created (with its directory) if missing; or a PostgreSQL database as a libpq URL
+  // (postgresql://user@host:port/dbname?sslmode=...), whose tables are created if missing. Several servers may
+  // share one PostgreSQL database; a SQLite file is opened by one process at a time.
+  std::string path;
   enum class Sync { kOff, kNormal, kFull };
   Sync sync = Sync::kFull;  // SQLite synchronous mode: kFull survives power loss, kNormal only process crashes
   int busy_timeout_ms = 5000;
@@ -253,6 +257,11 @@ class MapStore {
   // larger ids are not yet reflected in the stored poses.
   virtual std::int64_t optimisedThroughLoop(const std::string& map) const = 0;
 };
+
+// True when `path` names a PostgreSQL database (postgresql://... or postgres://...) rather than a SQLite file.
+bool isPostgresUrl(const std::string& path);
+// `path` as logs may show it: a PostgreSQL URL's password replaced by ***.
+std::string printableLocation(const std::string& path);
 
 // Schema version this build writes; older files are migrated forward on open.
 inline constexpr int kSchemaVersion = 5;

@@ -1,0 +1,103 @@
+// What the parts of the PostgreSQL map store share: the connections, the catalogue with the descriptor
+// indexes (a cache of the database, as in the SQLite store), the fingerprint cache, and the change journal that
+// keeps several processes' caches in step.
+//
+// Any number of server processes (replicas) may open one database. Every write takes one database-wide
+// advisory lock for its transaction, so writes commit in the order of their ids (scans, loops and journal
+// entries alike): a reader that has seen id n has seen every committed id below it. Each write appends an entry
+// to the journal (sglc_changes) and notifies; a process applies other processes' entries to its catalogue and
+// indexes when notified (or polled), and before each of its own writes, under the lock.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "catalogue.hpp"
+#include "fair_shared_mutex.hpp"
+#include "fingerprint_cache.hpp"
+#include "postgres.hpp"
+
+namespace sglc::storage::pg {
+
+// Advisory lock keys: (kLockSpace, kWriteLock) orders every write; (kLockSpace, kSchemaLock) the migrations.
+constexpr std::int32_t kLockSpace = 0x53474C43;  // "SGLC"
+constexpr std::int32_t kSchemaLock = 0, kWriteLock = 1;
+
+// Journal entry kinds (sglc_changes.kind); map_id names the map, ref the row.
+enum class Change : std::int16_t {
+  kMapCreated = 1,
+  kMapDeleted = 2,
+  kScanAdded = 3,
+  kSessionDeleted = 4,
+  kRobotDeleted = 5
+};
+
+struct Core {
+  explicit Core(const StoreOptions& options);
+
+  const StoreOptions options;
+  const std::string url;  // redacted, for messages
+  Conn writer;            // under write_mutex
+  Pool readers;
+  mutable std::mutex write_mutex;
+  mutable FairSharedMutex state_mutex;  // catalogue + indexes + applied
+  Catalogue catalogue;
+  mutable FingerprintCache cache;
+  std::int64_t applied = 0;  // the last journal entry the catalogue and indexes reflect
+
+  // The id of `map` in the catalogue (kNotFound), under a shared lock of its own.
+  std::int64_t mapId(const std::string& map) const;
+};
+
+// A write: holds write_mutex and a transaction on the writer that holds the database-wide write lock, and has
+// applied every other process's committed change. Commit with commit(); destruction rolls back.
+class WriteTx {
+ public:
+  explicit WriteTx(Core& core);
+  // Appends a journal entry and a notification to this transaction; returns the entry's id.
+  std::int64_t journal(Change kind, std::int64_t map_id, std::int64_t ref);
+  // Commits, then runs `apply` (the change to the catalogue and indexes) under the exclusive state lock, so no
+  // reader sees the one without the other, and records `entry` (0: none) as applied.
+  template <typename Apply>
+  void commit(std::int64_t entry, Apply apply) {
+    std::unique_lock lock(core_.state_mutex);
+    tx_.commit();
+    apply();
+    if (entry > core_.applied) core_.applied = entry;
+  }
+  const Conn& conn() const { return core_.writer; }
+
+ private:
+  Core& core_;
+  std::lock_guard<std::mutex> write_;
+  Transaction tx_;
+};
+
+namespace journal {
+// Reads the whole catalogue and every map's index in one snapshot, with the journal position it matches.
+void load(Core& core);
+// Applies the journal's entries after core.applied (the caller holds write_mutex).
+void catchUp(Core& core);
+}  // namespace journal
+
+// Follows other processes' writes: LISTENs for the journal's notifications and catches up on each, and at
+// least every poll_ms in case a notification was missed (a dropped connection).
+class Follower {
+ public:
+  Follower(Core& core, int poll_ms);
+  ~Follower();
+  Follower(const Follower&) = delete;
+  Follower& operator=(const Follower&) = delete;
+
+ private:
+  void run();
+  Core& core_;
+  const int poll_ms_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+};
+
+}  // namespace sglc::storage::pg

@@ -1,0 +1,224 @@
+// The change journal: loading the catalogue and indexes from one snapshot, applying other processes' writes
+// in journal order, the write transaction that keeps that order, and the thread that follows notifications.
+#include <poll.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "map_index.hpp"
+#include "pg_core.hpp"
+
+namespace sglc::storage::pg {
+namespace {
+
+using Code = StorageError::Code;
+
+constexpr const char* kChannel = "sglc_changes";
+constexpr std::int64_t kBatch = 20000;
+
+MapState newMap(const Core& core, std::int64_t id, std::string name, std::int64_t dim) {
+  if (dim < 1 || dim > kMaxDescriptorDim)
+    throw StorageError(Code::kCorrupt, "map '" + name + "' has descriptor dimension " + std::to_string(dim) + " (1.." +
+                                           std::to_string(kMaxDescriptorDim) + " expected)");
+  MapState m;
+  m.id = id;
+  m.name = std::move(name);
+  m.dim = static_cast<int>(dim);
+  m.index = std::make_unique<DescriptorIndex>(m.dim, core.options.index);
+  return m;
+}
+
+// Columns: id, robot_id, session_id, seq, stamp, descriptor starting at `col`.
+IndexEntry entryOf(const Result& r, int row, int col, const MapState& m) {
+  const auto blob = r.blob(row, col + 5);
+  if (blob.size() != static_cast<std::size_t>(m.dim) * sizeof(float))
+    throw StorageError(Code::kCorrupt, "scan " + std::to_string(r.i64(row, col)) + " of map '" + m.name +
+                                           "' has a descriptor of the wrong length");
+  return {r.i64(row, col), r.i64(row, col + 1), r.i64(row, col + 2), r.i64(row, col + 3),
+          r.isNull(row, col + 4) ? std::nan("") : r.f64(row, col + 4)};
+}
+
+void loadScans(const Core& core, MapState& m) {
+  std::vector<IndexEntry> entries;
+  std::vector<float> vectors;
+  for (std::int64_t after = 0;;) {
+    const auto r = core.writer.query(
+        "SELECT id, robot_id, session_id, seq, stamp, descriptor FROM scans WHERE map_id = $1 AND id > $2"
+        " ORDER BY id LIMIT $3",
+        {m.id, after, kBatch});
+    for (int i = 0; i < r.rows(); ++i) {
+      entries.push_back(entryOf(r, i, 0, m));
+      const auto* f = reinterpret_cast<const float*>(r.blob(i, 5).data());
+      vectors.insert(vectors.end(), f, f + m.dim);
+    }
+    if (r.rows() < kBatch) break;
+    after = entries.back().scan_id;
+  }
+  m.index->build(std::move(entries), vectors);
+}
+
+MapState* mapById(Core& core, std::int64_t id) {
+  const auto name = core.catalogue.nameOf(id);
+  return name.empty() ? nullptr : &core.catalogue.map(name);
+}
+
+// Drops the scans `keep` selects from m's index and the fingerprint cache.
+template <typename Pred>
+void dropScans(Core& core, MapState& m, Pred keep) {
+  const auto ids = m.index->liveIds(keep);
+  m.index->remove(ids);
+  for (const auto id : ids) core.cache.erase(id);
+}
+
+// Columns of catchUp's query: 0 id, 1 kind, 2 map_id, 3 ref, 4 map name, 5 dim, 6 robot name, 7 session name,
+// 8.. scan (id, robot_id, session_id, seq, stamp, descriptor).
+void apply(Core& core, const Result& r, int i) {
+  const auto kind = static_cast<Change>(r.i64(i, 1));
+  const auto map_id = r.i64(i, 2), ref = r.i64(i, 3);
+  if (kind == Change::kMapCreated) {
+    if (!r.isNull(i, 4) && core.catalogue.nameOf(map_id).empty())
+      core.catalogue.add(newMap(core, map_id, r.text(i, 4), r.i64(i, 5)));
+    return;
+  }
+  MapState* m = mapById(core, map_id);
+  if (!m) return;  // deleted since
+  switch (kind) {
+    case Change::kMapDeleted:
+      dropScans(core, *m, [](const IndexEntry&) { return true; });
+      core.catalogue.remove(m->name);
+      break;
+    case Change::kScanAdded: {
+      if (r.isNull(i, 8)) break;  // deleted since: its deletion follows in the journal
+      const auto e = entryOf(r, i, 8, *m);
+      m->robots[r.text(i, 6)] = e.robot_id;
+      m->sessions[{e.robot_id, r.text(i, 7)}] = e.session_id;
+      m->index->add(e, reinterpret_cast<const float*>(r.blob(i, 13).data()));
+      break;
+    }
+    case Change::kSessionDeleted:
+      dropScans(core, *m, [&](const IndexEntry& e) { return e.session_id == ref; });
+      std::erase_if(m->sessions, [&](const auto& s) { return s.second == ref; });
+      break;
+    case Change::kRobotDeleted:
+      dropScans(core, *m, [&](const IndexEntry& e) { return e.robot_id == ref; });
+      std::erase_if(m->sessions, [&](const auto& s) { return s.first.first == ref; });
+      std::erase_if(m->robots, [&](const auto& r) { return r.second == ref; });
+      break;
+    default:
+      break;
+  }
+}
+
+}  // namespace
+
+std::int64_t Core::mapId(const std::string& map) const {
+  std::shared_lock lock(state_mutex);
+  return catalogue.map(map).id;
+}
+
+namespace journal {
+
+void load(Core& core) {
+  const Conn& db = core.writer;
+  Transaction tx(db);
+  db.exec("SET TRANSACTION ISOLATION LEVEL REPEATABLE READ READ ONLY");  // one snapshot for all that follows
+  core.applied = db.query("SELECT coalesce(max(id), 0) FROM sglc_changes").i64(0, 0);
+  {
+    const auto r = db.query("SELECT id, name, descriptor_dim FROM maps ORDER BY id");
+    for (int i = 0; i < r.rows(); ++i) core.catalogue.add(newMap(core, r.i64(i, 0), r.text(i, 1), r.i64(i, 2)));
+  }
+  {
+    const auto r = db.query("SELECT id, map_id, name FROM robots");
+    for (int i = 0; i < r.rows(); ++i)
+      if (auto* m = mapById(core, r.i64(i, 1))) m->robots[r.text(i, 2)] = r.i64(i, 0);
+  }
+  {
+    const auto r =
+        db.query("SELECT x.id, x.robot_id, x.name, r.map_id FROM sessions x JOIN robots r ON r.id = x.robot_id");
+    for (int i = 0; i < r.rows(); ++i)
+      if (auto* m = mapById(core, r.i64(i, 3))) m->sessions[{r.i64(i, 1), r.text(i, 2)}] = r.i64(i, 0);
+  }
+  for (auto& [name, m] : core.catalogue.maps()) loadScans(core, m);
+  tx.commit();
+}
+
+void catchUp(Core& core) {
+  for (;;) {
+    const auto r = core.writer.query(
+        "SELECT c.id, c.kind, c.map_id, c.ref, m.name, m.descriptor_dim, rb.name, x.name,"
+        " s.id, s.robot_id, s.session_id, s.seq, s.stamp, s.descriptor"
+        " FROM sglc_changes c LEFT JOIN maps m ON c.kind = 1 AND m.id = c.map_id"
+        " LEFT JOIN scans s ON c.kind = 3 AND s.id = c.ref LEFT JOIN robots rb ON rb.id = s.robot_id"
+        " LEFT JOIN sessions x ON x.id = s.session_id WHERE c.id > $1 ORDER BY c.id LIMIT $2",
+        {core.applied, kBatch});
+    if (r.rows() == 0) return;
+    std::unique_lock lock(core.state_mutex);
+    for (int i = 0; i < r.rows(); ++i) {
+      apply(core, r, i);
+      core.applied = r.i64(i, 0);
+    }
+    if (r.rows() < kBatch) return;
+  }
+}
+
+}  // namespace journal
+
+// The writer, reconnected first if the server dropped it (a restart): the transaction then begins on it.
+const Conn& reconnected(Core& core) {
+  core.writer.ensureOpen();
+  return core.writer;
+}
+
+WriteTx::WriteTx(Core& core) : core_(core), write_(core.write_mutex), tx_(reconnected(core)) {
+  core_.writer.query("SELECT pg_advisory_xact_lock($1, $2)", {kLockSpace, kWriteLock});
+  journal::catchUp(core_);
+}
+
+std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref) {
+  const auto r = core_.writer.query("INSERT INTO sglc_changes(map_id, kind, ref) VALUES($1, $2, $3) RETURNING id",
+                                    {map_id, static_cast<int>(kind), ref});
+  core_.writer.query("SELECT pg_notify($1, '')", {kChannel});
+  return r.i64(0, 0);
+}
+
+Follower::Follower(Core& core, int poll_ms) : core_(core), poll_ms_(poll_ms), thread_([this] { run(); }) {}
+
+Follower::~Follower() {
+  stop_ = true;
+  thread_.join();
+}
+
+void Follower::run() {
+  std::unique_ptr<Conn> listener;
+  while (!stop_) {
+    try {
+      if (!listener || !listener->ensureOpen()) {
+        listener = std::make_unique<Conn>(core_.options.path);
+        listener->exec(std::string("LISTEN ") + kChannel);
+      }
+      // Wait for a notification in slices short enough to notice stop_ soon.
+      pollfd pfd{PQsocket(listener->get()), POLLIN, 0};
+      bool notified = false;
+      for (int waited = 0; waited < poll_ms_ && !stop_ && !notified; waited += 100) {
+        if (::poll(&pfd, 1, 100) > 0) {
+          PQconsumeInput(listener->get());
+          while (PGnotify* n = PQnotifies(listener->get())) {
+            notified = true;
+            PQfreemem(n);
+          }
+          if (PQstatus(listener->get()) != CONNECTION_OK) break;
+        }
+      }
+      if (stop_) break;
+      std::lock_guard write(core_.write_mutex);
+      if (core_.writer.ensureOpen()) journal::catchUp(core_);
+    } catch (const StorageError&) {
+      // The database is unreachable: try again after a pause (the next write reports it to its caller).
+      listener.reset();
+      for (int i = 0; i < poll_ms_ / 100 + 1 && !stop_; ++i)
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+  }
+}
+
+}  // namespace sglc::storage::pg

@@ -1,0 +1,251 @@
+#include "postgres.hpp"
+
+#include <endian.h>
+
+#include <array>
+#include <cstdio>
+#include <cstring>
+
+namespace sglc::storage::pg {
+namespace {
+
+using Code = StorageError::Code;
+
+// Type OIDs of PostgreSQL's built-in types (fixed in its catalogue).
+constexpr Oid kBool = 16, kBytea = 17, kName = 19, kInt8 = 20, kInt2 = 21, kInt4 = 23, kText = 25, kFloat4 = 700,
+              kFloat8 = 701, kVarchar = 1043;
+
+template <typename T>
+T bigEndian(const char* p) {
+  T v;
+  std::memcpy(&v, p, sizeof(T));
+  if constexpr (sizeof(T) == 8) return static_cast<T>(be64toh(static_cast<std::uint64_t>(v)));
+  if constexpr (sizeof(T) == 4) return static_cast<T>(be32toh(static_cast<std::uint32_t>(v)));
+  if constexpr (sizeof(T) == 2) return static_cast<T>(be16toh(static_cast<std::uint16_t>(v)));
+  return v;
+}
+
+// SQLSTATE (PostgreSQL's error code) to our codes.
+Code classify(const char* sqlstate) {
+  const std::string s = sqlstate ? sqlstate : "";
+  if (s == "23505") return Code::kAlreadyExists;             // unique_violation
+  if (s == "23503") return Code::kNotFound;                  // foreign_key_violation: a row it refers to is gone
+  if (s == "53100") return Code::kFull;                      // disk_full
+  if (s == "25006" || s == "42501") return Code::kReadOnly;  // read-only transaction, insufficient privilege
+  if (s == "55P03" || s == "40001" || s == "40P01" || s == "57014") return Code::kBusy;  // lock/statement timeout
+  if (s.rfind("08", 0) == 0 || s.rfind("57P", 0) == 0 || s.empty()) return Code::kUnavailable;  // connection
+  if (s == "XX001" || s == "XX002" || s == "42P01" || s == "42703") return Code::kCorrupt;      // damage, missing table
+  return Code::kIo;
+}
+
+void ignoreNotice(void*, const char*) {}
+
+}  // namespace
+
+bool isUrl(const std::string& path) { return path.rfind("postgresql://", 0) == 0 || path.rfind("postgres://", 0) == 0; }
+
+std::string redacted(const std::string& url) {
+  // scheme://[user[:password]@]host...: the password is between the first ':' after the scheme and the '@'.
+  const auto scheme = url.find("://");
+  if (scheme == std::string::npos) return url;
+  const auto at = url.find('@', scheme + 3);
+  const auto slash = url.find('/', scheme + 3);
+  std::string out = url;
+  if (at != std::string::npos && (slash == std::string::npos || at < slash)) {
+    const auto colon = url.find(':', scheme + 3);
+    if (colon != std::string::npos && colon < at) out = url.substr(0, colon + 1) + "***" + url.substr(at);
+  }
+  // password=... among the query parameters.
+  for (auto p = out.find("password="); p != std::string::npos; p = out.find("password=", p + 12)) {
+    const auto end = out.find('&', p);
+    out = out.substr(0, p + 9) + "***" + (end == std::string::npos ? "" : out.substr(end));
+  }
+  return out;
+}
+
+Param::Param(double v) {
+  std::array<char, 32> buf{};
+  std::snprintf(buf.data(), buf.size(), "%.17g", v);  // round-trips every finite double
+  text_ = buf.data();
+}
+
+std::int64_t Result::i64(int row, int col) const {
+  const char* p = PQgetvalue(r_.get(), row, col);
+  switch (PQftype(r_.get(), col)) {
+    case kInt8:
+      return bigEndian<std::int64_t>(p);
+    case kInt4:
+      return bigEndian<std::int32_t>(p);
+    case kInt2:
+      return bigEndian<std::int16_t>(p);
+    case kBool:
+      return *p != 0;
+    default:
+      throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt),
+                         "column " + std::to_string(col) + " is not an integer");
+  }
+}
+
+double Result::f64(int row, int col) const {
+  const char* p = PQgetvalue(r_.get(), row, col);
+  switch (PQftype(r_.get(), col)) {
+    case kFloat8: {
+      const auto bits = bigEndian<std::uint64_t>(p);
+      double v;
+      std::memcpy(&v, &bits, sizeof v);
+      return v;
+    }
+    case kFloat4: {
+      const auto bits = bigEndian<std::uint32_t>(p);
+      float v;
+      std::memcpy(&v, &bits, sizeof v);
+      return v;
+    }
+    default:
+      return static_cast<double>(i64(row, col));
+  }
+}
+
+std::string Result::text(int row, int col) const {
+  const auto type = PQftype(r_.get(), col);
+  if (type != kText && type != kVarchar && type != kName)
+    throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt), "column " + std::to_string(col) + " is not text");
+  return {PQgetvalue(r_.get(), row, col), static_cast<std::size_t>(PQgetlength(r_.get(), row, col))};
+}
+
+std::span<const std::uint8_t> Result::blob(int row, int col) const {
+  if (PQftype(r_.get(), col) != kBytea)
+    throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt), "column " + std::to_string(col) + " is not bytea");
+  return {reinterpret_cast<const std::uint8_t*>(PQgetvalue(r_.get(), row, col)),
+          static_cast<std::size_t>(PQgetlength(r_.get(), row, col))};
+}
+
+std::string meaning(Code code) {
+  switch (code) {
+    case Code::kFull:
+      return "the map database's disk is full (or the database reached its size limit)";
+    case Code::kReadOnly:
+      return "the map database cannot be written (read-only server, or no permission)";
+    case Code::kCorrupt:
+      return "the map database is damaged or not an SGLC map";
+    case Code::kBusy:
+      return "the map database is busy (a lock was not granted in time)";
+    case Code::kAlreadyExists:
+      return "the record already exists";
+    case Code::kNotFound:
+      return "a record it refers to no longer exists";
+    case Code::kUnavailable:
+      return "the map database (PostgreSQL) cannot be reached";
+    default:
+      return "the map database had an error";
+  }
+}
+
+Conn::Conn(const std::string& url) : redacted_(redacted(url)) {
+  char* parse_error = nullptr;
+  PQconninfoOption* parsed = PQconninfoParse(url.c_str(), &parse_error);
+  if (!parsed) {
+    std::string why = parse_error ? parse_error : "out of memory";
+    PQfreemem(parse_error);
+    throw StorageError(Code::kInvalidArgument, "the PostgreSQL URL " + redacted_ + " is not valid", why);
+  }
+  PQconninfoFree(parsed);
+  // Our defaults first: the URL's own settings (expanded from dbname) override them.
+  const std::array<const char*, 4> keys = {"connect_timeout", "application_name", "dbname", nullptr};
+  const std::array<const char*, 4> values = {"10", "sglc", url.c_str(), nullptr};
+  c_.reset(PQconnectdbParams(keys.data(), values.data(), 1));
+  if (!c_ || PQstatus(c_.get()) != CONNECTION_OK)
+    throw StorageError(Code::kUnavailable, "cannot connect to PostgreSQL at " + redacted_,
+                       c_ ? PQerrorMessage(c_.get()) : "out of memory");
+  PQsetNoticeProcessor(c_.get(), &ignoreNotice, nullptr);
+}
+
+void Conn::fail(const PGresult* r, const char* sql) const {
+  const char* state = r ? PQresultErrorField(r, PG_DIAG_SQLSTATE) : nullptr;
+  const auto code = r && PQstatus(c_.get()) == CONNECTION_OK ? classify(state) : Code::kUnavailable;
+  std::string detail = std::string(sql).substr(0, 120) + ": ";
+  detail += r && PQresultErrorMessage(r)[0] ? PQresultErrorMessage(r) : PQerrorMessage(c_.get());
+  while (!detail.empty() && detail.back() == '\n') detail.pop_back();
+  throw StorageError(code, meaning(code), detail);
+}
+
+void Conn::exec(const std::string& sql) const {
+  PGresult* r = PQexec(c_.get(), sql.c_str());
+  Result owned(r);
+  const auto status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) fail(r, sql.c_str());
+}
+
+Result Conn::query(const char* sql, const std::vector<Param>& params) const {
+  std::vector<const char*> values;
+  std::vector<int> lengths, formats;
+  for (const auto& p : params) {
+    values.push_back(p.data());
+    lengths.push_back(p.length());
+    formats.push_back(p.binary() ? 1 : 0);
+  }
+  PGresult* r = PQexecParams(c_.get(), sql, static_cast<int>(params.size()), nullptr, values.data(), lengths.data(),
+                             formats.data(), 1);
+  const auto status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+  if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) {
+    Result owned(r);
+    fail(r, sql);
+  }
+  return Result(r);
+}
+
+void Conn::copyIn(const std::string& copy_sql, const std::string& data) const {
+  {
+    PGresult* r = PQexec(c_.get(), copy_sql.c_str());
+    Result owned(r);
+    if (!r || PQresultStatus(r) != PGRES_COPY_IN) fail(r, copy_sql.c_str());
+  }
+  if (PQputCopyData(c_.get(), data.data(), static_cast<int>(data.size())) != 1 || PQputCopyEnd(c_.get(), nullptr) != 1)
+    fail(nullptr, copy_sql.c_str());
+  while (PGresult* r = PQgetResult(c_.get())) {
+    Result owned(r);
+    if (PQresultStatus(r) != PGRES_COMMAND_OK) fail(r, copy_sql.c_str());
+  }
+}
+
+bool Conn::ensureOpen() const {
+  if (PQstatus(c_.get()) == CONNECTION_OK) return true;
+  PQreset(c_.get());
+  return PQstatus(c_.get()) == CONNECTION_OK;
+}
+
+Transaction::Transaction(const Conn& conn) : conn_(conn) { conn_.exec("BEGIN"); }
+
+Transaction::~Transaction() {
+  if (done_) return;
+  try {
+    conn_.exec("ROLLBACK");
+  } catch (const StorageError&) {
+    // The connection is gone: the server rolls the transaction back itself.
+  }
+}
+
+void Transaction::commit() {
+  conn_.exec("COMMIT");
+  done_ = true;
+}
+
+Pool::Lease Pool::acquire() const {
+  {
+    std::lock_guard lock(mutex_);
+    while (!idle_.empty()) {
+      auto conn = std::move(idle_.back());
+      idle_.pop_back();
+      if (conn->ensureOpen()) return {*this, std::move(conn)};
+    }
+  }
+  return {*this, std::make_unique<Conn>(url_)};
+}
+
+void Pool::release(std::unique_ptr<Conn> conn) const {
+  if (PQstatus(conn->get()) != CONNECTION_OK || PQtransactionStatus(conn->get()) != PQTRANS_IDLE) return;
+  std::lock_guard lock(mutex_);
+  if (idle_.size() < kKept) idle_.push_back(std::move(conn));
+}
+
+}  // namespace sglc::storage::pg

@@ -1,0 +1,188 @@
+// What only the PostgreSQL map store has: a server to reach, other applications' databases to refuse, and other
+// processes (replicas) writing the same map. The behaviour both back-ends share is tested on both in
+// test_map_store.cpp.
+#include <chrono>
+#include <thread>
+
+#include "backend.hpp"
+
+namespace sglc::storage {
+namespace {
+
+using testing::Backend;
+using testing::randomFingerprint;
+
+StorageError::Code errorCode(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const StorageError& e) {
+    return e.code();
+  }
+  ADD_FAILURE() << "no StorageError thrown";
+  return StorageError::Code::kIo;
+}
+
+class PostgresStore : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!backend_.unavailable().empty()) GTEST_SKIP() << backend_.unavailable();
+  }
+  // SQL on the test's database behind the store's back.
+  void exec(const std::string& sql) { pg::Conn(backend_.options().path).exec(sql); }
+  Backend backend_{"postgresql"};
+};
+
+// Waits (up to a minute, far beyond any expected lag) until `done` holds; the test asserts the result, so a
+// slow machine only makes it slower.
+bool eventually(const std::function<bool()>& done) {
+  for (int i = 0; i < 6000; ++i) {
+    if (done()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return done();
+}
+
+std::vector<std::int64_t> hits(const MapStore& store, const Fingerprint& fp, int k = 50) {
+  std::vector<std::int64_t> out;
+  for (const auto& h : store.search({.map = "m", .descriptor = fp.descriptor, .k = k})) out.push_back(h.scan_id);
+  return out;
+}
+
+TEST_F(PostgresStore, AnUnreachableServerIsUnavailableAndItsPasswordStaysSecret) {
+  auto o = backend_.options();
+  o.path = "postgresql://sglc:s3cret@127.0.0.1:1/map?connect_timeout=5";
+  try {
+    MapStore::open(o);
+    ADD_FAILURE() << "opened a store on a closed port";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kUnavailable);
+    EXPECT_NE(std::string(e.what()).find("127.0.0.1:1"), std::string::npos) << e.what();
+    EXPECT_EQ(std::string(e.what()).find("s3cret"), std::string::npos) << e.what();
+    EXPECT_EQ(e.detail().find("s3cret"), std::string::npos) << e.detail();
+  }
+  o.path = "postgresql://[::1";  // not a URL libpq can parse
+  EXPECT_EQ(errorCode([&] { MapStore::open(o); }), StorageError::Code::kInvalidArgument);
+  EXPECT_EQ(pg::redacted("postgresql://u:pw@h/db?password=x&sslmode=require"),
+            "postgresql://u:***@h/db?password=***&sslmode=require");
+}
+
+TEST_F(PostgresStore, RefusesAForeignDatabaseAndANewerSchemaWithoutTouchingThem) {
+  exec("CREATE TABLE inventory(x integer); INSERT INTO inventory VALUES (7)");
+  EXPECT_EQ(errorCode([&] { backend_.open(); }), StorageError::Code::kCorrupt);
+  pg::Conn conn(backend_.options().path);
+  EXPECT_EQ(conn.query("SELECT count(*) FROM pg_tables WHERE schemaname = 'public'").i64(0, 0), 1);
+  exec("DROP TABLE inventory");
+  { backend_.open()->createMap("m", 8); }
+  exec("UPDATE sglc_meta SET value = '99' WHERE key = 'schema_version'");
+  try {
+    backend_.open();
+    ADD_FAILURE() << "opened a newer schema";
+  } catch (const StorageError& e) {
+    EXPECT_EQ(e.code(), StorageError::Code::kNewerSchema);
+    EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(conn.query("SELECT count(*) FROM maps").i64(0, 0), 1);
+}
+
+TEST_F(PostgresStore, DamagedRowsAreCorruptNotServed) {
+  std::int64_t a = 0, b = 0;
+  {
+    auto store = backend_.open();
+    const auto fp = randomFingerprint(5);
+    store->createMap("m", static_cast<int>(fp.descriptor.size()));
+    a = store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
+    b = store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 1, .fingerprint = &fp});
+    store->addLoop("m", {0, b, a, Mat4d::Identity(), 0.8, 0.9, 0.05, 12});
+    EXPECT_EQ(store->integrityCheck(), "ok");
+  }
+  // The eighth double becomes a NaN (0x7FF8000000000000, little-endian).
+  exec("UPDATE loops SET t = overlay(t placing '\\x000000000000f87f'::bytea from 57 for 8)");
+  exec("UPDATE scan_blobs SET fingerprint = '\\x0102'::bytea WHERE scan_id = " + std::to_string(a));
+  {
+    auto store = backend_.open();
+    EXPECT_EQ(errorCode([&] { store->loops("m"); }), StorageError::Code::kCorrupt);
+    EXPECT_EQ(errorCode([&] { store->fingerprint(a); }), StorageError::Code::kCorrupt);
+    EXPECT_NE(store->fingerprint(b), nullptr);
+  }
+  exec("UPDATE scans SET descriptor = '\\x00'::bytea WHERE id = " + std::to_string(b));
+  EXPECT_EQ(errorCode([&] { backend_.open(); }), StorageError::Code::kCorrupt);
+}
+
+// Two stores on one database, as two replicas are: each finds the other's scans, sees its deletions, creates
+// no second map of a name, and ids stay unique and in commit order.
+TEST_F(PostgresStore, ReplicasSeeEachOthersWrites) {
+  auto a = backend_.open();
+  auto b = backend_.open();
+  const auto dim = static_cast<int>(randomFingerprint(1).descriptor.size());
+  const auto map = a->createMap("m", dim);
+  EXPECT_EQ(b->createMap("m", dim).id, map.id);  // b catches up before it writes: the same map
+  std::vector<Fingerprint> fps;
+  for (int i = 0; i < 20; ++i) fps.push_back(randomFingerprint(100 + static_cast<std::uint64_t>(i)));
+  std::vector<std::int64_t> ids;
+  for (int i = 0; i < 20; ++i) {
+    auto& store = i % 2 ? *b : *a;  // alternate writers, one robot and session
+    ids.push_back(store.addScan({.map = "m", .robot = "r", .session = "s", .seq = i, .fingerprint = &fps[i]}));
+  }
+  EXPECT_TRUE(std::is_sorted(ids.begin(), ids.end()));
+  EXPECT_EQ(std::set<std::int64_t>(ids.begin(), ids.end()).size(), ids.size());
+  // Each replica finds every scan, the other's included, first for its own descriptor.
+  for (auto* store : {a.get(), b.get()}) {
+    ASSERT_TRUE(eventually([&] { return store->stats("m").index_entries == 20; }));
+    for (int i = 0; i < 20; ++i) EXPECT_EQ(hits(*store, fps[i]).front(), ids[i]);
+  }
+  EXPECT_EQ(
+      errorCode([&] { b->addScan({.map = "m", .robot = "r", .session = "s", .seq = 4, .fingerprint = &fps[0]}); }),
+      StorageError::Code::kAlreadyExists);
+  // A deletion on one is followed on the other, index and cache alike.
+  ASSERT_NE(a->fingerprint(ids[3]), nullptr);
+  EXPECT_EQ(b->deleteRobot("m", "r"), 20);
+  ASSERT_TRUE(eventually([&] { return a->stats("m").index_entries == 0; }));
+  EXPECT_TRUE(hits(*a, fps[3]).empty());
+  EXPECT_EQ(a->fingerprint(ids[3]), nullptr);
+  EXPECT_TRUE(a->listRobots("m").empty());
+  // A map deleted by one and created again: the other sees the new map, empty, under a new id.
+  a->deleteMap("m");
+  const auto again = b->createMap("m", dim);
+  EXPECT_GT(again.id, map.id);
+  ASSERT_TRUE(eventually([&] {
+    const auto m = a->findMap("m");
+    return m && m->id == again.id;
+  }));
+  EXPECT_EQ(a->stats("m").index_entries, 0);
+  EXPECT_EQ(a->integrityCheck(), "ok");
+}
+
+// The server restarting (here: the store's connections killed) costs the calls in flight an UNAVAILABLE and
+// nothing more: the next calls reconnect, and nothing written before is lost.
+TEST_F(PostgresStore, ALostConnectionIsReportedAndReestablished) {
+  auto store = backend_.open();
+  const auto fp = randomFingerprint(9);
+  store->createMap("m", static_cast<int>(fp.descriptor.size()));
+  const auto id = store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
+  pg::Conn admin(backend_.options().path);
+  admin.exec(
+      "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = current_database() AND "
+      "pid <> pg_backend_pid()");
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    try {
+      store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 1, .fingerprint = &fp});
+      break;
+    } catch (const StorageError& e) {
+      EXPECT_EQ(e.code(), StorageError::Code::kUnavailable) << e.what();
+    }
+  }
+  std::optional<ScanInfo> info;
+  for (int attempt = 0; attempt < 3 && !info; ++attempt) {
+    try {
+      info = store->scanInfo(id);
+    } catch (const StorageError& e) {
+      EXPECT_EQ(e.code(), StorageError::Code::kUnavailable) << e.what();
+    }
+  }
+  ASSERT_TRUE(info);
+  EXPECT_EQ(store->stats("m").scans, 2);
+  EXPECT_EQ(store->stats("m").index_entries, 2);
+}
+
+}  // namespace
+}  // namespace sglc::storage
