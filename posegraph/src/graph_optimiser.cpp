@@ -16,7 +16,7 @@
 namespace sglc::posegraph {
 
 GraphOptimiser::GraphOptimiser(storage::MapStore& store, GraphOptimiserOptions options)
-    : store_(store), options_(options) {
+    : store_(store), options_(options), shared_(store.shared()) {
   const auto now = Clock::now();
   for (const auto& m : store_.listMaps())
     if (!store_.loops(m.name, 0, 1).empty()) due_[m.name] = now;
@@ -96,8 +96,18 @@ std::optional<GraphEvent> GraphOptimiser::waitForVersion(const std::string& map,
 }
 
 void GraphOptimiser::run() {
+  const auto poll_every = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(std::max(0.05, options_.replica_poll_s)));
+  auto next_poll = Clock::now() + poll_every;
   std::unique_lock lock(mutex_);
   while (!stop_) {
+    if (shared_ && Clock::now() >= next_poll) {
+      lock.unlock();
+      pollMaps();
+      lock.lock();
+      next_poll = Clock::now() + poll_every;
+      continue;
+    }
     if (!forget_.empty()) {
       const auto names = std::exchange(forget_, {});
       lock.unlock();
@@ -109,13 +119,16 @@ void GraphOptimiser::run() {
       continue;
     }
     if (due_.empty()) {
-      wake_.wait(lock);
+      if (shared_)
+        wake_.wait_until(lock, next_poll);
+      else
+        wake_.wait(lock);
       continue;
     }
     auto next =
         std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
     if (next->second > Clock::now()) {
-      wake_.wait_until(lock, next->second);
+      wake_.wait_until(lock, shared_ ? std::min(next->second, next_poll) : next->second);
       continue;
     }
     const std::string map = next->first;
@@ -154,6 +167,9 @@ GraphEvent GraphOptimiser::optimise(const std::string& map, Scope scope) {
       return event;
     }
     map_id = info->id;
+    if (shared_ && !store_.claimGraph(map_id)) return follow(map, map_id, gen);
+    if (shared_ && held_.insert(map).second)
+      spdlog::info("{}", logging::logLine({{"event", "graph_owner"}, {"map", map}, {"held", true}}));
     return solve(map, map_id, gen, scope);
   } catch (const std::exception& e) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
@@ -182,6 +198,45 @@ GraphEvent GraphOptimiser::optimise(const std::string& map, Scope scope) {
     publish(map, event, gen);
     return event;
   }
+}
+
+GraphEvent GraphOptimiser::follow(const std::string& map, std::int64_t map_id, std::uint64_t generation) {
+  graphs_.erase(map);
+  if (held_.erase(map)) spdlog::warn("{}", logging::logLine({{"event", "graph_owner"}, {"map", map}, {"held", false}}));
+  GraphEvent event = latest(map).value_or(GraphEvent{});
+  const auto version = store_.graphVersion(map);
+  if (version == event.graph_version && event.map_id == map_id) return event;
+  event = GraphEvent{};
+  event.graph_version = version;
+  event.map_id = map_id;
+  event.converged = true;  // as the holder left it: its own events say more
+  event.loops = static_cast<std::int64_t>(store_.optimisedThroughLoop(map));
+  publish(map, event, generation);
+  return event;
+}
+
+void GraphOptimiser::pollMaps() {
+  std::vector<std::string> todo;
+  try {
+    for (const auto& m : store_.listMaps()) {
+      std::int64_t after = 0;
+      {
+        std::lock_guard one(optimise_mutex_);
+        const auto it = graphs_.find(m.name);
+        if (it != graphs_.end() && it->second.graph && !it->second.graph->empty()) after = it->second.graph->lastLoop();
+      }
+      // Held and solved up to date: nothing to do. Not held: follow it (and take it over if its holder died).
+      if (!store_.loops(m.name, after, 1).empty() || (after == 0 && store_.graphVersion(m.name) > 0))
+        todo.push_back(m.name);
+    }
+  } catch (const std::exception&) {
+    return;  // the database is unreachable: the next poll tries again
+  }
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& map : todo) dueBy(map, Clock::now() + options_.debounce);
+  }
+  wake_.notify_all();
 }
 
 MapGraph& GraphOptimiser::graphOf(const std::string& map, std::int64_t map_id) {

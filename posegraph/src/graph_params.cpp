@@ -23,6 +23,9 @@ Table<Options> makeTable() {
                        "per loop event, free only this many nodes either side of each new loop's ends (0: global)"));
   t.add(field<Options>(SGLC_KEY(global_interval_s), closed(0, 86400),
                        "after a local solve, solve the whole graph within this many seconds"));
+  t.add(field<Options>(SGLC_KEY(replica_poll_s), closed(0.05, 3600),
+                       "servers sharing a PostgreSQL map: how often each looks for the others' loops and takes over "
+                       "maps whose solving server died (s)"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_m), atLeast(0), "odometry: per-axis sigma per step (m)"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_per_m), atLeast(0), "odometry: added per metre driven (m/m)"));
   t.add(field<Options>(SGLC_KEY(odometry_sigma_deg), atLeast(0), "odometry: per-axis sigma per step (deg)"));

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <condition_variable>
 #include <mutex>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -98,6 +99,22 @@ class Follower {
   const int poll_ms_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
+};
+
+// The pose graphs this process solves: a session-level advisory lock per map on a connection of its own, so
+// that a process that dies (or loses its connection) frees its maps for another to take over.
+class GraphOwner {
+ public:
+  explicit GraphOwner(std::string url) : url_(std::move(url)) {}
+  // True when this process holds map_id's lock (checked live: a lost connection loses every lock), taking it
+  // when free; false when another process holds it or the database cannot be reached.
+  bool claim(std::int64_t map_id);
+
+ private:
+  std::mutex mutex_;
+  const std::string url_;
+  std::unique_ptr<Conn> conn_;
+  std::set<std::int64_t> held_;
 };
 
 }  // namespace sglc::storage::pg

@@ -181,6 +181,29 @@ std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref
   return r.i64(0, 0);
 }
 
+bool GraphOwner::claim(std::int64_t map_id) {
+  // One 64-bit key per map, apart from the store's (int, int) keys: the two kinds never conflict.
+  constexpr std::int64_t kGraphKeys = std::int64_t{0x5347} << 48;
+  std::lock_guard lock(mutex_);
+  try {
+    if (conn_) {
+      try {
+        conn_->exec("SELECT 1");  // alive? A dropped connection has lost its locks, perhaps to another process.
+      } catch (const StorageError&) {
+        held_.clear();
+        conn_.reset();
+      }
+    }
+    if (!conn_) conn_ = std::make_unique<Conn>(url_);
+    if (held_.count(map_id)) return true;
+    if (!conn_->query("SELECT pg_try_advisory_lock($1)", {kGraphKeys + map_id}).boolean(0, 0)) return false;
+    held_.insert(map_id);
+    return true;
+  } catch (const StorageError&) {
+    return false;
+  }
+}
+
 Follower::Follower(Core& core, int poll_ms) : core_(core), poll_ms_(poll_ms), thread_([this] { run(); }) {}
 
 Follower::~Follower() {

@@ -111,8 +111,13 @@ class PgMapStore final : public MapStore {
     return graph::mapValue(core_, map, "SELECT graph_loop FROM maps WHERE id = $1");
   }
 
+  // ---- Replicas
+  bool shared() const override { return true; }
+  bool claimGraph(std::int64_t map_id) override { return owner_.claim(map_id); }
+
  private:
   Core core_;
+  GraphOwner owner_{core_.options.path};
   std::unique_ptr<Follower> follower_;
 };
 

@@ -186,3 +186,32 @@ TEST_F(PostgresStore, ALostConnectionIsReportedAndReestablished) {
 
 }  // namespace
 }  // namespace sglc::storage
+
+namespace sglc::storage {
+namespace {
+
+// One process at a time solves a map's pose graph; the right goes with the store that holds it.
+TEST_F(PostgresStore, OneStoreAtATimeHoldsAMapsGraphAndItsCloseFreesIt) {
+  auto a = backend_.open();
+  auto b = backend_.open();
+  const auto id = a->createMap("m", 8).id;
+  const auto other = a->createMap("n", 8).id;
+  EXPECT_TRUE(a->shared());
+  EXPECT_TRUE(a->claimGraph(id));
+  EXPECT_TRUE(a->claimGraph(id));  // held: still true
+  EXPECT_FALSE(b->claimGraph(id));
+  EXPECT_TRUE(b->claimGraph(other));  // per map
+  EXPECT_FALSE(a->claimGraph(other));
+  a.reset();
+  EXPECT_TRUE(b->claimGraph(id));
+  // A lost connection loses the lock: the holder finds out on its next claim instead of solving beside another.
+  auto c = backend_.open();
+  EXPECT_FALSE(c->claimGraph(id));
+  pg::Conn(backend_.options().path)
+      .exec("SELECT pg_terminate_backend(pid) FROM pg_locks WHERE locktype = 'advisory' AND granted");
+  EXPECT_TRUE(c->claimGraph(id));
+  EXPECT_FALSE(b->claimGraph(id));
+}
+
+}  // namespace
+}  // namespace sglc::storage

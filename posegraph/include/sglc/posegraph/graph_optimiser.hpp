@@ -6,6 +6,10 @@
 // are batched (one optimisation per `debounce`). On start every map that has loops is optimised once, so a
 // restarted server serves the same poses and picks up loops recorded just before a crash.
 //
+// Several servers on one database (MapStore::shared): each map's graph is solved by the one that holds it
+// (MapStore::claimGraph); the others follow its stored graph version and publish events for it, and every
+// replica_poll_s each looks for loops other servers stored and tries to take over maps whose holder died.
+//
 // Nothing from outside can take the process down through here: scans whose odometry pose is not a rigid
 // motion and loops with a damaged pose or information are left out of the graph (with a log line), the
 // problem is checked to be finite before Ceres sees it, and a solve that fails or ends non-finite marks the
@@ -71,6 +75,9 @@ struct GraphOptimiserOptions {
   // background, one at a time) after a local solve that left an edge at its window's boundary or a new loop in it
   // beyond the 99.9 % point of its error.
   double global_interval_s = 30.0;
+  // With a database shared by several servers (replicas): how often each looks for loops the others stored,
+  // and whether the replica that solves a map's graph is still alive (else it takes the map over).
+  double replica_poll_s = 2.0;
   // Odometry between consecutive scans of a session: per-axis sigmas growing with the distance driven. The
   // defaults suit LiDAR odometry that drifts about 1 % in translation and 0.005 deg per metre in heading.
   double odometry_sigma_m = 0.01, odometry_sigma_per_m = 0.015;
@@ -123,6 +130,12 @@ class GraphOptimiser {
  private:
   void run();
   GraphEvent optimise(const std::string& map, Scope scope);
+  // A map another server solves: drop our graph (a takeover starts from the stored poses) and publish the
+  // stored graph version when it moved.
+  GraphEvent follow(const std::string& map, std::int64_t map_id, std::uint64_t generation);
+  // Shared databases: queue the maps with loops this server has not solved (other servers' loops, or maps
+  // another server holds, to follow them and take them over when their holder dies).
+  void pollMaps();
   GraphEvent solve(const std::string& map, std::int64_t map_id, std::uint64_t generation, Scope scope);
   // The map's in-memory graph, rebuilt when stale or when the name is a new map.
   MapGraph& graphOf(const std::string& map, std::int64_t map_id);
@@ -171,6 +184,8 @@ class GraphOptimiser {
     std::uint64_t lineage = 0;
   };
   std::map<std::string, Slot> graphs_;  // only the worker / optimiseNow touch these
+  std::set<std::string> held_;          // maps whose graph this server solves (shared databases); as graphs_
+  const bool shared_;
   std::uint64_t next_lineage_ = 0;
   struct GlobalJob {
     std::string map;

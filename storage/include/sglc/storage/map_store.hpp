@@ -256,6 +256,15 @@ class MapStore {
   // The through_loop of the last saveOptimised (0 before any, or in files from before schema 4): loops with
   // larger ids are not yet reflected in the stored poses.
   virtual std::int64_t optimisedThroughLoop(const std::string& map) const = 0;
+
+  // ---- Several processes on one database (PostgreSQL): who solves a map's pose graph.
+  // True when other processes may write this database too (their scans and loops appear without a call here).
+  virtual bool shared() const { return false; }
+  // Whether this process holds the right to solve the pose graph of map `map_id`, taking it when free. One
+  // process holds it at a time; it goes with the process (or its database connection), so another takes it
+  // over when the holder dies. False when the database cannot be reached. Always true for a store that is not
+  // shared.
+  virtual bool claimGraph(std::int64_t /*map_id*/) { return true; }
 };
 
 // True when `path` names a PostgreSQL database (postgresql://... or postgres://...) rather than a SQLite file.
