@@ -4,6 +4,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstring>
@@ -20,19 +21,25 @@ namespace {
 namespace fs = std::filesystem;
 using Code = StorageError::Code;
 
-// The environment for a libpq client program: ours, with the URL's settings as PG* variables (so that the
-// password never appears on a command line).
+// The environment for a libpq client program: ours (PG* variables included, as the store's own connections
+// see them), with the URL's settings as PG* variables over them, so that the password never appears on a
+// command line.
 std::vector<std::string> clientEnvironment(const std::string& url) {
-  std::vector<std::string> env;
-  for (char** e = environ; *e; ++e)
-    if (std::strncmp(*e, "PG", 2) != 0) env.emplace_back(*e);
   char* error = nullptr;
   PQconninfoOption* options = PQconninfoParse(url.c_str(), &error);
   PQfreemem(error);
-  if (!options) return env;
-  for (auto* o = options; o->keyword; ++o)
-    if (o->val && o->envvar) env.push_back(std::string(o->envvar) + "=" + o->val);
+  std::vector<std::string> from_url;
+  for (auto* o = options; o && o->keyword; ++o)
+    if (o->val && o->envvar) from_url.push_back(std::string(o->envvar) + "=" + o->val);
   PQconninfoFree(options);
+  std::vector<std::string> env;
+  for (char** e = environ; *e; ++e) {
+    const std::string var(*e);
+    const auto name = var.substr(0, var.find('=') + 1);
+    if (std::none_of(from_url.begin(), from_url.end(), [&](const auto& u) { return u.rfind(name, 0) == 0; }))
+      env.push_back(var);
+  }
+  env.insert(env.end(), from_url.begin(), from_url.end());
   return env;
 }
 
@@ -91,8 +98,8 @@ void backup(const Core& core, const std::string& dest) {
                        "the backup file cannot be created", dest + ": " + std::strerror(e));
   }
   ::close(fd);
-  const auto [status, err] =
-      run({"pg_dump", "--format=custom", "--no-owner", "--file=" + dest}, clientEnvironment(core.options.path));
+  const auto [status, err] = run({"pg_dump", "--format=custom", "--no-owner", "--no-password", "--file=" + dest},
+                                 clientEnvironment(core.options.path));
   if (status != 0) {
     std::error_code ec;
     fs::remove(dest, ec);
@@ -147,7 +154,8 @@ Stats stats(const Core& core, const std::string& map) {
   }
   auto db = core.readers.acquire();
   const auto r = db->query(
-      "SELECT count(*), coalesce(sum(fingerprint_bytes), 0)::bigint FROM scans WHERE $1 < 0 OR map_id = $1", {map_id});
+      "SELECT count(*), coalesce(sum(fingerprint_bytes), 0)::bigint FROM scans WHERE $1::bigint < 0 OR map_id = $1",
+      {map_id});
   s.scans = r.i64(0, 0);
   s.fingerprint_bytes = r.i64(0, 1);
   s.db_bytes = databaseBytes(*db);

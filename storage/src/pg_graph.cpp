@@ -100,10 +100,10 @@ std::int64_t saveOptimised(Core& core, const std::string& map, std::int64_t expe
                            const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames,
                            std::int64_t through_loop) {
   validate::optimised(poses, frames);
-  std::lock_guard write(core.write_mutex);
-  const auto& db = core.writer;
-  db.ensureOpen();
-  Transaction tx(db);
+  // Under the write lock: a deletion by another replica is either wholly before (the map or its scans are gone
+  // and skipped) or wholly after.
+  WriteTx tx(core);
+  const auto& db = tx.conn();
   // Checked in the database, not the catalogue, which may lag another replica's deletion.
   if (db.query("SELECT 1 FROM maps WHERE id = $1 AND name = $2", {expected_map_id, map}).rows() == 0)
     throw StorageError(Code::kNotFound, "map '" + map + "' was deleted while its pose graph was being solved");
@@ -135,7 +135,7 @@ std::int64_t saveOptimised(Core& core, const std::string& map, std::int64_t expe
                              " RETURNING graph_version",
                              {expected_map_id, through_loop})
                            .i64(0, 0);
-  tx.commit();
+  tx.commit(0, [] {});
   return version;
 }
 

@@ -215,10 +215,9 @@ void Follower::run() {
   std::unique_ptr<Conn> listener;
   while (!stop_) {
     try {
-      if (!listener || !listener->ensureOpen()) {
-        listener = std::make_unique<Conn>(core_.options.path);
-        listener->exec(std::string("LISTEN ") + kChannel);
-      }
+      // LISTEN is part of the connection's setup: a reconnect listens again.
+      if (!listener || !listener->ensureOpen())
+        listener = std::make_unique<Conn>(core_.options.path, std::string("LISTEN ") + kChannel);
       // Wait for a notification in slices short enough to notice stop_ soon.
       pollfd pfd{PQsocket(listener->get()), POLLIN, 0};
       bool notified = false;
@@ -235,8 +234,9 @@ void Follower::run() {
       if (stop_) break;
       std::lock_guard write(core_.write_mutex);
       if (core_.writer.ensureOpen()) journal::catchUp(core_);
-    } catch (const StorageError&) {
-      // The database is unreachable: try again after a pause (the next write reports it to its caller).
+    } catch (const std::exception&) {
+      // The database is unreachable (or a damaged row): try again after a pause; the next write reports it to its
+      // caller.
       listener.reset();
       for (int i = 0; i < poll_ms_ / 100 + 1 && !stop_; ++i)
         std::this_thread::sleep_for(std::chrono::milliseconds(100));

@@ -14,21 +14,20 @@ using Code = StorageError::Code;
 
 constexpr int kFollowPollMs = 1000;
 
-// Per-connection settings of the writer: durability per StoreOptions::sync, and how long a write waits for
-// the database-wide write lock before it fails with kBusy.
-void configure(const Conn& writer, const StoreOptions& o) {
+// Session settings of the writer (run again on every reconnect): durability per StoreOptions::sync, and how
+// long a write waits for the database-wide write lock before it fails with kBusy.
+std::string writerSetup(const StoreOptions& o) {
   const char* sync = o.sync == StoreOptions::Sync::kFull     ? "on"
                      : o.sync == StoreOptions::Sync::kNormal ? "local"
                                                              : "off";
-  writer.exec(std::string("SET synchronous_commit = ") + sync);
-  writer.exec("SET lock_timeout = " + std::to_string(std::max(1, o.busy_timeout_ms)));
+  return std::string("SET synchronous_commit = ") + sync +
+         "; SET lock_timeout = " + std::to_string(std::max(1, o.busy_timeout_ms));
 }
 
 class PgMapStore final : public MapStore {
  public:
   explicit PgMapStore(const StoreOptions& options) : core_(options) {
     openSchema(core_.writer, core_.url);
-    configure(core_.writer, options);
     journal::load(core_);
     follower_ = std::make_unique<Follower>(core_, kFollowPollMs);
   }
@@ -153,7 +152,8 @@ std::vector<RobotInfo> PgMapStore::listRobots(const std::string& map) const {
   auto db = core_.readers.acquire();
   const auto r = db->query(
       "SELECT r.name, (SELECT count(*) FROM scans s WHERE s.robot_id = r.id),"
-      " (SELECT count(*) FROM sessions x WHERE x.robot_id = r.id) FROM robots r WHERE r.map_id = $1 ORDER BY r.name",
+      " (SELECT count(*) FROM sessions x WHERE x.robot_id = r.id) FROM robots r WHERE r.map_id = $1"
+      " ORDER BY r.name COLLATE \"C\"",  // bytewise, as SQLite orders
       {map_id});
   std::vector<RobotInfo> out;
   for (int i = 0; i < r.rows(); ++i) out.push_back({r.text(i, 0), r.i64(i, 1), r.i64(i, 2)});
@@ -172,7 +172,8 @@ std::vector<SessionInfo> PgMapStore::listSessions(const std::string& map, const 
   const auto r = db->query(
       "SELECT r.name, x.name, count(s.id), coalesce(min(s.seq), 0), coalesce(max(s.seq), 0)"
       " FROM sessions x JOIN robots r ON r.id = x.robot_id LEFT JOIN scans s ON s.session_id = x.id"
-      " WHERE r.map_id = $1 AND ($2 = '' OR r.name = $2) GROUP BY x.id, r.name, x.name ORDER BY r.name, x.name",
+      " WHERE r.map_id = $1 AND ($2 = '' OR r.name = $2) GROUP BY x.id, r.name, x.name"
+      " ORDER BY r.name COLLATE \"C\", x.name COLLATE \"C\"",
       {map_id, robot});
   std::vector<SessionInfo> out;
   for (int i = 0; i < r.rows(); ++i) out.push_back({r.text(i, 0), r.text(i, 1), r.i64(i, 2), r.i64(i, 3), r.i64(i, 4)});
@@ -184,7 +185,7 @@ std::vector<SessionInfo> PgMapStore::listSessions(const std::string& map, const 
 Core::Core(const StoreOptions& o)
     : options(o),
       url(redacted(o.path)),
-      writer(o.path),
+      writer(o.path, writerSetup(o)),
       readers(o.path),
       cache(static_cast<std::size_t>(std::max(0.0, o.cache_mb) * 1024 * 1024)) {}
 

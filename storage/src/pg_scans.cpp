@@ -57,12 +57,16 @@ std::int64_t insertRow(const Conn& db, std::int64_t map_id, const Owner& o, cons
   }
 }
 
-void checkQuota(const Core& core) {
+// The size limit (StoreOptions::max_db_mb) counts the bytes the scans store (fingerprints, descriptors, raw
+// clouds), kept per map in the write's transaction: unlike the tables' size on disk it goes down when scans
+// are deleted. PostgreSQL's own overhead comes on top.
+void checkQuota(const Conn& db, const Core& core, std::int64_t incoming) {
   if (core.options.max_db_mb <= 0) return;
-  const double mb = static_cast<double>(admin::databaseBytes(core.writer)) / (1024.0 * 1024.0);
+  const auto stored = db.query("SELECT coalesce(sum(bytes), 0)::bigint FROM maps").i64(0, 0);
+  const double mb = static_cast<double>(stored + incoming) / (1024.0 * 1024.0);
   if (mb > core.options.max_db_mb)
     throw StorageError(Code::kFull, meaning(Code::kFull),
-                       "the map's tables take " + std::to_string(mb) + " MB, over the " +
+                       "the scans would take " + std::to_string(mb) + " MB, over the " +
                            std::to_string(core.options.max_db_mb) + " MB limit (store.max_db_mb)");
 }
 
@@ -83,9 +87,11 @@ std::int64_t add(Core& core, const NewScan& scan) {
     throw StorageError(Code::kInvalidArgument, "descriptor has " + std::to_string(descriptor.size()) +
                                                    " values, map '" + scan.map + "' needs " + std::to_string(m->dim));
   const auto& db = tx.conn();
-  checkQuota(core);
+  const auto payload = static_cast<std::int64_t>(fingerprint.size() + raw.size() + descriptor.size() * sizeof(float));
+  checkQuota(db, core, payload);
   const auto owner = ownerOf(db, *m, scan);
   const auto id = insertRow(db, m->id, owner, scan, fingerprint.size());
+  db.query("UPDATE maps SET bytes = bytes + $2 WHERE id = $1", {m->id, payload});
   db.query(
       "INSERT INTO scan_blobs(scan_id, fingerprint, raw) VALUES($1, $2, $3)",
       {id, std::span<const std::uint8_t>(fingerprint), scan.raw ? Param(std::span<const std::uint8_t>(raw)) : Param()});
@@ -166,6 +172,12 @@ std::int64_t deleteScans(Core& core, WriteTx& tx, MapState& m, const char* owner
   const auto& db = tx.conn();
   const std::string scans = std::string("SELECT id FROM scans WHERE map_id = $1 AND ") + owner + " = $2";
   const auto removed = db.query(("SELECT count(*) FROM (" + scans + ") q").c_str(), {m.id, id}).i64(0, 0);
+  db.query(("UPDATE maps SET bytes = greatest(0, bytes - (SELECT coalesce(sum(s.fingerprint_bytes +"
+            " octet_length(s.descriptor) + coalesce(octet_length(b.raw), 0)), 0) FROM scans s JOIN scan_blobs b"
+            " ON b.scan_id = s.id WHERE s.id IN (" +
+            scans + "))) WHERE id = $1")
+               .c_str(),
+           {m.id, id});
   for (const auto& sql : {"DELETE FROM scan_blobs WHERE scan_id IN (" + scans + ")",
                           "DELETE FROM loops WHERE query_scan IN (" + scans + ") OR candidate_scan IN (" + scans + ")",
                           "DELETE FROM optimised_poses WHERE scan_id IN (" + scans + ")"})

@@ -19,7 +19,7 @@ const char* const kMigrations[] = {
     CREATE TABLE maps(
       id bigserial PRIMARY KEY, name text NOT NULL UNIQUE, descriptor_dim integer NOT NULL,
       created_at double precision NOT NULL, graph_version bigint NOT NULL DEFAULT 0,
-      graph_loop bigint NOT NULL DEFAULT 0);
+      graph_loop bigint NOT NULL DEFAULT 0, bytes bigint NOT NULL DEFAULT 0);
     CREATE TABLE robots(
       id bigserial PRIMARY KEY, map_id bigint NOT NULL REFERENCES maps(id), name text NOT NULL,
       UNIQUE(map_id, name));

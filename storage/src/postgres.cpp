@@ -1,8 +1,10 @@
 #include "postgres.hpp"
 
 #include <endian.h>
+#include <poll.h>
 
 #include <array>
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 
@@ -35,10 +37,25 @@ Code classify(const char* sqlstate) {
   if (s == "55P03" || s == "40001" || s == "40P01" || s == "57014") return Code::kBusy;  // lock/statement timeout
   if (s.rfind("08", 0) == 0 || s.rfind("57P", 0) == 0 || s.empty()) return Code::kUnavailable;  // connection
   if (s == "XX001" || s == "XX002" || s == "42P01" || s == "42703") return Code::kCorrupt;      // damage, missing table
+  if (s == "22021") return Code::kInvalidArgument;  // a name that is not valid UTF-8 (text columns hold UTF-8)
   return Code::kIo;
 }
 
 void ignoreNotice(void*, const char*) {}
+
+std::string percentDecoded(const std::string& text) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    if (text[i] == '%' && i + 2 < text.size() && std::isxdigit(static_cast<unsigned char>(text[i + 1])) &&
+        std::isxdigit(static_cast<unsigned char>(text[i + 2]))) {
+      out += static_cast<char>(std::stoi(text.substr(i + 1, 2), nullptr, 16));
+      i += 2;
+    } else {
+      out += text[i];
+    }
+  }
+  return out;
+}
 
 }  // namespace
 
@@ -55,12 +72,22 @@ std::string redacted(const std::string& url) {
     const auto colon = url.find(':', scheme + 3);
     if (colon != std::string::npos && colon < at) out = url.substr(0, colon + 1) + "***" + url.substr(at);
   }
-  // password=... among the query parameters.
-  for (auto p = out.find("password="); p != std::string::npos; p = out.find("password=", p + 12)) {
-    const auto end = out.find('&', p);
-    out = out.substr(0, p + 9) + "***" + (end == std::string::npos ? "" : out.substr(end));
+  // Among the query parameters, any whose name decodes to "password" (libpq decodes %xx in names too).
+  const auto query = out.find('?');
+  if (query == std::string::npos) return out;
+  std::string result = out.substr(0, query + 1);
+  for (std::size_t start = query + 1; start <= out.size();) {
+    const auto end = std::min(out.find('&', start), out.size());
+    const std::string param = out.substr(start, end - start);
+    const auto eq = param.find('=');
+    result += eq != std::string::npos && percentDecoded(param.substr(0, eq)) == "password"
+                  ? param.substr(0, eq + 1) + "***"
+                  : param;
+    if (end == out.size()) break;
+    result += '&';
+    start = end + 1;
   }
-  return out;
+  return result;
 }
 
 Param::Param(double v) {
@@ -69,7 +96,14 @@ Param::Param(double v) {
   text_ = buf.data();
 }
 
+void Result::check(int row, int col) const {
+  if (row < 0 || row >= PQntuples(r_.get()) || col < 0 || col >= PQnfields(r_.get()))
+    throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt),
+                       "row " + std::to_string(row) + " column " + std::to_string(col) + " is not in the result");
+}
+
 std::int64_t Result::i64(int row, int col) const {
+  check(row, col);
   const char* p = PQgetvalue(r_.get(), row, col);
   switch (PQftype(r_.get(), col)) {
     case kInt8:
@@ -87,6 +121,7 @@ std::int64_t Result::i64(int row, int col) const {
 }
 
 double Result::f64(int row, int col) const {
+  check(row, col);
   const char* p = PQgetvalue(r_.get(), row, col);
   switch (PQftype(r_.get(), col)) {
     case kFloat8: {
@@ -107,6 +142,7 @@ double Result::f64(int row, int col) const {
 }
 
 std::string Result::text(int row, int col) const {
+  check(row, col);
   const auto type = PQftype(r_.get(), col);
   if (type != kText && type != kVarchar && type != kName)
     throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt), "column " + std::to_string(col) + " is not text");
@@ -114,6 +150,7 @@ std::string Result::text(int row, int col) const {
 }
 
 std::span<const std::uint8_t> Result::blob(int row, int col) const {
+  check(row, col);
   if (PQftype(r_.get(), col) != kBytea)
     throw StorageError(Code::kCorrupt, meaning(Code::kCorrupt), "column " + std::to_string(col) + " is not bytea");
   return {reinterpret_cast<const std::uint8_t*>(PQgetvalue(r_.get(), row, col)),
@@ -136,28 +173,40 @@ std::string meaning(Code code) {
       return "a record it refers to no longer exists";
     case Code::kUnavailable:
       return "the map database (PostgreSQL) cannot be reached";
+    case Code::kInvalidArgument:
+      return "a name is not valid UTF-8 (a PostgreSQL map stores names as UTF-8 text)";
     default:
       return "the map database had an error";
   }
 }
 
-Conn::Conn(const std::string& url) : redacted_(redacted(url)) {
+Conn::Conn(const std::string& url, std::string setup) : redacted_(redacted(url)), setup_(std::move(setup)) {
   char* parse_error = nullptr;
   PQconninfoOption* parsed = PQconninfoParse(url.c_str(), &parse_error);
   if (!parsed) {
-    std::string why = parse_error ? parse_error : "out of memory";
-    PQfreemem(parse_error);
-    throw StorageError(Code::kInvalidArgument, "the PostgreSQL URL " + redacted_ + " is not valid", why);
+    PQfreemem(parse_error);  // it may quote the password: not passed on
+    throw StorageError(Code::kInvalidArgument, "the PostgreSQL URL " + redacted_ + " is not valid",
+                       "libpq cannot parse the URL");
   }
   PQconninfoFree(parsed);
-  // Our defaults first: the URL's own settings (expanded from dbname) override them.
-  const std::array<const char*, 4> keys = {"connect_timeout", "application_name", "dbname", nullptr};
-  const std::array<const char*, 4> values = {"10", "sglc", url.c_str(), nullptr};
+  // Our defaults first: the URL's own settings (expanded from dbname) override them. Keepalives and the TCP
+  // user timeout bound how long a call waits on a server that vanished from the network.
+  const std::array<const char*, 9> keys = {"connect_timeout",
+                                           "application_name",
+                                           "keepalives",
+                                           "keepalives_idle",
+                                           "keepalives_interval",
+                                           "keepalives_count",
+                                           "tcp_user_timeout",
+                                           "dbname",
+                                           nullptr};
+  const std::array<const char*, 9> values = {"10", "sglc", "1", "10", "5", "3", "30000", url.c_str(), nullptr};
   c_.reset(PQconnectdbParams(keys.data(), values.data(), 1));
   if (!c_ || PQstatus(c_.get()) != CONNECTION_OK)
     throw StorageError(Code::kUnavailable, "cannot connect to PostgreSQL at " + redacted_,
                        c_ ? PQerrorMessage(c_.get()) : "out of memory");
   PQsetNoticeProcessor(c_.get(), &ignoreNotice, nullptr);
+  if (!setup_.empty()) exec(setup_);
 }
 
 void Conn::fail(const PGresult* r, const char* sql) const {
@@ -209,9 +258,19 @@ void Conn::copyIn(const std::string& copy_sql, const std::string& data) const {
 }
 
 bool Conn::ensureOpen() const {
+  // An idle connection the server closed has a readable socket (its goodbye, then EOF): reading it updates the
+  // status, so the connection is re-established here rather than failing the next statement.
+  // The goodbye and the EOF may take one read each.
+  pollfd pfd{PQsocket(c_.get()), POLLIN, 0};
+  for (int reads = 0; reads < 4 && PQstatus(c_.get()) == CONNECTION_OK &&
+                      PQtransactionStatus(c_.get()) == PQTRANS_IDLE && ::poll(&pfd, 1, 0) > 0;
+       ++reads)
+    PQconsumeInput(c_.get());
   if (PQstatus(c_.get()) == CONNECTION_OK) return true;
   PQreset(c_.get());
-  return PQstatus(c_.get()) == CONNECTION_OK;
+  if (PQstatus(c_.get()) != CONNECTION_OK) return false;
+  if (!setup_.empty()) exec(setup_);
+  return true;
 }
 
 Transaction::Transaction(const Conn& conn) : conn_(conn) { conn_.exec("BEGIN"); }
@@ -230,6 +289,8 @@ void Transaction::commit() {
   done_ = true;
 }
 
+Pool::~Pool() = default;
+
 Pool::Lease Pool::acquire() const {
   {
     std::lock_guard lock(mutex_);
@@ -237,6 +298,7 @@ Pool::Lease Pool::acquire() const {
       auto conn = std::move(idle_.back());
       idle_.pop_back();
       if (conn->ensureOpen()) return {*this, std::move(conn)};
+      idle_.clear();  // one closed by the server: the others most likely too (a restart), so start afresh
     }
   }
   return {*this, std::make_unique<Conn>(url_)};

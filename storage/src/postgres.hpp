@@ -52,7 +52,11 @@ class Result {
  public:
   explicit Result(PGresult* r) : r_(r, &PQclear) {}
   int rows() const { return PQntuples(r_.get()); }
-  bool isNull(int row, int col) const { return PQgetisnull(r_.get(), row, col) != 0; }
+  bool isNull(int row, int col) const {
+    check(row, col);
+    return PQgetisnull(r_.get(), row, col) != 0;
+  }
+  // Every accessor checks that the row and column exist (kCorrupt otherwise: a query that found nothing).
   std::int64_t i64(int row, int col) const;
   double f64(int row, int col) const;
   bool boolean(int row, int col) const { return i64(row, col) != 0; }
@@ -60,6 +64,7 @@ class Result {
   std::span<const std::uint8_t> blob(int row, int col) const;
 
  private:
+  void check(int row, int col) const;
   std::unique_ptr<PGresult, void (*)(PGresult*)> r_;
 };
 
@@ -68,9 +73,10 @@ std::string meaning(StorageError::Code code);
 
 class Conn {
  public:
-  // Connects (libpq's connect_timeout bounds the wait). kUnavailable when the server cannot be reached,
+  // Connects (libpq's connect_timeout bounds the wait; TCP keepalives notice a dead peer), then runs `setup`
+  // (session settings, LISTEN), again after every reconnect. kUnavailable when the server cannot be reached,
   // kInvalidArgument for a URL libpq cannot parse; messages carry the redacted URL only.
-  explicit Conn(const std::string& url);
+  explicit Conn(const std::string& url, std::string setup = "");
   Conn(Conn&&) = default;
   Conn& operator=(Conn&&) = default;
 
@@ -79,7 +85,9 @@ class Conn {
   Result query(const char* sql, const std::vector<Param>& params = {}) const;
   // COPY ... FROM STDIN with `data` in COPY's text format.
   void copyIn(const std::string& copy_sql, const std::string& data) const;
-  // A lost connection (server restarted) is re-established; true when the connection is usable.
+  // A lost connection (server restarted, backend terminated) is re-established, its setup run again; true when
+  // the connection is usable. Looks at the socket, so a connection the server closed while idle is noticed here
+  // rather than by the next statement.
   bool ensureOpen() const;
   PGconn* get() const { return c_.get(); }
 
@@ -87,6 +95,7 @@ class Conn {
   [[noreturn]] void fail(const PGresult* r, const char* sql) const;
   std::unique_ptr<PGconn, void (*)(PGconn*)> c_{nullptr, &PQfinish};
   std::string redacted_;
+  std::string setup_;
 };
 
 // BEGIN ... COMMIT on `conn`, rolled back on destruction unless committed.
@@ -107,6 +116,7 @@ class Transaction {
 class Pool {
  public:
   explicit Pool(std::string url) : url_(std::move(url)) {}
+  ~Pool();
   class Lease {
    public:
     Lease(const Pool& pool, std::unique_ptr<Conn> conn) : pool_(pool), conn_(std::move(conn)) {}

@@ -2,9 +2,11 @@
 // processes (replicas) writing the same map. The behaviour both back-ends share is tested on both in
 // test_map_store.cpp.
 #include <chrono>
+#include <future>
 #include <thread>
 
 #include "backend.hpp"
+#include "pg_core.hpp"
 
 namespace sglc::storage {
 namespace {
@@ -64,6 +66,7 @@ TEST_F(PostgresStore, AnUnreachableServerIsUnavailableAndItsPasswordStaysSecret)
   EXPECT_EQ(errorCode([&] { MapStore::open(o); }), StorageError::Code::kInvalidArgument);
   EXPECT_EQ(pg::redacted("postgresql://u:pw@h/db?password=x&sslmode=require"),
             "postgresql://u:***@h/db?password=***&sslmode=require");
+  EXPECT_EQ(pg::redacted("postgres://h/db?pass%77ord=x"), "postgres://h/db?pass%77ord=***");  // libpq decodes names
 }
 
 TEST_F(PostgresStore, RefusesAForeignDatabaseAndANewerSchemaWithoutTouchingThem) {
@@ -152,36 +155,86 @@ TEST_F(PostgresStore, ReplicasSeeEachOthersWrites) {
   EXPECT_EQ(a->integrityCheck(), "ok");
 }
 
-// The server restarting (here: the store's connections killed) costs the calls in flight an UNAVAILABLE and
-// nothing more: the next calls reconnect, and nothing written before is lost.
-TEST_F(PostgresStore, ALostConnectionIsReportedAndReestablished) {
-  auto store = backend_.open();
-  const auto fp = randomFingerprint(9);
-  store->createMap("m", static_cast<int>(fp.descriptor.size()));
-  const auto id = store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
-  pg::Conn admin(backend_.options().path);
+// Ends the store's server connections and waits until they are gone (their sockets closed).
+void killConnections(const std::string& url) {
+  pg::Conn admin(url);
   admin.exec(
       "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = current_database() AND "
       "pid <> pg_backend_pid()");
-  for (int attempt = 0; attempt < 3; ++attempt) {
-    try {
-      store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 1, .fingerprint = &fp});
-      break;
-    } catch (const StorageError& e) {
-      EXPECT_EQ(e.code(), StorageError::Code::kUnavailable) << e.what();
-    }
+  ASSERT_TRUE(eventually([&] {
+    return admin
+               .query(
+                   "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() AND "
+                   "pid <> pg_backend_pid()")
+               .i64(0, 0) == 0;
+  }));
+}
+
+// The server restarting (here: every connection of the store ended by the server) costs nothing: idle
+// connections are checked before use and re-established with their session settings, and a write after it
+// still gives up on a held lock after busy_timeout_ms instead of waiting for ever.
+TEST_F(PostgresStore, LostConnectionsAreReestablishedWithTheirSettings) {
+  auto o = backend_.options();
+  o.busy_timeout_ms = 300;
+  auto store = MapStore::open(o);
+  const auto fp = randomFingerprint(9);
+  store->createMap("m", static_cast<int>(fp.descriptor.size()));
+  const auto id = store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
+  {
+    std::vector<std::thread> readers;  // several pooled reader connections
+    for (int i = 0; i < 4; ++i) readers.emplace_back([&] { EXPECT_TRUE(store->scanInfo(id)); });
+    for (auto& t : readers) t.join();
   }
-  std::optional<ScanInfo> info;
-  for (int attempt = 0; attempt < 3 && !info; ++attempt) {
-    try {
-      info = store->scanInfo(id);
-    } catch (const StorageError& e) {
-      EXPECT_EQ(e.code(), StorageError::Code::kUnavailable) << e.what();
-    }
-  }
-  ASSERT_TRUE(info);
+  killConnections(o.path);
+  EXPECT_TRUE(store->scanInfo(id));
+  EXPECT_TRUE(store->scanInfo(id));
+  EXPECT_NO_THROW(store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 1, .fingerprint = &fp}));
   EXPECT_EQ(store->stats("m").scans, 2);
   EXPECT_EQ(store->stats("m").index_entries, 2);
+  // Another process holds the write lock: after the reconnect, the writer's lock_timeout still applies.
+  killConnections(o.path);
+  pg::Conn holder(o.path);
+  holder.query("SELECT pg_advisory_lock($1, $2)", {pg::kLockSpace, pg::kWriteLock});
+  std::promise<void> answered;
+  std::thread release([&, done = answered.get_future()] {
+    done.wait_for(std::chrono::seconds(20));  // the write should give up long before; if not, do not hang
+    holder.query("SELECT pg_advisory_unlock($1, $2)", {pg::kLockSpace, pg::kWriteLock});
+  });
+  EXPECT_EQ(
+      errorCode([&] { store->addScan({.map = "m", .robot = "r", .session = "s", .seq = 2, .fingerprint = &fp}); }),
+      StorageError::Code::kBusy);
+  answered.set_value();
+  release.join();
+}
+
+// What PostgreSQL stores differently is refused or handled with the right code: names that are not UTF-8
+// (text columns), map ids past 2^31, and the size limit, which deletions free again.
+TEST_F(PostgresStore, EdgesOfTheTypesAndTheSizeLimit) {
+  auto o = backend_.options();
+  o.max_db_mb = 0.3;
+  auto store = MapStore::open(o);
+  const auto fp = randomFingerprint(3, 40);
+  const auto dim = static_cast<int>(fp.descriptor.size());
+  exec("ALTER SEQUENCE maps_id_seq RESTART WITH 3000000000");
+  EXPECT_GT(store->createMap("m", dim).id, std::int64_t{1} << 31);
+  EXPECT_EQ(store->stats("m").scans, 0);
+  EXPECT_EQ(errorCode([&] { store->addScan({.map = "m", .robot = "r\xff", .session = "s", .fingerprint = &fp}); }),
+            StorageError::Code::kInvalidArgument);
+  int stored = 0;
+  for (bool full = false; !full && stored < 1000;) {
+    try {
+      store->addScan({.map = "m", .robot = "r", .session = "s", .seq = stored, .fingerprint = &fp});
+      ++stored;
+    } catch (const StorageError& e) {
+      EXPECT_EQ(e.code(), StorageError::Code::kFull) << e.what();
+      full = true;
+    }
+  }
+  ASSERT_GT(stored, 2);
+  ASSERT_LT(stored, 1000) << "the limit was never reached";
+  EXPECT_EQ(store->deleteSession("m", "r", "s"), stored);
+  EXPECT_NO_THROW(store->addScan({.map = "m", .robot = "r", .session = "t", .seq = 0, .fingerprint = &fp}));
+  EXPECT_EQ(store->integrityCheck(), "ok");
 }
 
 }  // namespace
