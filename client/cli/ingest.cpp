@@ -6,6 +6,7 @@
 #include <deque>
 #include <iostream>
 #include <memory>
+#include <thread>
 
 #include "common.hpp"
 #include "sglc/client/packing.hpp"
@@ -63,85 +64,143 @@ struct IngestArgs {
   bool store_raw = false;
   bool progress = false, no_progress = false;
   int window = 4;
+  int retries = 5;
   double chunk_mb = sc::kDefaultChunkBytes / 1e6;
   QueryFlags q;
+};
+
+// A break of the connection rather than an answer of the server: UNAVAILABLE, or a stream reset by a proxy whose
+// upstream died (gRPC reports RST_STREAM as INTERNAL).
+bool retryable(const sc::RpcError& e) {
+  return e.code() == grpc::StatusCode::UNAVAILABLE ||
+         (e.code() == grpc::StatusCode::INTERNAL && e.statusMessage().find("RST_STREAM") != std::string::npos);
+}
+
+// One robot session sent over IngestStream; when the stream breaks (the server, or the replica behind a
+// balancer, went away), a new stream resends the scans not yet answered. Ingest is idempotent: a scan
+// stored before the break is answered as stored, not stored twice.
+class Feeder {
+ public:
+  Feeder(const Common& common, const IngestArgs& a, const sglc::Sequence& seq, std::string session)
+      : common_(common),
+        a_(a),
+        seq_(seq),
+        session_(std::move(session)),
+        client_(connectClient(common, static_cast<std::size_t>(a.chunk_mb * 1e6))),
+        progress_(a.progress || (::isatty(STDERR_FILENO) == 1 && !a.no_progress), seq.frames.size()) {
+    options_.store_raw = a.store_raw;
+    options_.query = a.query;
+    options_.query_options = toQueryOptions(a.q);
+  }
+
+  void run() {
+    client_.ensureMap(a_.map);
+    progress_.update(0, 0);
+    for (int attempt = 0;; ++attempt) {
+      try {
+        stream();
+        break;
+      } catch (const sc::RpcError& e) {
+        if (!retryable(e) || attempt >= a_.retries) fail(e.what());
+        progress_.clear();
+        std::cerr << "sglc ingest: " << e.what() << "; retrying " << pending_.size() << " unanswered scans ("
+                  << attempt + 1 << "/" << a_.retries << ")\n";
+        std::this_thread::sleep_for(std::chrono::milliseconds(200) * (1 << std::min(attempt, 5)));
+      } catch (const std::exception& e) {
+        fail(e.what());
+      }
+    }
+    progress_.done();
+    if (!common_.json)
+      std::cout << "ingested " << done_ << " scans from " << a_.dir << " into map " << a_.map << " (robot " << a_.robot
+                << ", session " << session_ << ")" << (a_.query ? ", " + std::to_string(loops_) + " loops" : "")
+                << "\n";
+  }
+
+ private:
+  // One stream: first the scans a broken stream left unanswered, then the rest. Every answer is reported, even
+  // when the stream then fails.
+  void stream() {
+    sc::IngestSession stream = client_.openSession();
+    std::size_t resent = 0;
+    try {
+      for (; resent < pending_.size(); ++resent) send(stream, pending_[resent]);
+      for (; next_ < seq_.frames.size(); ++next_) {
+        pending_.push_back(next_);
+        send(stream, next_);
+        while (stream.outstanding() >= static_cast<std::size_t>(a_.window)) handle(stream.next());
+      }
+      while (stream.outstanding() > 0) handle(stream.next());
+    } catch (const sc::RpcError&) {
+      // What the server answered before the break is in order on the stream: report it, resend the rest.
+      try {
+        while (stream.outstanding() > 0) handle(stream.next());
+      } catch (const std::exception&) {
+      }
+      throw;
+    }
+    stream.finish();
+  }
+
+  void send(sc::IngestSession& stream, std::size_t i) {
+    const auto& f = seq_.frames[i];
+    const sglc::LabelledScan scan = sglc::readScan(f.scan_path, f.label_path, a_.label_field);
+    auto o = options_;
+    o.stamp = f.stamp;
+    o.odometry_pose = f.pose;
+    stream.send(sc::makeKey(a_.map, a_.robot, session_, f.number), scan, o);
+  }
+
+  void handle(const v1::IngestResponse& r) {
+    const std::string frame = seq_.frames[pending_.front()].name;
+    pending_.pop_front();
+    ++done_;
+    loops_ += r.loops_size();
+    if (common_.json) {
+      json j;
+      j["scan_id"] = r.scan_id();
+      j["frame"] = frame;
+      j["loops"] = json::array();
+      for (const auto& c : r.loops()) j["loops"].push_back(candidateJson(c));
+      progress_.clear();
+      std::cout << j.dump() << std::endl;
+    } else if (r.loops_size() > 0) {
+      progress_.clear();
+      for (const auto& c : r.loops())
+        std::cout << "frame " << frame << " (scan " << r.scan_id() << "): loop with " << candidateText(c) << "\n";
+      std::cout.flush();
+    }
+    progress_.update(done_, loops_);
+  }
+
+  [[noreturn]] void fail(const std::string& why) {
+    progress_.clear();
+    throw std::runtime_error(why + " (after " + std::to_string(done_) + " of " + std::to_string(seq_.frames.size()) +
+                             " scans were stored)");
+  }
+
+  const Common& common_;
+  const IngestArgs& a_;
+  const sglc::Sequence& seq_;
+  const std::string session_;
+  const sc::Client client_;
+  Progress progress_;
+  sc::IngestOptions options_;
+  std::deque<std::size_t> pending_;  // frames sent and not yet answered, in order
+  std::size_t next_ = 0;             // the next frame never sent
+  std::size_t done_ = 0, loops_ = 0;
 };
 
 int runIngest(const Common& common, const IngestArgs& a) {
   if (a.map.empty()) throw UsageError("--map is empty");
   if (a.robot.empty()) throw UsageError("--robot is empty");
   if (a.window < 1) throw UsageError("--window must be at least 1");
+  if (a.retries < 0 || a.retries > 100) throw UsageError("--retries must be between 0 and 100");
   if (!(a.chunk_mb >= 0.001 && a.chunk_mb <= 2000)) throw UsageError("--chunk-mb must be between 0.001 and 2000");
-  const v1::QueryOptions query_options = toQueryOptions(a.q);
   const sglc::Sequence seq = sglc::openSequence(a.dir, sglc::FrameSelection::parse(a.frames), a.every);
   const std::string session = a.session.empty() ? seq.name : a.session;
   if (session.empty()) throw UsageError("cannot name the session after " + a.dir + ": give --session");
-
-  const sc::Client client = connectClient(common, static_cast<std::size_t>(a.chunk_mb * 1e6));
-  client.ensureMap(a.map);
-
-  const bool tty = ::isatty(STDERR_FILENO) == 1;
-  Progress progress(a.progress || (tty && !a.no_progress), seq.frames.size());
-  progress.update(0, 0);
-
-  sc::IngestSession stream = client.openSession();
-  std::deque<std::string> pending_frames;
-  std::size_t done = 0, loops = 0;
-  auto handle = [&](const v1::IngestResponse& r) {
-    const std::string frame = pending_frames.front();
-    pending_frames.pop_front();
-    ++done;
-    loops += r.loops_size();
-    if (common.json) {
-      json j;
-      j["scan_id"] = r.scan_id();
-      j["frame"] = frame;
-      j["loops"] = json::array();
-      for (const auto& c : r.loops()) j["loops"].push_back(candidateJson(c));
-      progress.clear();
-      std::cout << j.dump() << std::endl;
-    } else if (r.loops_size() > 0) {
-      progress.clear();
-      for (const auto& c : r.loops())
-        std::cout << "frame " << frame << " (scan " << r.scan_id() << "): loop with " << candidateText(c) << "\n";
-      std::cout.flush();
-    }
-    progress.update(done, loops);
-  };
-
-  std::string failure;
-  try {
-    for (const auto& f : seq.frames) {
-      const sglc::LabelledScan scan = sglc::readScan(f.scan_path, f.label_path, a.label_field);
-      sc::IngestOptions o;
-      o.stamp = f.stamp;
-      o.odometry_pose = f.pose;
-      o.store_raw = a.store_raw;
-      o.query = a.query;
-      o.query_options = query_options;
-      stream.send(sc::makeKey(a.map, a.robot, session, f.number), scan, o);
-      pending_frames.push_back(f.name);
-      while (stream.outstanding() >= static_cast<std::size_t>(a.window)) handle(stream.next());
-    }
-  } catch (const std::exception& e) {
-    failure = e.what();
-  }
-  // Report every scan the server answered, even after a failure, then close the stream.
-  try {
-    while (stream.outstanding() > 0) handle(stream.next());
-    stream.finish();
-  } catch (const std::exception& e) {
-    if (failure.empty()) failure = e.what();
-  }
-  if (!failure.empty()) {
-    progress.clear();
-    throw std::runtime_error(failure + " (after " + std::to_string(done) + " of " + std::to_string(seq.frames.size()) +
-                             " scans were stored)");
-  }
-  progress.done();
-  if (!common.json)
-    std::cout << "ingested " << done << " scans from " << a.dir << " into map " << a.map << " (robot " << a.robot
-              << ", session " << session << ")" << (a.query ? ", " + std::to_string(loops) + " loops" : "") << "\n";
+  Feeder(common, a, seq, session).run();
   return 0;
 }
 
@@ -163,6 +222,12 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
   c->add_flag("--progress", a->progress, "Show the progress bar even when stderr is not a terminal");
   c->add_flag("--no-progress", a->no_progress, "Never show the progress bar");
   c->add_option("--window", a->window, "Scans in flight on the stream")->capture_default_str();
+  c->add_option(
+       "--retries", a->retries,
+       "When the stream breaks (UNAVAILABLE, or reset by a proxy), reopen it and resend the unanswered scans this "
+       "many times "
+       "(ingest is idempotent)")
+      ->capture_default_str();
   c->add_option("--chunk-mb", a->chunk_mb,
                 "Scans larger than this (packed) go through IngestChunked in pieces this size")
       ->capture_default_str();
