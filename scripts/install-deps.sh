@@ -11,6 +11,8 @@ PACKAGES=(
   libsqlite3-dev libfaiss-dev libopenblas0-pthread
   # the PostgreSQL map store: libpq to build; the server and its client programs (pg_dump) to test and back up
   libpq-dev postgresql-15 postgresql-client-15
+  # the gRPC balancer of scripts/cluster-demo.sh (deploy/nginx/sglc-grpc.conf)
+  nginx
   # PCD and PLY scans (sglc_io links PCL's io and common modules only)
   libpcl-dev
   # service

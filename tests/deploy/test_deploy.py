@@ -7,10 +7,14 @@ Usage: test_deploy.py REPO_ROOT BIN_DIR
 - the Dockerfile's COPY sources exist, and its runtime stage installs every Debian package that provides a
   shared library of sglc-server or sglc (ldd + dpkg -S; skipped where dpkg is missing);
 - the systemd unit's install steps create the user and /etc/sglc, and its ExecStart line, pointed at this
-  build and a temporary directory, starts a server that answers SERVING and stops cleanly on SIGTERM.
+  build and a temporary directory, starts a server that answers SERVING and stops cleanly on SIGTERM;
+- the Kubernetes manifests parse, probe the gRPC port with grpc.health, take the database URL from a secret,
+  and their server configuration is accepted by this build's sglc-server (--dump-config);
+- the nginx configuration passes `nginx -t` (skipped where nginx is missing) and balances over grpc_pass.
 """
 import os
 import re
+import shutil
 import shlex
 import signal
 import socket
@@ -139,9 +143,58 @@ def test_systemd_unit():
         assert os.path.isfile(os.path.join(state, "map.db")), "the database goes where the unit says"
 
 
+def test_kubernetes():
+    k8s = os.path.join(DEPLOY, "k8s")
+    docs = {}
+    for name in sorted(os.listdir(k8s)):
+        if name.endswith(".yaml"):
+            for doc in yaml.safe_load_all(read(os.path.join(k8s, name))):
+                if doc:
+                    docs[(doc["kind"], doc["metadata"]["name"])] = doc
+    deployment = docs[("Deployment", "sglc-server")]
+    container = deployment["spec"]["template"]["spec"]["containers"][0]
+    port = next(p["containerPort"] for p in container["ports"] if p["name"] == "grpc")
+    for probe in ("readinessProbe", "livenessProbe"):
+        assert container[probe]["grpc"]["port"] == port, f"{probe} must use grpc.health on the gRPC port"
+    env = {e["name"]: e for e in container["env"]}
+    url = env["SGLC_DB_URL"]["valueFrom"]["secretKeyRef"]
+    assert ("Secret", url["name"]) in docs and url["key"] in docs[("Secret", url["name"])]["stringData"]
+    assert "$(SGLC_DB_URL)" in container["args"], "the server gets the URL from the secret"
+    service = docs[("Service", "sglc")]
+    assert service["spec"]["selector"] == deployment["spec"]["selector"]["matchLabels"]
+    config = docs[("ConfigMap", "sglc-config")]["data"]["sglc.yaml"]
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "sglc.yaml")
+        with open(path, "w") as f:
+            f.write(config.replace("/etc/sglc/secrets/tokens", os.devnull))
+        out = subprocess.run([os.path.join(BIN, "sglc-server"), "--config", path, "--dump-config"],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, f"sglc-server refuses the ConfigMap's configuration: {out.stderr}"
+        assert yaml.safe_load(out.stdout)["server"]["listen"] == f"0.0.0.0:{port}"
+
+
+def test_nginx():
+    conf = read(os.path.join(DEPLOY, "nginx", "sglc-grpc.conf"))
+    assert "grpc_pass grpc://sglc_replicas" in conf and "http2" in conf
+    nginx = shutil.which("nginx") or ("/usr/sbin/nginx" if os.path.exists("/usr/sbin/nginx") else None)
+    if not nginx:
+        print("skip nginx -t: nginx is not installed (scripts/install-deps.sh installs it)")
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        conf = re.sub(r"^pid .*$", f"pid {tmp}/nginx.pid;", conf, flags=re.M)
+        conf = re.sub(r"^error_log .*$", f"error_log {tmp}/error.log;", conf, flags=re.M)
+        conf = conf.replace("http {", f"http {{\n  client_body_temp_path {tmp}/body;\n  proxy_temp_path {tmp}/p;\n"
+                            f"  fastcgi_temp_path {tmp}/f;\n  uwsgi_temp_path {tmp}/u;\n  scgi_temp_path {tmp}/s;", 1)
+        path = os.path.join(tmp, "nginx.conf")
+        with open(path, "w") as f:
+            f.write(conf)
+        out = subprocess.run([nginx, "-t", "-c", path, "-p", tmp], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0, f"nginx -t: {out.stderr}"
+
+
 def main():
     failed = 0
-    for t in (test_dockerignore, test_compose, test_dockerfile, test_systemd_unit):
+    for t in (test_dockerignore, test_compose, test_dockerfile, test_systemd_unit, test_kubernetes, test_nginx):
         try:
             t()
             print(f"ok   {t.__name__}")
