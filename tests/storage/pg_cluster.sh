@@ -3,7 +3,8 @@
 #   pg_cluster.sh start DIR   initdb + start on a free port; writes the server's URL to DIR/url
 #   pg_cluster.sh stop DIR    stops it and removes its data
 # Uses Debian's postgresql-15 (scripts/install-deps.sh installs it). As root, the server runs as user postgres
-# (initdb refuses root). Durability is off (fsync): the tests check the store, not the disk.
+# (initdb refuses root). Durability is off (fsync) for the tests, which check the store, not the disk;
+# SGLC_PG_DURABLE=1 keeps PostgreSQL's defaults (for measurements).
 set -euo pipefail
 cmd=${1:?start or stop}
 dir=${2:?state directory}
@@ -36,11 +37,13 @@ case "$cmd" in
     [ "$(id -u)" -eq 0 ] && chown postgres: "$data"
     as_server_user "$bin/initdb" -D "$data/pgdata" -U postgres --auth=trust -E UTF8 --no-sync >"$dir/initdb.log" 2>&1 \
       || { cat "$dir/initdb.log" >&2; exit 1; }
+    durability="-c fsync=off -c full_page_writes=off"
+    [ "${SGLC_PG_DURABLE:-0}" = 1 ] && durability=""
     for attempt in $(seq 1 20); do
       port=$((20000 + RANDOM % 20000))
       (exec 3<>"/dev/tcp/127.0.0.1/$port") 2>/dev/null && continue  # taken
       if as_server_user "$bin/pg_ctl" -D "$data/pgdata" -l "$data/server.log" -w -t 60 \
-        -o "-c listen_addresses=127.0.0.1 -p $port -k $data -c fsync=off -c full_page_writes=off -c max_connections=300" \
+        -o "-c listen_addresses=127.0.0.1 -p $port -k $data -c max_connections=300 $durability" \
         start >/dev/null 2>&1; then
         echo "postgresql://postgres@127.0.0.1:$port/postgres" >"$dir/url"
         echo "pg_cluster: PostgreSQL on 127.0.0.1:$port ($data)"

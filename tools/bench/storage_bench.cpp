@@ -5,13 +5,17 @@
 // real one), so the index sees realistic descriptor statistics.
 //
 //   build/bin/sglc-bench-storage [--dir /tmp/sglc-bench] [--frames 300] [--scans 100000] [--million]
+#include <malloc.h>
+
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <thread>
 
 #include "bench/kitti_path.hpp"
 #include "sglc/elapsed.hpp"
@@ -26,6 +30,14 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using namespace sglc;
+
+// The process's resident memory (MB), from /proc.
+double residentMb() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmRSS:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  return 0;
+}
 
 nlohmann::ordered_json summary(const std::vector<double>& v) {
   return {{"median_ms", percentile(v, 0.5)}, {"p90_ms", percentile(v, 0.9)}, {"n", v.size()}};
@@ -67,6 +79,8 @@ struct Options {
   bool million = false;
   std::string data = "../shared/data";
   std::vector<int> nprobes{storage::IndexOptions{}.ivf_nprobe};
+  std::string postgres;  // a PostgreSQL database URL: the store and write-rate figures on it too
+  double write_seconds = 10;
 };
 
 void addOptions(CLI::App& app, Options& o) {
@@ -74,6 +88,10 @@ void addOptions(CLI::App& app, Options& o) {
   app.add_option("--frames", o.frames, "simulated frames to fingerprint")->capture_default_str();
   app.add_option("--scans", o.scans, "size of the exact-search map")->capture_default_str();
   app.add_flag("--million", o.million, "also build a 1M-scan map with the approximate (IVF) index");
+  app.add_option("--postgres", o.postgres,
+                 "PostgreSQL database URL: also measure storing, fetching and the write rate at saturation there "
+                 "(one store per writer, as replicas; a map of its own, deleted afterwards)");
+  app.add_option("--write-seconds", o.write_seconds, "length of each write-rate run (s)")->capture_default_str();
   app.add_option("--data", o.data, "shared data directory (KITTI poses)")->capture_default_str();
   app.add_option("--ivf-nprobe", o.nprobes, "IVF cells visited per search (a list is measured value by value)")
       ->capture_default_str()
@@ -101,10 +119,8 @@ std::vector<Fingerprint> simulatedFingerprints(const Pipeline& pipeline, const s
 }
 
 // 2. Store with synchronous=FULL, then fetches from the database and from the cache.
-void benchStoreAndFetch(const std::string& dir, const std::vector<Fingerprint>& base, nlohmann::ordered_json& out) {
-  storage::StoreOptions o;
-  o.path = dir + "/full.db";
-  o.sync = storage::StoreOptions::Sync::kFull;
+void benchStoreAndFetch(const storage::StoreOptions& o, const std::vector<Fingerprint>& base,
+                        nlohmann::ordered_json& out) {
   auto store = storage::MapStore::open(o);
   store->createMap("m", base.front().layout.scanDim());
   std::vector<double> store_ms, fetch_ms, cold_ms;
@@ -132,6 +148,59 @@ void benchStoreAndFetch(const std::string& dir, const std::vector<Fingerprint>& 
   out["fetch_from_cache"] = summary(fetch_ms);
   const auto st = store->stats();
   out["bytes_per_scan_db"] = static_cast<double>(st.db_bytes) / static_cast<double>(st.scans);
+  store->deleteMap("m");
+}
+
+// Scans stored per second with `writers` threads writing at once for `seconds`, each through a store of its own
+// (as replicas do) when `store_per_writer`, else through one store; with every write's latency.
+nlohmann::ordered_json writeRate(const storage::StoreOptions& o, const std::vector<Fingerprint>& base, int writers,
+                                 bool store_per_writer, double seconds) {
+  std::vector<std::unique_ptr<storage::MapStore>> stores;
+  for (int w = 0; w < (store_per_writer ? writers : 1); ++w) stores.push_back(storage::MapStore::open(o));
+  const std::string map = "rate-" + std::to_string(writers);
+  stores[0]->createMap(map, base.front().layout.scanDim());
+  std::vector<std::vector<double>> ms(static_cast<std::size_t>(writers));
+  const auto t0 = Clock::now();
+  std::vector<std::thread> threads;
+  for (int w = 0; w < writers; ++w)
+    threads.emplace_back([&, w] {
+      auto& store = *stores[store_per_writer ? static_cast<std::size_t>(w) : 0];
+      for (std::int64_t i = 0; msSince(t0) < seconds * 1000; ++i) {
+        const auto& fp = base[static_cast<std::size_t>(i) % base.size()];
+        const auto t = Clock::now();
+        store.addScan({.map = map, .robot = "w" + std::to_string(w), .session = "s", .seq = i, .fingerprint = &fp});
+        ms[static_cast<std::size_t>(w)].push_back(msSince(t));
+      }
+    });
+  for (auto& t : threads) t.join();
+  const double elapsed = msSince(t0) / 1000.0;
+  std::vector<double> all;
+  for (const auto& v : ms) all.insert(all.end(), v.begin(), v.end());
+  stores[0]->deleteMap(map);
+  nlohmann::ordered_json out = summary(all);
+  out["writers"] = writers;
+  out["scans_per_s"] = static_cast<double>(all.size()) / elapsed;
+  return out;
+}
+
+// The same figures on PostgreSQL (full durability: synchronous_commit on), and the write rate of 1, 2 and 4
+// writers on both back-ends.
+void benchWriteRates(const Options& options, const std::vector<Fingerprint>& base, nlohmann::ordered_json& out) {
+  storage::StoreOptions sqlite;
+  sqlite.path = options.dir + "/rate.db";
+  sqlite.sync = storage::StoreOptions::Sync::kFull;
+  nlohmann::ordered_json rates = nlohmann::ordered_json::array();
+  for (const int w : {1, 2, 4}) rates.push_back(writeRate(sqlite, base, w, false, options.write_seconds));
+  out["sqlite_write_rate"] = rates;
+  if (options.postgres.empty()) return;
+  storage::StoreOptions pg = sqlite;
+  pg.path = options.postgres;
+  nlohmann::ordered_json pg_out;
+  benchStoreAndFetch(pg, base, pg_out);
+  rates = nlohmann::ordered_json::array();
+  for (const int w : {1, 2, 4}) rates.push_back(writeRate(pg, base, w, true, options.write_seconds));
+  pg_out["write_rate_store_per_writer"] = rates;
+  out["postgres"] = pg_out;
 }
 
 // Top-50 exact searches near the kept descriptors, plain and with every filter.
@@ -179,9 +248,16 @@ void benchLargeMap(const std::string& dir, const std::vector<Fingerprint>& base,
   { auto store = storage::MapStore::open(o); }
   out["open_with_snapshot_s"] = msSince(t0) / 1000.0;
   fs::remove_all(o.path + ".index");
+  o.cache_mb = 0;    // the index alone
+  ::malloc_trim(0);  // the stores above gave their memory back: measure from what is really held
+  const double rss_before = residentMb();
   t0 = Clock::now();
-  { auto store = storage::MapStore::open(o); }
-  out["open_rebuild_s"] = msSince(t0) / 1000.0;
+  {
+    auto store = storage::MapStore::open(o);
+    out["open_rebuild_s"] = msSince(t0) / 1000.0;
+    // What a replica holds in memory per scan: the FAISS index, the entries the filters read, the catalogue.
+    out["index_rss_mb_per_million_scans"] = (residentMb() - rss_before) * 1e6 / static_cast<double>(scans);
+  }
 }
 
 // Fingerprints of `base` reduced to what the index needs: nodes and descriptor only.
@@ -273,7 +349,11 @@ int main(int argc, char** argv) {
   const Pipeline pipeline;
   const auto base = simulatedFingerprints(pipeline, bench::kitti00OrLoopRoute(options.data), options.frames, out);
   std::mt19937_64 rng(42);
-  benchStoreAndFetch(options.dir, base, out);
+  storage::StoreOptions full;
+  full.path = options.dir + "/full.db";
+  full.sync = storage::StoreOptions::Sync::kFull;
+  benchStoreAndFetch(full, base, out);
+  benchWriteRates(options, base, out);
   benchLargeMap(options.dir, base, options.scans, rng, out);
   if (options.million) benchMillion(options.dir, base, options.nprobes, rng, out);
   std::cout << out.dump(2) << std::endl;
