@@ -7,18 +7,18 @@
 # Run on a fresh Debian 12 machine as root (it installs and builds first). Prints one JSON line and exits 1
 # unless every scan a client saw acknowledged is stored and indexed on every surviving replica.
 # Environment: SGLC_CLUSTER_FRAMES (default 0:1911:3, 637 scans), SGLC_CLUSTER_PORT (nginx's; replicas
-# listen on the next three), SGLC_CLUSTER_DIR (var/cluster), SGLC_CLUSTER_SKIP_SETUP=1 (no install or build).
+# listen on the next three), SGLC_CLUSTER_DIR (var/cluster), SGLC_CLUSTER_BIN (build/bin),
+# SGLC_CLUSTER_PROBES (200 visibility probes), SGLC_CLUSTER_SKIP_SETUP=1 (no install or build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-ROOT=$PWD
 if [ "${SGLC_CLUSTER_SKIP_SETUP:-0}" != 1 ]; then
   scripts/install-deps.sh
   scripts/build.sh
 fi
-WORK=$ROOT/${SGLC_CLUSTER_DIR:-var/cluster}
+WORK=$(realpath -m "${SGLC_CLUSTER_DIR:-var/cluster}")
 FRAMES=${SGLC_CLUSTER_FRAMES:-0:1911:3}
 PORT=${SGLC_CLUSTER_PORT:-50070}
-BIN=$ROOT/build/bin
+BIN=$(realpath "${SGLC_CLUSTER_BIN:-build/bin}")
 rm -rf "$WORK" && mkdir -p "$WORK"
 
 REPLICA_PIDS=()
