@@ -7,6 +7,8 @@
 #include <cstring>
 #include <filesystem>
 
+#include "validate.hpp"
+
 namespace sglc::storage::admin {
 namespace {
 
@@ -16,18 +18,7 @@ using Code = StorageError::Code;
 }  // namespace
 
 void backup(const StoreCore& core, const std::string& dest) {
-  // Claim the name first (O_EXCL): of two backups to one name only one proceeds, and a failure removes only
-  // the file this call created. VACUUM INTO accepts an existing empty file.
-  const int fd = ::open(dest.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    const int e = errno;
-    if (e == EEXIST) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
-    throw StorageError(e == EACCES || e == EROFS || e == EPERM ? Code::kReadOnly
-                       : e == ENOSPC || e == EDQUOT            ? Code::kFull
-                                                               : Code::kIo,
-                       "the backup file cannot be created", dest + ": " + std::strerror(e));
-  }
-  ::close(fd);
+  validate::claimBackupFile(dest);  // VACUUM INTO accepts an existing empty file
   auto reader = core.readers.acquire();
   try {
     sql::Stmt st(*reader, "VACUUM INTO ?");

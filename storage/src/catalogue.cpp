@@ -26,6 +26,13 @@ std::int64_t MapState::sessionId(std::int64_t robot_id, const std::string& sessi
   return it == sessions.end() ? -2 : it->second;
 }
 
+std::int64_t MapState::requireSession(const std::string& robot, const std::string& session) const {
+  const auto id = sessionId(requireRobot(robot), session);
+  if (id < 0)
+    throw StorageError(StorageError::Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
+  return id;
+}
+
 MapInfo MapState::info() const {
   MapInfo info;
   info.id = id;

@@ -31,6 +31,8 @@ struct MapState {
   // The robot's id; StorageError kNotFound "map '...' has no robot '...'" for a name the map does not have.
   std::int64_t requireRobot(const std::string& robot) const;
   std::int64_t sessionId(std::int64_t robot_id, const std::string& session) const;
+  // The session's id; StorageError kNotFound for a robot or session the map does not have.
+  std::int64_t requireSession(const std::string& robot, const std::string& session) const;
   MapInfo info() const;
 };
 

@@ -12,6 +12,7 @@
 #include <utility>
 
 #include "pg_parts.hpp"
+#include "validate.hpp"
 
 extern char** environ;
 
@@ -86,18 +87,7 @@ void count(const Conn& db, const char* query, const char* what, std::string& rep
 }  // namespace
 
 void backup(const Core& core, const std::string& dest) {
-  // Claim the name first (O_EXCL): of two backups to one name only one proceeds, and a failure removes only the
-  // file this call created.
-  const int fd = ::open(dest.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    const int e = errno;
-    if (e == EEXIST) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
-    throw StorageError(e == EACCES || e == EROFS || e == EPERM ? Code::kReadOnly
-                       : e == ENOSPC || e == EDQUOT            ? Code::kFull
-                                                               : Code::kIo,
-                       "the backup file cannot be created", dest + ": " + std::strerror(e));
-  }
-  ::close(fd);
+  validate::claimBackupFile(dest);
   const auto [status, err] = run({"pg_dump", "--format=custom", "--no-owner", "--no-password", "--file=" + dest},
                                  clientEnvironment(core.options.path));
   if (status != 0) {

@@ -214,10 +214,7 @@ std::int64_t deleteSession(Core& core, const std::string& map, const std::string
   {
     std::shared_lock lock(core.state_mutex);
     m = &core.catalogue.map(map);
-    auto s = m->sessions.find({m->requireRobot(robot), session});
-    if (s == m->sessions.end())
-      throw StorageError(Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
-    session_id = s->second;
+    session_id = m->requireSession(robot, session);
   }
   return deleteScans(core, tx, *m, "session_id", session_id, Change::kSessionDeleted);
 }

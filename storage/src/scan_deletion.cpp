@@ -76,10 +76,7 @@ std::int64_t deleteSession(StoreCore& core, const std::string& map, const std::s
   {
     std::shared_lock lock(core.state_mutex);
     m = &core.catalogue.map(map);
-    auto s = m->sessions.find({m->requireRobot(robot), session});
-    if (s == m->sessions.end())
-      throw StorageError(Code::kNotFound, "robot '" + robot + "' has no session '" + session + "'");
-    session_id = s->second;
+    session_id = m->requireSession(robot, session);
   }
   return deleteScans(core, *m, kSession, session_id, [&] {
     for (auto it = m->sessions.begin(); it != m->sessions.end();)

@@ -1,6 +1,11 @@
 #include "validate.hpp"
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 
 #include "catalogue.hpp"
 
@@ -37,6 +42,19 @@ void newMap(const std::string& name, int dim) {
   checkName("map", name);
   if (dim <= 0 || dim > kMaxDescriptorDim)
     throw StorageError(Code::kInvalidArgument, "descriptor dimension must be 1.." + std::to_string(kMaxDescriptorDim));
+}
+
+void claimBackupFile(const std::string& dest) {
+  const int fd = ::open(dest.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    const int e = errno;
+    if (e == EEXIST) throw StorageError(Code::kAlreadyExists, "the backup target already exists", dest);
+    throw StorageError(e == EACCES || e == EROFS || e == EPERM ? Code::kReadOnly
+                       : e == ENOSPC || e == EDQUOT            ? Code::kFull
+                                                               : Code::kIo,
+                       "the backup file cannot be created", dest + ": " + std::strerror(e));
+  }
+  ::close(fd);
 }
 
 }  // namespace sglc::storage::validate

@@ -16,4 +16,8 @@ void optimised(const std::vector<OptimisedPose>& poses, const std::vector<Sessio
 // The map name rule and a dimension in 1..kMaxDescriptorDim.
 void newMap(const std::string& name, int dim);
 
+// Creates the empty file `dest` for a backup, failing if it exists (O_EXCL: of two backups to one name only one
+// proceeds, and a failure removes only the file its own call created): kAlreadyExists, kReadOnly, kFull, kIo.
+void claimBackupFile(const std::string& dest);
+
 }  // namespace sglc::storage::validate

@@ -6,6 +6,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <random>
 #include <string>
 
@@ -75,6 +76,17 @@ class TempDir {
  private:
   std::string path_;
 };
+
+// The code of the StorageError `f` throws (a test failure if it throws none).
+inline StorageError::Code errorCode(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const StorageError& e) {
+    return e.code();
+  }
+  ADD_FAILURE() << "no StorageError thrown";
+  return StorageError::Code::kIo;
+}
 
 inline StoreOptions options(const std::string& path) {
   StoreOptions o;

@@ -15,6 +15,7 @@
 namespace sglc::storage {
 namespace {
 
+using testing::errorCode;
 using testing::OnBothBackends;
 using testing::options;
 using testing::randomFingerprint;
@@ -31,16 +32,6 @@ void execSql(const std::string& path, const char* sql) {
   ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
   EXPECT_EQ(sqlite3_exec(db, sql, nullptr, nullptr, nullptr), SQLITE_OK) << sqlite3_errmsg(db);
   sqlite3_close(db);
-}
-
-StorageError::Code errorCode(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const StorageError& e) {
-    return e.code();
-  }
-  ADD_FAILURE() << "no StorageError thrown";
-  return StorageError::Code::kIo;
 }
 
 struct Stored {

@@ -12,17 +12,8 @@ namespace sglc::storage {
 namespace {
 
 using testing::Backend;
+using testing::errorCode;
 using testing::randomFingerprint;
-
-StorageError::Code errorCode(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const StorageError& e) {
-    return e.code();
-  }
-  ADD_FAILURE() << "no StorageError thrown";
-  return StorageError::Code::kIo;
-}
 
 class PostgresStore : public ::testing::Test {
  protected:
