@@ -43,7 +43,7 @@ EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/":
 # Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
 POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
          "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
-         "sys/time.h", "time.h", "dirent.h", "pthread.h", "netdb.h"}
+         "sys/time.h", "time.h", "dirent.h", "pthread.h", "netdb.h", "spawn.h", "endian.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
 ALL = {"types", "core", "config", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
@@ -54,7 +54,8 @@ LAYERS = {
     "config": (["config"], {"types", "core", "config"}, {"yaml"}),
     # Point-cloud files: PCD and PLY through PCL's I/O module (in io/src/pcl_cloud.cpp only).
     "io": (["io"], {"types", "io"}, {"eigen", "pcl"}),
-    "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "faiss"}),
+    # The map database: SQLite (embedded) or PostgreSQL through libpq, the FAISS indexes.
+    "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "postgres", "faiss"}),
     # The use cases: the engine and the map database, nothing of any transport.
     "closing": (["closing"], {"types", "core", "storage", "closing"}, {"eigen"}),
     # One JSON object per log line.
