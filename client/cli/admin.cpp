@@ -255,7 +255,8 @@ void addMapEdits(CLI::App& app, Common& common, Commands& out) {
   c = app.add_subcommand("health", "grpc.health.v1 check: exit 0 when the server is SERVING, 1 otherwise (probes)");
   addCommon(c, common);
   out.push_back({c, [&common] {
-                   const bool ok = connectClient(common).serving();
+                   // A probe answers for now: no retries.
+                   const bool ok = connectClient(common, sc::kDefaultChunkBytes, 1).serving();
                    if (common.json)
                      std::cout << json{{"server", common.server}, {"serving", ok}}.dump() << std::endl;
                    else

@@ -29,9 +29,10 @@ void addCommon(CLI::App* app, Common& c) {
   app->add_flag("--json", c.json, "Machine-readable output (JSON)");
 }
 
-sc::Client connectClient(const Common& c, std::size_t chunk_bytes) {
+sc::Client connectClient(const Common& c, std::size_t chunk_bytes, int max_attempts) {
   sc::ConnectOptions options;
   options.chunk_bytes = chunk_bytes;
+  options.max_attempts = max_attempts;
   options.token = c.token;
   if (!c.tls_ca.empty()) {
     std::ifstream in(c.tls_ca, std::ios::binary);

@@ -34,7 +34,8 @@ struct Common {
   bool json = false;
 };
 void addCommon(CLI::App* app, Common& c);
-sc::Client connectClient(const Common& c, std::size_t chunk_bytes = sc::kDefaultChunkBytes);
+// Calls that fail with UNAVAILABLE are retried (ConnectOptions::max_attempts) except where max_attempts says.
+sc::Client connectClient(const Common& c, std::size_t chunk_bytes = sc::kDefaultChunkBytes, int max_attempts = 5);
 
 // Query options of `ingest --query` and `query`.
 struct QueryFlags {

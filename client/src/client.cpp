@@ -120,6 +120,20 @@ struct ClientCore {
 // ---------------------------------------------------------------------------------------------------------
 // Client
 
+namespace {
+
+// gRPC's retry policy for every service of ours (and health checks): UNAVAILABLE only.
+std::string retryServiceConfig(int max_attempts) {
+  return R"({"methodConfig": [{"name": [{"service": "sglc.v1.LoopClosure"}, {"service": "sglc.v1.MapAdmin"},)"
+         R"( {"service": "sglc.v1.PoseGraph"}, {"service": "grpc.health.v1.Health"}],)"
+         R"( "retryPolicy": {"maxAttempts": )" +
+         std::to_string(max_attempts) +
+         R"(, "initialBackoff": "0.2s", "maxBackoff": "5s", "backoffMultiplier": 2,)"
+         R"( "retryableStatusCodes": ["UNAVAILABLE"]}}]})";
+}
+
+}  // namespace
+
 Client Client::connect(const std::string& address, ConnectOptions options) {
   if (address.empty()) throw InputError("empty server address");
   std::shared_ptr<grpc::ChannelCredentials> credentials;
@@ -133,6 +147,13 @@ Client Client::connect(const std::string& address, ConnectOptions options) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(-1);  // responses (graphs, many candidates) are not capped on our side
   args.SetMaxSendMessageSize(-1);     // the chunk limit keeps requests small enough for the server
+  if (options.max_attempts < 1 || options.max_attempts > 5) throw InputError("max_attempts must be 1..5");
+  if (options.max_attempts > 1) {
+    args.SetServiceConfigJSON(retryServiceConfig(options.max_attempts));
+    // A call is retried only while its request is buffered: room for one chunk (or one whole small scan).
+    args.SetInt(GRPC_ARG_PER_RPC_RETRY_BUFFER_SIZE,
+                static_cast<int>(std::min<std::size_t>(options.chunk_bytes + (1 << 20), 1 << 30)));
+  }
   return Client(grpc::CreateCustomChannel(address, credentials, args), std::move(options));
 }
 

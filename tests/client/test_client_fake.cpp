@@ -117,9 +117,15 @@ class FakeMapAdmin final : public v1::MapAdmin::Service {
   }
   grpc::Status ListMaps(grpc::ServerContext*, const v1::ListMapsRequest*, v1::ListMapsResponse* response) override {
     std::lock_guard lock(mutex_);
+    ++list_calls;
+    if (unavailable > 0) {  // a replica going away, as a balancer reports it
+      --unavailable;
+      return {grpc::StatusCode::UNAVAILABLE, "upstream connect error"};
+    }
     for (const auto& m : maps_) response->add_maps()->set_name(m);
     return grpc::Status::OK;
   }
+  int unavailable = 0, list_calls = 0;  // under mutex_
   grpc::Status ListRobots(grpc::ServerContext*, const v1::ListRobotsRequest* request,
                           v1::ListRobotsResponse*) override {
     return {grpc::StatusCode::NOT_FOUND, "unknown map '" + request->map() + "'"};
@@ -145,8 +151,10 @@ class FakeMapAdmin final : public v1::MapAdmin::Service {
     return grpc::Status::OK;
   }
 
- private:
+ public:
   std::mutex mutex_;
+
+ private:
   std::vector<std::string> maps_;
 };
 
@@ -312,6 +320,39 @@ TEST_F(FakeServer, DeadlinesApplyPerCall) {
     EXPECT_EQ(e.code(), grpc::StatusCode::DEADLINE_EXCEEDED);
   }
   EXPECT_EQ(c.getStats("fast", sc::CallOptions{std::chrono::milliseconds(30'000)}).scans(), 11);
+}
+
+// UNAVAILABLE is retried by gRPC's retry policy (ConnectOptions::max_attempts); other errors and a client that
+// asks for one attempt are not.
+TEST_F(FakeServer, UnavailableIsRetriedUpToMaxAttempts) {
+  const auto address = "127.0.0.1:" + std::to_string(port_);
+  auto set = [&](int unavailable) {
+    std::lock_guard lock(admin_.mutex_);
+    admin_.unavailable = unavailable;
+    admin_.list_calls = 0;
+  };
+  auto calls = [&] {
+    std::lock_guard lock(admin_.mutex_);
+    return admin_.list_calls;
+  };
+  set(2);
+  EXPECT_NO_THROW(client().listMaps());
+  EXPECT_EQ(calls(), 3);
+  set(5);
+  try {
+    client().listMaps();
+    FAIL() << "five UNAVAILABLE answers gave no error";
+  } catch (const sc::RpcError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::UNAVAILABLE);
+  }
+  EXPECT_EQ(calls(), 5);
+  sc::ConnectOptions once;
+  once.max_attempts = 1;
+  set(1);
+  EXPECT_THROW(sc::Client::connect(address, once).listMaps(), sc::RpcError);
+  EXPECT_EQ(calls(), 1);
+  once.max_attempts = 6;
+  EXPECT_THROW(sc::Client::connect(address, once), sglc::InputError);
 }
 
 TEST_F(FakeServer, UnreachableServerIsUnavailable) {

@@ -218,3 +218,39 @@ def test_a_page_token_that_does_not_grow_ends_paging_with_an_error():
     with pytest.raises(sglc.InternalError, match="does not follow"):
         c.poses("m")
     c.close()
+
+
+def test_unavailable_is_retried_up_to_max_attempts():
+    """A call answered UNAVAILABLE (a replica behind a balancer going away) is retried by gRPC's retry policy."""
+    import grpc
+    from concurrent import futures
+    calls = {"n": 0, "unavailable": 0}
+
+    def list_maps(request, context):
+        calls["n"] += 1
+        if calls["unavailable"] > 0:
+            calls["unavailable"] -= 1
+            context.abort(grpc.StatusCode.UNAVAILABLE, "upstream connect error")
+        return sglc.pb2.ListMapsResponse()
+
+    handler = grpc.method_handlers_generic_handler("sglc.v1.MapAdmin", {"ListMaps": grpc.unary_unary_rpc_method_handler(
+        list_maps, request_deserializer=sglc.pb2.ListMapsRequest.FromString,
+        response_serializer=sglc.pb2.ListMapsResponse.SerializeToString)})
+    server = grpc.server(futures.ThreadPoolExecutor(max_workers=2))
+    server.add_generic_rpc_handlers((handler,))
+    port = server.add_insecure_port("127.0.0.1:0")
+    server.start()
+    try:
+        calls.update(n=0, unavailable=2)
+        with sglc.Client(f"127.0.0.1:{port}") as c:
+            assert c.list_maps() == []
+        assert calls["n"] == 3
+        calls.update(n=0, unavailable=1)
+        with sglc.Client(f"127.0.0.1:{port}", max_attempts=1) as c:
+            with pytest.raises(sglc.UnavailableError):
+                c.list_maps()
+        assert calls["n"] == 1
+        with pytest.raises(ValueError):
+            sglc.Client(f"127.0.0.1:{port}", max_attempts=6)
+    finally:
+        server.stop(0)

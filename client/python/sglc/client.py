@@ -1,6 +1,7 @@
 """sglc.Client: the SGLC loop-closure service over gRPC (sglc.v1: LoopClosure, MapAdmin, PoseGraph)."""
 from __future__ import annotations
 
+import json
 from typing import Iterable, Iterator, Optional, Sequence, Union
 
 import grpc
@@ -19,13 +20,25 @@ SCOPES = {"all": pb2.SCOPE_WHOLE_MAP, "same": pb2.SCOPE_SAME_ROBOT, "other": pb2
 _HEALTH_CHECK = "/grpc.health.v1.Health/Check"
 
 
+def _retry_service_config(max_attempts: int) -> str:
+    """gRPC's retry policy for every service of ours (and health checks): UNAVAILABLE only."""
+    services = ["sglc.v1.LoopClosure", "sglc.v1.MapAdmin", "sglc.v1.PoseGraph", "grpc.health.v1.Health"]
+    return json.dumps({"methodConfig": [{
+        "name": [{"service": s} for s in services],
+        "retryPolicy": {"maxAttempts": max_attempts, "initialBackoff": "0.2s", "maxBackoff": "5s",
+                        "backoffMultiplier": 2, "retryableStatusCodes": ["UNAVAILABLE"]}}]})
+
+
 class Client(AdminCalls, PoseGraphCalls):
     """Connects to an SGLC server.
 
     address: "host:port". token: bearer token, sent as ``authorization: Bearer <token>``.
     tls_root_certs: PEM bytes, or a path to a PEM file, to use TLS; None for plain TCP.
     timeout: default deadline of each call in seconds (None: none). chunk_bytes: scans whose packed size
-    exceeds this are sent with IngestChunked.
+    exceeds this are sent with IngestChunked. max_attempts (1..5): a call that fails with UNAVAILABLE (the
+    server restarting, or a replica behind a balancer going away) is retried by gRPC after 0.2 s, doubling up to
+    5 s, until this many attempts; safe for every call, as each reads or is idempotent (a stream only before its
+    first answer).
 
     Every call raises an SglcError subclass on failure (NotFoundError, AlreadyExistsError, ...; see
     sglc.errors) and ValueError on input it rejects before sending. Use it as a context manager to close
@@ -34,14 +47,19 @@ class Client(AdminCalls, PoseGraphCalls):
 
     def __init__(self, address: str = "127.0.0.1:50051", token: Optional[str] = None,
                  tls_root_certs: Union[bytes, str, None] = None, timeout: Optional[float] = 30.0,
-                 chunk_bytes: int = DEFAULT_CHUNK_BYTES):
+                 chunk_bytes: int = DEFAULT_CHUNK_BYTES, max_attempts: int = 5):
         if chunk_bytes < packing.POINT_BYTES + packing.LABEL_BYTES:
             raise ValueError("chunk_bytes must hold at least one point (16 bytes)")
+        if not 1 <= max_attempts <= 5:
+            raise ValueError("max_attempts must be 1..5")
         self.address = address
         self.timeout = timeout
         self.chunk_bytes = chunk_bytes
         self._metadata = (("authorization", f"Bearer {token}"),) if token else None
         options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+        if max_attempts > 1:
+            options += [("grpc.service_config", _retry_service_config(max_attempts)),
+                        ("grpc.per_rpc_retry_buffer_size", min(chunk_bytes + (1 << 20), 1 << 30))]
         if tls_root_certs is not None:
             if isinstance(tls_root_certs, str):
                 with open(tls_root_certs, "rb") as f:
