@@ -22,10 +22,11 @@ BIN=$(realpath "${SGLC_CLUSTER_BIN:-build/bin}")
 rm -rf "$WORK" && mkdir -p "$WORK"
 
 REPLICA_PIDS=()
+FEEDERS=()
 NGINX_PID=""
-cleanup() {
-  for p in "${REPLICA_PIDS[@]}" $NGINX_PID; do kill -TERM "$p" 2>/dev/null || true; done
-  for p in "${REPLICA_PIDS[@]}" $NGINX_PID; do wait "$p" 2>/dev/null || true; done
+cleanup() {  # also on an interrupted run: the feeders would go on retrying
+  for p in "${FEEDERS[@]}" "${REPLICA_PIDS[@]}" $NGINX_PID; do kill -TERM "$p" 2>/dev/null || true; done
+  for p in "${FEEDERS[@]}" "${REPLICA_PIDS[@]}" $NGINX_PID; do wait "$p" 2>/dev/null || true; done
   tests/storage/pg_cluster.sh stop "$WORK/pg" >/dev/null 2>&1 || true
 }
 trap cleanup EXIT
@@ -66,7 +67,6 @@ N=$(ls "$WORK/seq/velodyne" | wc -l)
 HALF=$((N / 2))
 echo "== two robots feed $N scans through nginx; one replica is killed part-way" >&2
 START=$(date +%s.%N)
-FEEDERS=()
 for robot in alpha bravo; do
   frames="0:$HALF" && [ $robot = bravo ] && frames="$HALF:"
   "$BIN/sglc" ingest --server "127.0.0.1:$PORT" --map demo --robot $robot --frames "$frames" --query \
@@ -77,8 +77,8 @@ done
 feeding() { for p in "${FEEDERS[@]}"; do kill -0 "$p" 2>/dev/null && return 0; done; return 1; }
 while feeding && [ "$(cat "$WORK"/alpha.jsonl "$WORK"/bravo.jsonl | wc -l)" -lt $((N * 2 / 5)) ]; do sleep 0.2; done
 VICTIM=1
-for i in 1 2 3; do
-  grep -q '"event":"graph_owner","map":"demo","held":true' "$WORK/replica$i.log" && VICTIM=$i
+for i in 1 2 3; do  # the replica whose latest word on the map is that it holds it
+  grep '"event":"graph_owner","map":"demo"' "$WORK/replica$i.log" | tail -n 1 | grep -q '"held":true' && VICTIM=$i
 done
 KILLED_AT=$(date +%s.%N)
 kill -KILL "${REPLICA_PIDS[$((VICTIM - 1))]}"

@@ -96,11 +96,15 @@ class Feeder {
   void run() {
     client_.ensureMap(a_.map);
     progress_.update(0, 0);
+    // The retry budget is per break: a stream that got answers before it broke starts the count again, so a long
+    // drive survives any number of breaks that each recover.
     for (int attempt = 0;; ++attempt) {
+      const auto answered = done_;
       try {
         stream();
         break;
       } catch (const sc::RpcError& e) {
+        if (done_ > answered) attempt = 0;
         if (!retryable(e) || attempt >= a_.retries) fail(e.what());
         progress_.clear();
         std::cerr << "sglc ingest: " << e.what() << "; retrying " << pending_.size() << " unanswered scans ("
@@ -125,9 +129,10 @@ class Feeder {
     std::size_t resent = 0;
     try {
       for (; resent < pending_.size(); ++resent) send(stream, pending_[resent]);
-      for (; next_ < seq_.frames.size(); ++next_) {
-        pending_.push_back(next_);
-        send(stream, next_);
+      while (next_ < seq_.frames.size()) {
+        const std::size_t i = next_++;  // counted as sent before anything can throw: a break resends it once
+        pending_.push_back(i);
+        send(stream, i);
         while (stream.outstanding() >= static_cast<std::size_t>(a_.window)) handle(stream.next());
       }
       while (stream.outstanding() > 0) handle(stream.next());

@@ -124,8 +124,16 @@ namespace {
 
 // gRPC's retry policy for every service of ours (and health checks): UNAVAILABLE only.
 std::string retryServiceConfig(int max_attempts) {
-  return R"({"methodConfig": [{"name": [{"service": "sglc.v1.LoopClosure"}, {"service": "sglc.v1.MapAdmin"},)"
-         R"( {"service": "sglc.v1.PoseGraph"}, {"service": "grpc.health.v1.Health"}],)"
+  // Not the deletes or Backup: a delete whose answer was lost would be repeated (NOT_FOUND, or worse, a map
+  // created again under the name meanwhile deleted), a backup would dump again.
+  return R"({"methodConfig": [{"name": [{"service": "sglc.v1.LoopClosure"}, {"service": "sglc.v1.PoseGraph"},)"
+         R"( {"service": "grpc.health.v1.Health"}, {"service": "sglc.v1.MapAdmin", "method": "GetServerInfo"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "CreateMap"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "ListMaps"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "ListRobots"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "ListSessions"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "GetScan"},)"
+         R"( {"service": "sglc.v1.MapAdmin", "method": "GetStats"}],)"
          R"( "retryPolicy": {"maxAttempts": )" +
          std::to_string(max_attempts) +
          R"(, "initialBackoff": "0.2s", "maxBackoff": "5s", "backoffMultiplier": 2,)"

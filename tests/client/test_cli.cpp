@@ -1,8 +1,15 @@
 // `sglc` command-line errors that need no server: every one exits non-zero with exactly one line on
 // stderr that says what is wrong, and prints nothing on stdout.
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <set>
+
 #include "client_test_util.hpp"
+#include "sglc/v1/sglc.grpc.pb.h"
 
 namespace t = sglc::client::test;
 
@@ -122,4 +129,87 @@ TEST(Cli, VersionAndHealthOfAServerThatIsNotThere) {
   const auto h = t::run({t::cliBinary(), "health", "--server", "127.0.0.1:1", "--timeout", "5"});
   EXPECT_EQ(h.exit_code, 1);
   EXPECT_NE(h.err.find("UNAVAILABLE"), std::string::npos) << h.err;
+}
+
+namespace {
+
+// An IngestStream whose first stream answers three scans, reads one more and fails with UNAVAILABLE (a replica
+// that went away); later streams answer every scan. It records the seqs each stream received.
+class BreakingLoopClosure final : public sglc::v1::LoopClosure::Service {
+ public:
+  grpc::Status IngestStream(
+      grpc::ServerContext*,
+      grpc::ServerReaderWriter<sglc::v1::IngestResponse, sglc::v1::IngestRequest>* stream) override {
+    std::size_t n;
+    {
+      std::lock_guard lock(mutex);
+      n = received.size();
+      received.emplace_back();
+    }
+    sglc::v1::IngestRequest r;
+    for (int answered = 0; stream->Read(&r);) {
+      {
+        std::lock_guard lock(mutex);
+        received[n].push_back(r.key().seq());
+      }
+      if (n == 0 && answered == 3) return {grpc::StatusCode::UNAVAILABLE, "the replica went away"};
+      sglc::v1::IngestResponse response;
+      response.set_scan_id(1000 + r.key().seq());
+      stream->Write(response);
+      ++answered;
+    }
+    return grpc::Status::OK;
+  }
+  std::mutex mutex;
+  std::vector<std::vector<std::int64_t>> received;
+};
+
+class AcceptingMapAdmin final : public sglc::v1::MapAdmin::Service {
+  grpc::Status CreateMap(grpc::ServerContext*, const sglc::v1::CreateMapRequest* request,
+                         sglc::v1::MapInfo* info) override {
+    info->set_name(request->name());
+    return grpc::Status::OK;
+  }
+};
+
+}  // namespace
+
+// A stream that breaks mid-run is reopened and only the unanswered scans are sent again, each once: every frame
+// is answered exactly once (a frame was sent twice after each break before).
+TEST(Cli, IngestResendsEachUnansweredScanOnceAfterTheStreamBreaks) {
+  t::TempDir tmp;
+  const auto dir = tmp.path() / "seq";
+  std::filesystem::create_directories(dir / "velodyne");
+  const int frames = 12;
+  for (int i = 0; i < frames; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof name, "%06d.bin", i);
+    sglc::writeKittiBin((dir / "velodyne" / name).string(), {{1.0f * i, 2, 3}}, {0.5f});
+  }
+  BreakingLoopClosure loop;
+  AcceptingMapAdmin admin;
+  int port = 0;
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  builder.RegisterService(&loop);
+  builder.RegisterService(&admin);
+  const auto server = builder.BuildAndStart();
+  ASSERT_TRUE(server && port > 0);
+  const auto r = t::run({t::cliBinary(), "ingest", "--server", "127.0.0.1:" + std::to_string(port), "--map", "m",
+                         "--robot", "r", "--json", "--no-progress", "--window", "4", dir.string()});
+  server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  std::multiset<std::string> answered;
+  for (const auto& line : t::lines(r.out)) answered.insert(nlohmann::json::parse(line).at("frame").get<std::string>());
+  EXPECT_EQ(answered.size(), static_cast<std::size_t>(frames));
+  for (const auto& frame : answered) EXPECT_EQ(answered.count(frame), 1u) << "frame " << frame << " answered twice";
+  std::lock_guard lock(loop.mutex);
+  ASSERT_GE(loop.received.size(), 2u) << "the first stream did not break";
+  std::set<std::int64_t> all;
+  for (std::size_t s = 1; s < loop.received.size(); ++s) {
+    const auto& seqs = loop.received[s];
+    EXPECT_EQ(std::set<std::int64_t>(seqs.begin(), seqs.end()).size(), seqs.size()) << "a seq sent twice on a stream";
+    all.insert(seqs.begin(), seqs.end());
+  }
+  for (int i = 3; i < frames; ++i) EXPECT_TRUE(all.count(i)) << "seq " << i << " never resent";
 }

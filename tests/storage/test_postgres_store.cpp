@@ -236,25 +236,28 @@ namespace {
 
 // One process at a time solves a map's pose graph; the right goes with the store that holds it.
 TEST_F(PostgresStore, OneStoreAtATimeHoldsAMapsGraphAndItsCloseFreesIt) {
+  using Claim = MapStore::GraphClaim;
   auto a = backend_.open();
   auto b = backend_.open();
   const auto id = a->createMap("m", 8).id;
   const auto other = a->createMap("n", 8).id;
   EXPECT_TRUE(a->shared());
-  EXPECT_TRUE(a->claimGraph(id));
-  EXPECT_TRUE(a->claimGraph(id));  // held: still true
-  EXPECT_FALSE(b->claimGraph(id));
-  EXPECT_TRUE(b->claimGraph(other));  // per map
-  EXPECT_FALSE(a->claimGraph(other));
+  EXPECT_EQ(a->claimGraph(id), Claim::kTaken);
+  EXPECT_EQ(a->claimGraph(id), Claim::kHeld);  // held since
+  EXPECT_EQ(b->claimGraph(id), Claim::kElsewhere);
+  EXPECT_EQ(b->claimGraph(other), Claim::kTaken);  // per map
+  EXPECT_EQ(a->claimGraph(other), Claim::kElsewhere);
   a.reset();
-  EXPECT_TRUE(b->claimGraph(id));
-  // A lost connection loses the lock: the holder finds out on its next claim instead of solving beside another.
+  EXPECT_EQ(b->claimGraph(id), Claim::kTaken);
+  // A lost connection loses the lock: the holder finds out on its next claim instead of solving beside another,
+  // and a lock taken again says so (what the holder knew may be stale).
   auto c = backend_.open();
-  EXPECT_FALSE(c->claimGraph(id));
+  EXPECT_EQ(c->claimGraph(id), Claim::kElsewhere);
   pg::Conn(backend_.options().path)
       .exec("SELECT pg_terminate_backend(pid) FROM pg_locks WHERE locktype = 'advisory' AND granted");
-  EXPECT_TRUE(c->claimGraph(id));
-  EXPECT_FALSE(b->claimGraph(id));
+  EXPECT_EQ(c->claimGraph(id), Claim::kTaken);
+  EXPECT_EQ(b->claimGraph(id), Claim::kElsewhere);
+  EXPECT_EQ(b->claimGraph(other), Claim::kTaken);  // b lost its connection too: taken again, not "held"
 }
 
 }  // namespace

@@ -22,9 +22,12 @@ _HEALTH_CHECK = "/grpc.health.v1.Health/Check"
 
 def _retry_service_config(max_attempts: int) -> str:
     """gRPC's retry policy for every service of ours (and health checks): UNAVAILABLE only."""
-    services = ["sglc.v1.LoopClosure", "sglc.v1.MapAdmin", "sglc.v1.PoseGraph", "grpc.health.v1.Health"]
+    # Not the deletes or Backup: a delete whose answer was lost would be repeated, a backup would dump again.
+    names = [{"service": s} for s in ("sglc.v1.LoopClosure", "sglc.v1.PoseGraph", "grpc.health.v1.Health")]
+    names += [{"service": "sglc.v1.MapAdmin", "method": m} for m in (
+        "GetServerInfo", "CreateMap", "ListMaps", "ListRobots", "ListSessions", "GetScan", "GetStats")]
     return json.dumps({"methodConfig": [{
-        "name": [{"service": s} for s in services],
+        "name": names,
         "retryPolicy": {"maxAttempts": max_attempts, "initialBackoff": "0.2s", "maxBackoff": "5s",
                         "backoffMultiplier": 2, "retryableStatusCodes": ["UNAVAILABLE"]}}]})
 

@@ -66,9 +66,10 @@ struct ConnectOptions {
   // Scans whose packed size exceeds this go through IngestChunked, in chunks of at most this size.
   std::size_t chunk_bytes = kDefaultChunkBytes;
   // Attempts of a call that fails with UNAVAILABLE (the server restarting, or a replica behind a balancer that
-  // went away), 1..5: gRPC retries it after 0.2 s, doubling up to 5 s. Safe for every call of the service: each
-  // reads, or is idempotent (ingest of a stored scan answers as the first call did). A stream is retried only
-  // before its first answer (IngestSession's callers resend what was not answered; `sglc ingest` does). 1: none.
+  // went away), 1..5: gRPC retries it after 0.2 s, doubling up to 5 s. Every call but the deletes and Backup:
+  // those read, or are idempotent (ingest of a stored scan answers as the first call did). A stream is retried
+  // only before its first answer (IngestSession's callers resend what was not answered; `sglc ingest` does).
+  // 1: none.
   int max_attempts = 5;
 };
 
