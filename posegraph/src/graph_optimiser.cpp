@@ -113,7 +113,11 @@ void GraphOptimiser::run() {
       lock.unlock();
       {
         std::lock_guard one(optimise_mutex_);
-        for (const auto& name : names) graphs_.erase(name);
+        for (const auto& name : names) {
+          graphs_.erase(name);
+          held_.erase(name);
+          deletions_seen_.erase(name);
+        }
       }
       lock.lock();
       continue;
@@ -167,9 +171,15 @@ GraphEvent GraphOptimiser::optimise(const std::string& map, Scope scope) {
       return event;
     }
     map_id = info->id;
-    if (shared_ && !store_.claimGraph(map_id)) return follow(map, map_id, gen);
-    if (shared_ && held_.insert(map).second)
-      spdlog::info("{}", logging::logLine({{"event", "graph_owner"}, {"map", map}, {"held", true}}));
+    if (shared_) {
+      const auto claim = store_.claimGraph(map_id);
+      if (claim == storage::MapStore::GraphClaim::kElsewhere) return follow(map, map_id, gen);
+      // Just taken (first solve here, or the lock was lost and taken again): another server may have solved the
+      // map meanwhile, so the graph is rebuilt from the stored rows and poses.
+      if (claim == storage::MapStore::GraphClaim::kTaken) graphs_.erase(map);
+      if (held_.insert(map).second)
+        spdlog::info("{}", logging::logLine({{"event", "graph_owner"}, {"map", map}, {"held", true}}));
+    }
     return solve(map, map_id, gen, scope);
   } catch (const std::exception& e) {
     // The map keeps its last good poses; its graph is rebuilt from the database on the next attempt.
@@ -206,32 +216,56 @@ GraphEvent GraphOptimiser::follow(const std::string& map, std::int64_t map_id, s
   GraphEvent event = latest(map).value_or(GraphEvent{});
   const auto version = store_.graphVersion(map);
   if (version == event.graph_version && event.map_id == map_id) return event;
+  // The stored version only: nodes, loops and the solve's details are in the holder's own events.
   event = GraphEvent{};
   event.graph_version = version;
   event.map_id = map_id;
-  event.converged = true;  // as the holder left it: its own events say more
-  event.loops = static_cast<std::int64_t>(store_.optimisedThroughLoop(map));
+  event.converged = true;
   publish(map, event, generation);
   return event;
 }
 
 void GraphOptimiser::pollMaps() {
-  std::vector<std::string> todo;
+  std::vector<storage::MapInfo> maps;
   try {
-    for (const auto& m : store_.listMaps()) {
-      std::int64_t after = 0;
-      {
-        std::lock_guard one(optimise_mutex_);
-        const auto it = graphs_.find(m.name);
-        if (it != graphs_.end() && it->second.graph && !it->second.graph->empty()) after = it->second.graph->lastLoop();
-      }
-      // Held and solved up to date: nothing to do. Not held: follow it (and take it over if its holder died).
-      if (!store_.loops(m.name, after, 1).empty() || (after == 0 && store_.graphVersion(m.name) > 0))
-        todo.push_back(m.name);
-    }
+    maps = store_.listMaps();
   } catch (const std::exception&) {
     return;  // the database is unreachable: the next poll tries again
   }
+  // Maps deleted through another server (gone, or their name now another map's): announced here too.
+  std::vector<std::pair<std::string, std::int64_t>> gone;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& [name, event] : latest_) {
+      const auto it = std::find_if(maps.begin(), maps.end(), [&](const auto& m) { return m.name == name; });
+      if (event.map_id != 0 && (it == maps.end() || it->id != event.map_id)) gone.emplace_back(name, event.map_id);
+    }
+  }
+  for (const auto& [name, id] : gone) mapDeleted(name, id);
+  std::vector<std::string> todo, removed;
+  for (const auto& m : maps) {
+    try {
+      std::int64_t after = 0;
+      bool built = false;
+      {
+        std::lock_guard one(optimise_mutex_);
+        const auto it = graphs_.find(m.name);
+        built = it != graphs_.end() && it->second.graph && it->second.map_id == m.id;
+        if (built) after = it->second.graph->lastLoop();
+        // Sessions or robots deleted through another server: the graph may hold their scans.
+        auto& seen = deletions_seen_[m.name];
+        if (built && m.deletions != seen) removed.push_back(m.name);
+        seen = m.deletions;
+      }
+      // Built and solved up to date: nothing to do. Not built here: follow it (and take it over if its holder
+      // died) once it has a graph.
+      if (!store_.loops(m.name, after, 1).empty() || (!built && store_.graphVersion(m.name) > 0))
+        todo.push_back(m.name);
+    } catch (const std::exception&) {
+      // deleted meanwhile, or the database failed: the next poll sees
+    }
+  }
+  for (const auto& map : removed) scansRemoved(map);
   {
     std::lock_guard lock(mutex_);
     for (const auto& map : todo) dueBy(map, Clock::now() + options_.debounce);

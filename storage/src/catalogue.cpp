@@ -41,6 +41,7 @@ MapInfo MapState::info() const {
   info.scans = index->live();
   info.robots = static_cast<std::int64_t>(robots.size());
   info.sessions = static_cast<std::int64_t>(sessions.size());
+  info.deletions = deletions;
   return info;
 }
 

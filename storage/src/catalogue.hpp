@@ -22,6 +22,7 @@ struct MapState {
   std::string name;
   int dim = 0;
   std::int64_t generation = 0;                 // bumped by every scan write; names the index snapshot that matches
+  std::int64_t deletions = 0;                  // session and robot deletions since open (MapInfo::deletions)
   std::map<std::string, std::int64_t> robots;  // name -> id
   std::map<std::pair<std::int64_t, std::string>, std::int64_t> sessions;  // (robot id, name) -> id
   std::unique_ptr<DescriptorIndex> index;

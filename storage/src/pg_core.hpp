@@ -106,9 +106,9 @@ class Follower {
 class GraphOwner {
  public:
   explicit GraphOwner(std::string url) : url_(std::move(url)) {}
-  // True when this process holds map_id's lock (checked live: a lost connection loses every lock), taking it
-  // when free; false when another process holds it or the database cannot be reached.
-  bool claim(std::int64_t map_id);
+  // Whether this process holds map_id's lock (checked live: a lost connection loses every lock), taking it
+  // when free (MapStore::GraphClaim).
+  MapStore::GraphClaim claim(std::int64_t map_id);
 
  private:
   std::mutex mutex_;

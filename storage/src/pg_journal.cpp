@@ -96,10 +96,12 @@ void apply(Core& core, const Result& r, int i) {
       break;
     }
     case Change::kSessionDeleted:
+      m->deletions += 1;
       dropScans(core, *m, [&](const IndexEntry& e) { return e.session_id == ref; });
       std::erase_if(m->sessions, [&](const auto& s) { return s.second == ref; });
       break;
     case Change::kRobotDeleted:
+      m->deletions += 1;
       dropScans(core, *m, [&](const IndexEntry& e) { return e.robot_id == ref; });
       std::erase_if(m->sessions, [&](const auto& s) { return s.first.first == ref; });
       std::erase_if(m->robots, [&](const auto& r) { return r.second == ref; });
@@ -181,7 +183,8 @@ std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref
   return r.i64(0, 0);
 }
 
-bool GraphOwner::claim(std::int64_t map_id) {
+MapStore::GraphClaim GraphOwner::claim(std::int64_t map_id) {
+  using Claim = MapStore::GraphClaim;
   // One 64-bit key per map, apart from the store's (int, int) keys: the two kinds never conflict.
   constexpr std::int64_t kGraphKeys = std::int64_t{0x5347} << 48;
   std::lock_guard lock(mutex_);
@@ -195,12 +198,12 @@ bool GraphOwner::claim(std::int64_t map_id) {
       }
     }
     if (!conn_) conn_ = std::make_unique<Conn>(url_);
-    if (held_.count(map_id)) return true;
-    if (!conn_->query("SELECT pg_try_advisory_lock($1)", {kGraphKeys + map_id}).boolean(0, 0)) return false;
+    if (held_.count(map_id)) return Claim::kHeld;
+    if (!conn_->query("SELECT pg_try_advisory_lock($1)", {kGraphKeys + map_id}).boolean(0, 0)) return Claim::kElsewhere;
     held_.insert(map_id);
-    return true;
+    return Claim::kTaken;
   } catch (const StorageError&) {
-    return false;
+    return Claim::kElsewhere;
   }
 }
 

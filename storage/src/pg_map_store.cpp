@@ -112,7 +112,7 @@ class PgMapStore final : public MapStore {
 
   // ---- Replicas
   bool shared() const override { return true; }
-  bool claimGraph(std::int64_t map_id) override { return owner_.claim(map_id); }
+  GraphClaim claimGraph(std::int64_t map_id) override { return owner_.claim(map_id); }
 
  private:
   Core core_;

@@ -194,6 +194,7 @@ std::int64_t deleteScans(Core& core, WriteTx& tx, MapState& m, const char* owner
     const auto ids =
         m.index->liveIds([&](const IndexEntry& e) { return session ? e.session_id == id : e.robot_id == id; });
     m.index->remove(ids);
+    m.deletions += 1;
     for (const auto sid : ids) core.cache.erase(sid);
     if (session) {
       std::erase_if(m.sessions, [&](const auto& s) { return s.second == id; });

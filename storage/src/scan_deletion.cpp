@@ -60,6 +60,7 @@ std::int64_t deleteScans(StoreCore& core, MapState& m, const Deletion& deletion,
   std::unique_lock lock(core.state_mutex);
   tx.commit();
   m.generation += 1;
+  m.deletions += 1;
   const auto removed = m.index->remove(ids);
   update();
   for (auto sid : ids) core.cache.erase(sid);

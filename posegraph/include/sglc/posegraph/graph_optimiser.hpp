@@ -134,7 +134,8 @@ class GraphOptimiser {
   // stored graph version when it moved.
   GraphEvent follow(const std::string& map, std::int64_t map_id, std::uint64_t generation);
   // Shared databases: queue the maps with loops this server has not solved (other servers' loops, or maps
-  // another server holds, to follow them and take them over when their holder dies).
+  // another server holds, to follow them and take them over when their holder dies), rebuild graphs whose
+  // sessions or robots another server deleted, and announce maps another server deleted.
   void pollMaps();
   GraphEvent solve(const std::string& map, std::int64_t map_id, std::uint64_t generation, Scope scope);
   // The map's in-memory graph, rebuilt when stale or when the name is a new map.
@@ -185,6 +186,7 @@ class GraphOptimiser {
   };
   std::map<std::string, Slot> graphs_;  // only the worker / optimiseNow touch these
   std::set<std::string> held_;          // maps whose graph this server solves (shared databases); as graphs_
+  std::map<std::string, std::int64_t> deletions_seen_;  // MapInfo::deletions at the last poll; as graphs_
   const bool shared_;
   std::uint64_t next_lineage_ = 0;
   struct GlobalJob {

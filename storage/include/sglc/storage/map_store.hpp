@@ -77,6 +77,9 @@ struct MapInfo {
   std::int64_t scans = 0;
   std::int64_t robots = 0;
   std::int64_t sessions = 0;
+  // Deletions of sessions or robots the map has had since the store was opened (by any process, for a shared
+  // store): a pose graph built before a change of it may hold deleted scans.
+  std::int64_t deletions = 0;
 };
 
 struct RobotInfo {
@@ -262,9 +265,11 @@ class MapStore {
   virtual bool shared() const { return false; }
   // Whether this process holds the right to solve the pose graph of map `map_id`, taking it when free. One
   // process holds it at a time; it goes with the process (or its database connection), so another takes it
-  // over when the holder dies. False when the database cannot be reached. Always true for a store that is not
-  // shared.
-  virtual bool claimGraph(std::int64_t /*map_id*/) { return true; }
+  // over when the holder dies. kTaken: taken by this call (what this process knew of the graph may be stale:
+  // another process may have solved it meanwhile); kHeld: held since the last claim; kElsewhere: another process
+  // holds it, or the database cannot be reached. Always kHeld for a store that is not shared.
+  enum class GraphClaim { kElsewhere, kTaken, kHeld };
+  virtual GraphClaim claimGraph(std::int64_t /*map_id*/) { return GraphClaim::kHeld; }
 };
 
 // True when `path` names a PostgreSQL database (postgresql://... or postgres://...) rather than a SQLite file.
