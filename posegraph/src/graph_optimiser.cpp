@@ -236,9 +236,10 @@ void GraphOptimiser::pollMaps() {
   std::vector<std::pair<std::string, std::int64_t>> gone;
   {
     std::lock_guard lock(mutex_);
-    for (const auto& [name, event] : latest_) {
-      const auto it = std::find_if(maps.begin(), maps.end(), [&](const auto& m) { return m.name == name; });
-      if (event.map_id != 0 && (it == maps.end() || it->id != event.map_id)) gone.emplace_back(name, event.map_id);
+    for (const auto& known : latest_) {
+      const auto it = std::find_if(maps.begin(), maps.end(), [&](const auto& m) { return m.name == known.first; });
+      const auto id = known.second.map_id;
+      if (id != 0 && (it == maps.end() || it->id != id)) gone.emplace_back(known.first, id);
     }
   }
   for (const auto& [name, id] : gone) mapDeleted(name, id);
