@@ -146,18 +146,18 @@ TEST_F(PostgresStore, ReplicasSeeEachOthersWrites) {
   EXPECT_EQ(a->integrityCheck(), "ok");
 }
 
-// Ends the store's server connections and waits until they are gone (their sockets closed).
+// Ends the store's server connections and waits until those backends are gone (their sockets closed). The store
+// reconnects at once (its follower does), so it waits for the ended ones, not for none at all.
 void killConnections(const std::string& url) {
   pg::Conn admin(url);
-  admin.exec(
-      "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = current_database() AND "
-      "pid <> pg_backend_pid()");
+  const auto r =
+      admin.query("SELECT pid FROM pg_stat_activity WHERE datname = current_database() AND pid <> pg_backend_pid()");
+  std::string pids = "{";
+  for (int i = 0; i < r.rows(); ++i) pids += (i ? "," : "") + std::to_string(r.i64(i, 0));
+  pids += "}";
+  admin.query("SELECT pg_terminate_backend(pid) FROM unnest($1::int[]) AS pid", {pids});
   ASSERT_TRUE(eventually([&] {
-    return admin
-               .query(
-                   "SELECT count(*) FROM pg_stat_activity WHERE datname = current_database() AND "
-                   "pid <> pg_backend_pid()")
-               .i64(0, 0) == 0;
+    return admin.query("SELECT count(*) FROM pg_stat_activity WHERE pid = ANY($1::int[])", {pids}).i64(0, 0) == 0;
   }));
 }
 
