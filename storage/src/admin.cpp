@@ -44,15 +44,7 @@ Stats stats(const StoreCore& core, const std::string& map) {
   std::shared_lock lock(core.state_mutex);
   Stats s;
   auto reader = core.readers.acquire();
-  std::int64_t map_id = -1;
-  if (!map.empty()) map_id = core.catalogue.map(map).id;
-  s.maps = map.empty() ? static_cast<std::int64_t>(core.catalogue.maps().size()) : 1;
-  for (const auto& [name, m] : core.catalogue.maps()) {
-    if (map_id >= 0 && m.id != map_id) continue;
-    s.robots += static_cast<std::int64_t>(m.robots.size());
-    s.sessions += static_cast<std::int64_t>(m.sessions.size());
-    s.index_entries += m.index->live();
-  }
+  const auto map_id = core.catalogue.count(map, s);
   sql::Stmt st(*reader, "SELECT count(*), coalesce(sum(fingerprint_bytes), 0) FROM scans WHERE ? < 0 OR map_id = ?");
   st.bind(1, map_id).bind(2, map_id);
   if (st.step()) {
@@ -64,9 +56,7 @@ Stats stats(const StoreCore& core, const std::string& map) {
     const auto size = fs::file_size(core.options.path + suffix, ec);
     if (!ec) s.db_bytes += static_cast<std::int64_t>(size);
   }
-  s.cache_mb = static_cast<double>(core.cache.usedBytes()) / (1024.0 * 1024.0);
-  s.cache_hits = core.cache.hits();
-  s.cache_misses = core.cache.misses();
+  core.cache.report(s);
   return s;
 }
 

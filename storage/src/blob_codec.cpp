@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstring>
 
+#include "sglc/storage/map_store.hpp"
+
 namespace sglc::storage::blob {
 namespace {
 
@@ -43,6 +45,12 @@ std::vector<std::uint8_t> fromPose(const Mat4d& T) { return rowsBlob(T, 3); }
 std::optional<Mat4d> toPose(std::span<const std::uint8_t> blob) {
   Mat4d T = Mat4d::Identity();
   return fromRowsBlob(blob, 3, T) ? std::optional<Mat4d>(T) : std::nullopt;
+}
+
+Mat4d requirePose(std::span<const std::uint8_t> blob, const std::string& what, const char* field) {
+  const auto T = toPose(blob);
+  if (!T) throw StorageError(StorageError::Code::kCorrupt, what + " has a damaged " + field);
+  return *T;
 }
 
 std::vector<std::uint8_t> fromInformation(const Mat6d& information) { return rowsBlob(information, 6); }

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "sglc/types.hpp"
@@ -15,6 +16,8 @@ namespace sglc::storage::blob {
 std::vector<std::uint8_t> fromPose(const Mat4d& T);
 // nullopt when the blob has the wrong size or a value that is not finite (never written: damage).
 std::optional<Mat4d> toPose(std::span<const std::uint8_t> blob);
+// The pose of a column that must hold one: StorageError kCorrupt "<what> has a damaged <field>" otherwise.
+Mat4d requirePose(std::span<const std::uint8_t> blob, const std::string& what, const char* field);
 
 // A 6x6 information matrix (36 doubles, row-major).
 std::vector<std::uint8_t> fromInformation(const Mat6d& information);

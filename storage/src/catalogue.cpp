@@ -75,6 +75,30 @@ void Catalogue::load(const sql::Db& db, const IndexOptions& index_options) {
   }
 }
 
+std::vector<MapInfo> Catalogue::infos() const {
+  std::vector<MapInfo> out;
+  for (const auto& [name, m] : maps_) out.push_back(m.info());
+  return out;
+}
+
+std::optional<MapInfo> Catalogue::info(const std::string& name) const {
+  const auto* m = find(name);
+  if (!m) return std::nullopt;
+  return m->info();
+}
+
+std::int64_t Catalogue::count(const std::string& map, Stats& s) const {
+  const std::int64_t map_id = map.empty() ? -1 : this->map(map).id;
+  s.maps = map.empty() ? static_cast<std::int64_t>(maps_.size()) : 1;
+  for (const auto& [name, m] : maps_) {
+    if (map_id >= 0 && m.id != map_id) continue;
+    s.robots += static_cast<std::int64_t>(m.robots.size());
+    s.sessions += static_cast<std::int64_t>(m.sessions.size());
+    s.index_entries += m.index->live();
+  }
+  return map_id;
+}
+
 const MapState& Catalogue::map(const std::string& name) const {
   const auto it = maps_.find(name);
   if (it == maps_.end()) throw StorageError(StorageError::Code::kNotFound, "no map named '" + name + "'");

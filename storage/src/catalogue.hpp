@@ -5,8 +5,10 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "descriptor_index.hpp"
 #include "sglc/storage/map_store.hpp"
@@ -56,6 +58,13 @@ class Catalogue {
   std::string nameOf(std::int64_t id) const;
   MapState& add(MapState state);
   void remove(const std::string& name);
+
+  // Every map's MapInfo, in name order; one map's, if there is one of that name.
+  std::vector<MapInfo> infos() const;
+  std::optional<MapInfo> info(const std::string& name) const;
+  // Adds maps, robots, sessions and index entries of `map` (all maps when empty) to `s`; returns the map's id,
+  // -1 for all (kNotFound for an unknown name).
+  std::int64_t count(const std::string& map, Stats& s) const;
 
   const std::map<std::string, MapState>& maps() const { return maps_; }
   std::map<std::string, MapState>& maps() { return maps_; }

@@ -8,6 +8,7 @@
 #include <unordered_map>
 
 #include "sglc/fingerprint.hpp"
+#include "sglc/storage/map_store.hpp"
 
 namespace sglc::storage {
 
@@ -58,17 +59,12 @@ class FingerprintCache {
     }
   }
 
-  std::size_t usedBytes() const {
+  // Its figures in a store's statistics.
+  void report(Stats& s) const {
     std::lock_guard lock(mutex_);
-    return used_;
-  }
-  std::int64_t hits() const {
-    std::lock_guard lock(mutex_);
-    return hits_;
-  }
-  std::int64_t misses() const {
-    std::lock_guard lock(mutex_);
-    return misses_;
+    s.cache_mb = static_cast<double>(used_) / (1024.0 * 1024.0);
+    s.cache_hits = hits_;
+    s.cache_misses = misses_;
   }
 
  private:

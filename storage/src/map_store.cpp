@@ -162,16 +162,12 @@ MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
 
 std::vector<MapInfo> SqliteMapStore::listMaps() const {
   std::shared_lock lock(core_.state_mutex);
-  std::vector<MapInfo> out;
-  for (const auto& [name, m] : core_.catalogue.maps()) out.push_back(m.info());
-  return out;
+  return core_.catalogue.infos();
 }
 
 std::optional<MapInfo> SqliteMapStore::findMap(const std::string& name) const {
   std::shared_lock lock(core_.state_mutex);
-  const auto* m = core_.catalogue.find(name);
-  if (!m) return std::nullopt;
-  return m->info();
+  return core_.catalogue.info(name);
 }
 
 std::vector<RobotInfo> SqliteMapStore::listRobots(const std::string& map) const {

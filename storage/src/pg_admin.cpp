@@ -133,14 +133,7 @@ Stats stats(const Core& core, const std::string& map) {
   std::int64_t map_id = -1;
   {
     std::shared_lock lock(core.state_mutex);
-    if (!map.empty()) map_id = core.catalogue.map(map).id;
-    s.maps = map.empty() ? static_cast<std::int64_t>(core.catalogue.maps().size()) : 1;
-    for (const auto& [name, m] : core.catalogue.maps()) {
-      if (map_id >= 0 && m.id != map_id) continue;
-      s.robots += static_cast<std::int64_t>(m.robots.size());
-      s.sessions += static_cast<std::int64_t>(m.sessions.size());
-      s.index_entries += m.index->live();
-    }
+    map_id = core.catalogue.count(map, s);
   }
   auto db = core.readers.acquire();
   const auto r = db->query(
@@ -149,9 +142,7 @@ Stats stats(const Core& core, const std::string& map) {
   s.scans = r.i64(0, 0);
   s.fingerprint_bytes = r.i64(0, 1);
   s.db_bytes = databaseBytes(*db);
-  s.cache_mb = static_cast<double>(core.cache.usedBytes()) / (1024.0 * 1024.0);
-  s.cache_hits = core.cache.hits();
-  s.cache_misses = core.cache.misses();
+  core.cache.report(s);
   return s;
 }
 

@@ -55,9 +55,7 @@ std::vector<LoopRecord> loops(const Core& core, const std::string& map, std::int
     l.id = r.i64(i, 0);
     l.query_scan = r.i64(i, 1);
     l.candidate_scan = r.i64(i, 2);
-    const auto T = blob::toPose(r.blob(i, 3));
-    if (!T) throw StorageError(Code::kCorrupt, "loop " + std::to_string(l.id) + " has a damaged transform");
-    l.T = *T;
+    l.T = blob::requirePose(r.blob(i, 3), "loop " + std::to_string(l.id), "transform");
     l.score = r.f64(i, 4);
     l.inliers = static_cast<int>(r.i64(i, 5));
     l.fitness = r.f64(i, 6);
@@ -151,9 +149,8 @@ std::vector<OptimisedPose> optimisedPoses(const Core& core, const std::string& m
       {map_id, after_scan, robot, session, limit >= 0 ? Param(limit) : Param()});
   std::vector<OptimisedPose> out;
   for (int i = 0; i < r.rows(); ++i) {
-    const auto T = blob::toPose(r.blob(i, 1));
-    if (!T) throw StorageError(Code::kCorrupt, "scan " + std::to_string(r.i64(i, 0)) + " has a damaged optimised pose");
-    out.push_back({r.i64(i, 0), *T});
+    out.push_back(
+        {r.i64(i, 0), blob::requirePose(r.blob(i, 1), "scan " + std::to_string(r.i64(i, 0)), "optimised pose")});
   }
   return out;
 }
@@ -172,9 +169,7 @@ std::vector<SessionFrame> sessionFrames(const Core& core, const std::string& map
     f.session_id = r.i64(i, 0);
     f.robot = r.text(i, 1);
     f.session = r.text(i, 2);
-    const auto T = blob::toPose(r.blob(i, 3));
-    if (!T) throw StorageError(Code::kCorrupt, "session " + std::to_string(f.session_id) + " has a damaged frame");
-    f.T_map_session = *T;
+    f.T_map_session = blob::requirePose(r.blob(i, 3), "session " + std::to_string(f.session_id), "frame");
     f.connected = r.boolean(i, 4);
     out.push_back(std::move(f));
   }

@@ -37,15 +37,11 @@ class PgMapStore final : public MapStore {
   MapInfo createMap(const std::string& name, int dim) override;
   std::vector<MapInfo> listMaps() const override {
     std::shared_lock lock(core_.state_mutex);
-    std::vector<MapInfo> out;
-    for (const auto& [name, m] : core_.catalogue.maps()) out.push_back(m.info());
-    return out;
+    return core_.catalogue.infos();
   }
   std::optional<MapInfo> findMap(const std::string& name) const override {
     std::shared_lock lock(core_.state_mutex);
-    const auto* m = core_.catalogue.find(name);
-    if (!m) return std::nullopt;
-    return m->info();
+    return core_.catalogue.info(name);
   }
   std::vector<RobotInfo> listRobots(const std::string& map) const override;
   std::vector<SessionInfo> listSessions(const std::string& map, const std::string& robot) const override;

@@ -67,9 +67,7 @@ std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std
     r.id = st.i64(0);
     r.query_scan = st.i64(1);
     r.candidate_scan = st.i64(2);
-    const auto T = blob::toPose(st.blob(3));
-    if (!T) throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged transform");
-    r.T = *T;
+    r.T = blob::requirePose(st.blob(3), "loop " + std::to_string(r.id), "transform");
     r.score = st.f64(4);
     r.inliers = static_cast<int>(st.i64(5));
     r.fitness = st.f64(6);
@@ -164,9 +162,7 @@ std::vector<OptimisedPose> optimisedPoses(const StoreCore& core, const std::stri
   st.bind(1, map_id).bind(2, after_scan).bind(3, robot).bind(4, session).bind(5, limit);
   std::vector<OptimisedPose> out;
   while (st.step()) {
-    const auto T = blob::toPose(st.blob(1));
-    if (!T) throw StorageError(Code::kCorrupt, "scan " + std::to_string(st.i64(0)) + " has a damaged optimised pose");
-    out.push_back({st.i64(0), *T});
+    out.push_back({st.i64(0), blob::requirePose(st.blob(1), "scan " + std::to_string(st.i64(0)), "optimised pose")});
   }
   return out;
 }
@@ -185,9 +181,7 @@ std::vector<SessionFrame> sessionFrames(const StoreCore& core, const std::string
     f.session_id = st.i64(0);
     f.robot = st.text(1);
     f.session = st.text(2);
-    const auto T = blob::toPose(st.blob(3));
-    if (!T) throw StorageError(Code::kCorrupt, "session " + std::to_string(f.session_id) + " has a damaged frame");
-    f.T_map_session = *T;
+    f.T_map_session = blob::requirePose(st.blob(3), "session " + std::to_string(f.session_id), "frame");
     f.connected = st.i64(4) != 0;
     out.push_back(std::move(f));
   }
