@@ -16,53 +16,6 @@ using namespace std::chrono_literals;
 using testing::drive;
 using testing::driveOptions;
 
-TEST(Replicas, OneServerSolvesAMapTheOtherFollowsAndTakesOverWhenItStops) {
-  storage::testing::Backend db("postgresql");
-  if (!db.unavailable().empty()) GTEST_SKIP() << db.unavailable();
-  auto store_a = db.open();
-  auto store_b = db.open();
-  const auto d = drive(*store_a);
-  auto options = driveOptions();
-  options.replica_poll_s = 0.1;
-  options.debounce = 20ms;
-  auto a = std::make_unique<GraphOptimiser>(*store_a, options);
-  const auto first = a->waitForVersion("m", 0, 120s);  // a starts first: it holds the map
-  ASSERT_TRUE(first && !first->failed);
-  EXPECT_EQ(first->nodes, 240);
-  const auto map_id = store_a->findMap("m")->id;
-  EXPECT_EQ(store_b->claimGraph(map_id), storage::MapStore::GraphClaim::kElsewhere);
-
-  GraphOptimiser b(*store_b, options);
-  const auto followed = b.waitForVersion("m", 0, 120s);  // b follows a's stored version, solving nothing
-  ASSERT_TRUE(followed && !followed->failed);
-  EXPECT_EQ(followed->nodes, 0);
-  EXPECT_GE(followed->graph_version, first->graph_version);
-
-  // A loop stored through b: a finds it on its next poll and solves it; b follows the new version.
-  const auto before = store_b->graphVersion("m");
-  store_b->addLoop("m", {0, d.ids[200], d.ids[80], d.gt[200].inverse() * d.gt[80], 0.8, 0.9, 0.02, 20});
-  b.loopsAdded("m");
-  const auto solved_by_a = a->waitForVersion("m", before, 120s);
-  ASSERT_TRUE(solved_by_a && !solved_by_a->failed);
-  EXPECT_GT(solved_by_a->nodes, 0);
-  ASSERT_TRUE(b.waitForVersion("m", solved_by_a->graph_version - 1, 120s));
-
-  // a stops (its store closes, and its lock with it): b takes the map over and solves it itself.
-  const auto version = store_b->graphVersion("m");
-  a.reset();
-  store_a.reset();
-  std::optional<GraphEvent> taken;
-  for (auto after = version; !taken;) {
-    const auto e = b.waitForVersion("m", after, 120s);
-    ASSERT_TRUE(e && !e->failed);
-    if (e->nodes > 0) taken = e;  // a solve of b's own, not a followed version
-    after = e->graph_version;
-  }
-  EXPECT_EQ(taken->nodes, 240);
-  EXPECT_NE(store_b->claimGraph(map_id), storage::MapStore::GraphClaim::kElsewhere);
-  EXPECT_LT(testing::ate(testing::optimised(*store_b), d.gt), 0.2);
-}
-
 GraphOptimiserOptions fastPolls() {
   auto o = driveOptions();
   o.replica_poll_s = 0.1;
@@ -97,13 +50,57 @@ std::optional<GraphEvent> solvedUntil(GraphOptimiser& g, std::int64_t after,
   return std::nullopt;
 }
 
+// Two stores on one fresh PostgreSQL database, as two servers have.
+class Replicas : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (!db.unavailable().empty()) GTEST_SKIP() << db.unavailable();
+    store_a = db.open();
+    store_b = db.open();
+  }
+  storage::testing::Backend db{"postgresql"};
+  std::unique_ptr<storage::MapStore> store_a, store_b;
+};
+
+TEST_F(Replicas, OneServerSolvesAMapTheOtherFollowsAndTakesOverWhenItStops) {
+  const auto d = drive(*store_a);
+  const auto options = fastPolls();
+  auto a = std::make_unique<GraphOptimiser>(*store_a, options);
+  const auto first = a->waitForVersion("m", 0, 120s);  // a starts first: it holds the map
+  ASSERT_TRUE(first && !first->failed);
+  EXPECT_EQ(first->nodes, 240);
+  const auto map_id = store_a->findMap("m")->id;
+  EXPECT_EQ(store_b->claimGraph(map_id), storage::MapStore::GraphClaim::kElsewhere);
+
+  GraphOptimiser b(*store_b, options);
+  const auto followed = b.waitForVersion("m", 0, 120s);  // b follows a's stored version, solving nothing
+  ASSERT_TRUE(followed && !followed->failed);
+  EXPECT_EQ(followed->nodes, 0);
+  EXPECT_GE(followed->graph_version, first->graph_version);
+
+  // A loop stored through b: a finds it on its next poll and solves it; b follows the new version.
+  const auto before = store_b->graphVersion("m");
+  store_b->addLoop("m", {0, d.ids[200], d.ids[80], d.gt[200].inverse() * d.gt[80], 0.8, 0.9, 0.02, 20});
+  b.loopsAdded("m");
+  const auto solved_by_a = a->waitForVersion("m", before, 120s);
+  ASSERT_TRUE(solved_by_a && !solved_by_a->failed);
+  EXPECT_GT(solved_by_a->nodes, 0);
+  ASSERT_TRUE(b.waitForVersion("m", solved_by_a->graph_version - 1, 120s));
+
+  // a stops (its store closes, and its lock with it): b takes the map over and solves it itself.
+  const auto version = store_b->graphVersion("m");
+  a.reset();
+  store_a.reset();
+  const auto taken = solvedUntil(b, version, [](const GraphEvent&) { return true; });  // b's own solve
+  ASSERT_TRUE(taken && !taken->failed);
+  EXPECT_EQ(taken->nodes, 240);
+  EXPECT_NE(store_b->claimGraph(map_id), storage::MapStore::GraphClaim::kElsewhere);
+  EXPECT_LT(testing::ate(testing::optimised(*store_b), d.gt), 0.2);
+}
+
 // Sessions or robots deleted through a server that does not hold the map: the holder rebuilds its graph
 // without them (it kept solving the deleted scans and their loops before).
-TEST(Replicas, ScansDeletedThroughAnotherServerLeaveTheHoldersGraph) {
-  storage::testing::Backend db("postgresql");
-  if (!db.unavailable().empty()) GTEST_SKIP() << db.unavailable();
-  auto store_a = db.open();
-  auto store_b = db.open();
+TEST_F(Replicas, ScansDeletedThroughAnotherServerLeaveTheHoldersGraph) {
   const auto d = drive(*store_a);
   addBadRobot(*store_a, d);
   GraphOptimiser a(*store_a, fastPolls());
@@ -122,11 +119,7 @@ TEST(Replicas, ScansDeletedThroughAnotherServerLeaveTheHoldersGraph) {
 
 // A map deleted through one server is announced on the others (their WatchMap streams end), and a lock that was
 // lost and taken again starts from the stored rows, not from the graph kept from before.
-TEST(Replicas, DeletionsAndLostLocksAreSeenByEveryServer) {
-  storage::testing::Backend db("postgresql");
-  if (!db.unavailable().empty()) GTEST_SKIP() << db.unavailable();
-  auto store_a = db.open();
-  auto store_b = db.open();
+TEST_F(Replicas, DeletionsAndLostLocksAreSeenByEveryServer) {
   const auto d = drive(*store_a);
   addBadRobot(*store_a, d);
   auto a = std::make_unique<GraphOptimiser>(*store_a, fastPolls());
@@ -173,10 +166,10 @@ TEST(Replicas, DeletionsAndLostLocksAreSeenByEveryServer) {
 
 // A held map with nothing new is not solved again on every poll (a map whose scans have no odometry, so its graph
 // has no nodes, was solved "fresh" and given a new version each time).
-TEST(Replicas, AnIdleMapIsNotSolvedAgainOnEveryPoll) {
+TEST_F(Replicas, AnIdleMapIsNotSolvedAgainOnEveryPoll) {
   storage::testing::Backend db("postgresql");
   if (!db.unavailable().empty()) GTEST_SKIP() << db.unavailable();
-  auto store = db.open();
+  auto& store = store_a;
   store->createMap("m", DescriptorLayout{}.scanDim());
   std::vector<std::int64_t> ids;
   for (int i = 0; i < 10; ++i) {
