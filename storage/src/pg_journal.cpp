@@ -2,8 +2,10 @@
 // in journal order, the write transaction that keeps that order, and the thread that follows notifications.
 #include <poll.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 
 #include "map_index.hpp"
 #include "pg_core.hpp"
@@ -179,8 +181,9 @@ WriteTx::WriteTx(Core& core) : core_(core), write_(core.write_mutex), tx_(reconn
 std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref) {
   const auto r = core_.writer.query("INSERT INTO sglc_changes(map_id, kind, ref) VALUES($1, $2, $3) RETURNING id",
                                     {map_id, static_cast<int>(kind), ref});
-  core_.writer.query("SELECT pg_notify($1, '')", {kChannel});
-  return r.i64(0, 0);
+  const auto id = r.i64(0, 0);
+  core_.writer.query("SELECT pg_notify($1, $2)", {kChannel, std::to_string(id)});  // the entry, for followers
+  return id;
 }
 
 MapStore::GraphClaim GraphOwner::claim(std::int64_t map_id) {
@@ -223,13 +226,19 @@ void Follower::run() {
         listener = std::make_unique<Conn>(core_.options.path, std::string("LISTEN ") + kChannel);
       // Wait for a notification in slices short enough to notice stop_ soon.
       pollfd pfd{PQsocket(listener->get()), POLLIN, 0};
+      // A notification names its journal entry: this process's own writes, already applied, need no catch-up.
+      std::int64_t newest = 0;
       bool notified = false;
       for (int waited = 0; waited < poll_ms_ && !stop_ && !notified; waited += 100) {
         if (::poll(&pfd, 1, 100) > 0) {
           PQconsumeInput(listener->get());
           while (PGnotify* n = PQnotifies(listener->get())) {
-            notified = true;
+            newest = std::max(newest, static_cast<std::int64_t>(std::strtoll(n->extra, nullptr, 10)));
             PQfreemem(n);
+          }
+          if (newest > 0) {
+            std::shared_lock lock(core_.state_mutex);
+            notified = newest > core_.applied;
           }
           if (PQstatus(listener->get()) != CONNECTION_OK) break;
         }
