@@ -41,7 +41,12 @@ Code classify(const char* sqlstate) {
   return Code::kIo;
 }
 
-void ignoreNotice(void*, const char*) {}
+// Notices are not shown; a FATAL one (the server ending an idle session) marks the connection as ending.
+void onNotice(void* ending, const PGresult* notice) {
+  const char* severity = PQresultErrorField(notice, PG_DIAG_SEVERITY_NONLOCALIZED);
+  if (severity && (std::strcmp(severity, "FATAL") == 0 || std::strcmp(severity, "PANIC") == 0))
+    static_cast<std::atomic<bool>*>(ending)->store(true);
+}
 
 // The server's side of the keepalives: a client whose machine vanished (no FIN, no RST) is noticed within about
 // 25 s, so that the locks its session holds (the write lock mid-transaction, a map's pose graph) are freed
@@ -212,7 +217,7 @@ Conn::Conn(const std::string& url, std::string setup) : redacted_(redacted(url))
   if (!c_ || PQstatus(c_.get()) != CONNECTION_OK)
     throw StorageError(Code::kUnavailable, "cannot connect to PostgreSQL at " + redacted_,
                        c_ ? PQerrorMessage(c_.get()) : "out of memory");
-  PQsetNoticeProcessor(c_.get(), &ignoreNotice, nullptr);
+  PQsetNoticeReceiver(c_.get(), &onNotice, ending_.get());
   exec(kServerSide);
   if (!setup_.empty()) exec(setup_);
 }
@@ -241,14 +246,16 @@ Result Conn::query(const char* sql, const std::vector<Param>& params) const {
     lengths.push_back(p.length());
     formats.push_back(p.binary() ? 1 : 0);
   }
-  PGresult* r = PQexecParams(c_.get(), sql, static_cast<int>(params.size()), nullptr, values.data(), lengths.data(),
-                             formats.data(), 1);
-  const auto status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
-  if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) {
+  const bool outside = PQtransactionStatus(c_.get()) == PQTRANS_IDLE;
+  for (int attempt = 0;; ++attempt) {
+    PGresult* r = PQexecParams(c_.get(), sql, static_cast<int>(params.size()), nullptr, values.data(), lengths.data(),
+                               formats.data(), 1);
+    const auto status = r ? PQresultStatus(r) : PGRES_FATAL_ERROR;
+    if (status == PGRES_COMMAND_OK || status == PGRES_TUPLES_OK) return Result(r);
     Result owned(r);
-    fail(r, sql);
+    const bool lost = PQstatus(c_.get()) == CONNECTION_BAD;
+    if (!(retry_reads_ && outside && lost && attempt == 0 && ensureOpen())) fail(r, sql);
   }
-  return Result(r);
 }
 
 void Conn::copyIn(const std::string& copy_sql, const std::string& data) const {
@@ -266,23 +273,32 @@ void Conn::copyIn(const std::string& copy_sql, const std::string& data) const {
 }
 
 bool Conn::ensureOpen() const {
-  // An idle connection the server closed has a readable socket (its goodbye, then EOF): reading it updates the
-  // status, so the connection is re-established here rather than failing the next statement.
-  // The goodbye and the EOF may take one read each.
+  // An idle connection the server ended has a readable socket (its FATAL goodbye, then EOF, perhaps a moment
+  // later): reading it updates the status or marks the connection as ending, so the connection is re-established
+  // here rather than failing the next statement.
   pollfd pfd{PQsocket(c_.get()), POLLIN, 0};
-  for (int reads = 0; reads < 4 && PQstatus(c_.get()) == CONNECTION_OK &&
+  for (int reads = 0; reads < 4 && PQstatus(c_.get()) == CONNECTION_OK && !*ending_ &&
                       PQtransactionStatus(c_.get()) == PQTRANS_IDLE && ::poll(&pfd, 1, 0) > 0;
        ++reads)
     PQconsumeInput(c_.get());
-  if (PQstatus(c_.get()) == CONNECTION_OK) return true;
+  if (PQstatus(c_.get()) == CONNECTION_OK && !*ending_) return true;
   PQreset(c_.get());
+  *ending_ = false;
   if (PQstatus(c_.get()) != CONNECTION_OK) return false;
   exec(kServerSide);
   if (!setup_.empty()) exec(setup_);
   return true;
 }
 
-Transaction::Transaction(const Conn& conn) : conn_(conn) { conn_.exec("BEGIN"); }
+Transaction::Transaction(const Conn& conn) : conn_(conn) {
+  try {
+    conn_.exec("BEGIN");
+  } catch (const StorageError& e) {
+    // A connection whose end showed only now (a restart): nothing has run yet, so begin on a new one.
+    if (e.code() != StorageError::Code::kUnavailable || !conn_.ensureOpen()) throw;
+    conn_.exec("BEGIN");
+  }
+}
 
 Transaction::~Transaction() {
   if (done_) return;
@@ -310,7 +326,9 @@ Pool::Lease Pool::acquire() const {
       idle_.clear();  // one closed by the server: the others most likely too (a restart), so start afresh
     }
   }
-  return {*this, std::make_unique<Conn>(url_)};
+  auto conn = std::make_unique<Conn>(url_);
+  conn->retryReadsWhenLost();
+  return {*this, std::move(conn)};
 }
 
 void Pool::release(std::unique_ptr<Conn> conn) const {

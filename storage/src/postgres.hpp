@@ -5,6 +5,7 @@
 
 #include <libpq-fe.h>
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -83,6 +84,10 @@ class Conn {
   // Statements without parameters (several may be separated by ';').
   void exec(const std::string& sql) const;
   Result query(const char* sql, const std::vector<Param>& params = {}) const;
+  // Readers' connections: a statement outside a transaction that fails because the connection was lost (a
+  // server restart, a terminated backend: its end may show only when a statement is sent) is sent once more on
+  // the re-established connection. Only for reads: a lost write's outcome is unknown.
+  void retryReadsWhenLost() { retry_reads_ = true; }
   // COPY ... FROM STDIN with `data` in COPY's text format.
   void copyIn(const std::string& copy_sql, const std::string& data) const;
   // A lost connection (server restarted, backend terminated) is re-established, its setup run again; true when
@@ -96,6 +101,10 @@ class Conn {
   std::unique_ptr<PGconn, void (*)(PGconn*)> c_{nullptr, &PQfinish};
   std::string redacted_;
   std::string setup_;
+  bool retry_reads_ = false;
+  // Set when the server said FATAL while the connection was idle (it is ending the session: a terminated backend,
+  // a shutdown), which libpq passes on as a notice, before the connection's status shows it.
+  std::unique_ptr<std::atomic<bool>> ending_ = std::make_unique<std::atomic<bool>>(false);
 };
 
 // BEGIN ... COMMIT on `conn`, rolled back on destruction unless committed.
