@@ -246,7 +246,9 @@ int main(int argc, char** argv) {
     }
     const Settings settings = settingsFrom(request);
     if (request.dump) {
-      std::cout << sglc::config::dumpYaml(sglc::server::settingsTable(), settings);
+      auto shown = settings;  // a PostgreSQL URL's password is not printed
+      shown.db = sglc::storage::printableLocation(settings.db);
+      std::cout << sglc::config::dumpYaml(sglc::server::settingsTable(), shown);
       return 0;
     }
     return serve(sglc::server::resolved(settings), signals);

@@ -8,8 +8,9 @@ Usage: test_deploy.py REPO_ROOT BIN_DIR
   shared library of sglc-server or sglc (ldd + dpkg -S; skipped where dpkg is missing);
 - the systemd unit's install steps create the user and /etc/sglc, and its ExecStart line, pointed at this
   build and a temporary directory, starts a server that answers SERVING and stops cleanly on SIGTERM;
-- the Kubernetes manifests parse, probe the gRPC port with grpc.health, take the database URL from a secret,
-  and their server configuration is accepted by this build's sglc-server (--dump-config);
+- the Kubernetes manifests parse, probe the gRPC port with grpc.health, take the database password from a
+  secret (as PGPASSWORD, never in the URL on the command line), and their server configuration is accepted by
+  this build's sglc-server (--dump-config), which prints a URL's password as ***;
 - the nginx configuration passes `nginx -t` (skipped where nginx is missing) and balances over grpc_pass.
 """
 import os
@@ -157,9 +158,12 @@ def test_kubernetes():
     for probe in ("readinessProbe", "livenessProbe"):
         assert container[probe]["grpc"]["port"] == port, f"{probe} must use grpc.health on the gRPC port"
     env = {e["name"]: e for e in container["env"]}
-    url = env["SGLC_DB_URL"]["valueFrom"]["secretKeyRef"]
-    assert ("Secret", url["name"]) in docs and url["key"] in docs[("Secret", url["name"])]["stringData"]
-    assert "$(SGLC_DB_URL)" in container["args"], "the server gets the URL from the secret"
+    password = env["PGPASSWORD"]["valueFrom"]["secretKeyRef"]
+    assert ("Secret", password["name"]) in docs
+    assert password["key"] in docs[("Secret", password["name"])]["stringData"]
+    url = container["args"][container["args"].index("--db") + 1]
+    assert url.startswith("postgresql://") and ":" not in url.split("//")[1].split("@")[0], \
+        "the URL on the command line carries no password"
     service = docs[("Service", "sglc")]
     assert service["spec"]["selector"] == deployment["spec"]["selector"]["matchLabels"]
     config = docs[("ConfigMap", "sglc-config")]["data"]["sglc.yaml"]
@@ -171,6 +175,11 @@ def test_kubernetes():
                              capture_output=True, text=True, timeout=60)
         assert out.returncode == 0, f"sglc-server refuses the ConfigMap's configuration: {out.stderr}"
         assert yaml.safe_load(out.stdout)["server"]["listen"] == f"0.0.0.0:{port}"
+        out = subprocess.run([os.path.join(BIN, "sglc-server"), "--config", path, "--db",
+                              "postgresql://sglc:s3cret@db:5432/sglc?sslmode=require", "--dump-config"],
+                             capture_output=True, text=True, timeout=60)
+        assert out.returncode == 0 and "s3cret" not in out.stdout, "--dump-config printed the password"
+        assert yaml.safe_load(out.stdout)["server"]["db"] == "postgresql://sglc:***@db:5432/sglc?sslmode=require"
 
 
 def test_nginx():
