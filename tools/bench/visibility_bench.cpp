@@ -9,6 +9,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <sstream>
+#include <stdexcept>
 #include <thread>
 
 #include "sglc/client/client.hpp"
@@ -41,29 +42,14 @@ bool found(const sglc::v1::QueryResponse& r, std::int64_t id) {
   return std::any_of(r.candidates().begin(), r.candidates().end(), [&](const auto& c) { return c.scan_id() == id; });
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
-  CLI::App app{"Cross-server visibility of acknowledged scans (replicas on one database)"};
-  std::string servers, dir, map = "visibility", session = "probe";
-  int scans = 100;
-  double timeout_s = 30;
-  app.add_option("--servers", servers, "Comma-separated host:port of the servers (at least 2)")->required();
-  app.add_option("--seq", dir, "Sequence directory whose scans are ingested")->required();
-  app.add_option("--map", map, "Map (created if missing)")->capture_default_str();
-  app.add_option("--session", session, "Session of robot 'probe' (must be new)")->capture_default_str();
-  app.add_option("--scans", scans, "Scans to probe")->capture_default_str()->check(CLI::Range(1, 100000));
-  app.add_option("--timeout", timeout_s, "Give up on a scan after this long (s)")->capture_default_str();
-  CLI11_PARSE(app, argc, argv);
-  const auto addresses = split(servers);
-  if (addresses.size() < 2) {
-    std::cerr << "sglc-bench-visibility: --servers needs at least two addresses\n";
-    return 2;
-  }
+// Ingests through one server, queries another until found; prints the JSON object. 0 when every scan was found.
+int probe(const std::vector<std::string>& addresses, const std::string& dir, const std::string& map,
+          const std::string& session, int scans, double timeout_s) {
+  const auto seq = sglc::openSequence(dir);
+  if (seq.frames.empty()) throw std::runtime_error(dir + ": the sequence has no scans");
   std::vector<sc::Client> clients;
   for (const auto& a : addresses) clients.push_back(sc::Client::connect(a));
   clients[0].ensureMap(map);
-  const auto seq = sglc::openSequence(dir);
   sglc::v1::QueryOptions q;
   q.set_scope(sglc::v1::SCOPE_SESSIONS);
   q.add_sessions("probe/" + session);
@@ -103,4 +89,31 @@ int main(int argc, char** argv) {
   out["query_ms_median"] = percentile(query_ms, 0.5);
   std::cout << out.dump() << std::endl;
   return lost == 0 ? 0 : 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"Cross-server visibility of acknowledged scans (replicas on one database)"};
+  std::string servers, dir, map = "visibility", session = "probe";
+  int scans = 100;
+  double timeout_s = 30;
+  app.add_option("--servers", servers, "Comma-separated host:port of the servers (at least 2)")->required();
+  app.add_option("--seq", dir, "Sequence directory whose scans are ingested")->required();
+  app.add_option("--map", map, "Map (created if missing)")->capture_default_str();
+  app.add_option("--session", session, "Session of robot 'probe' (must be new)")->capture_default_str();
+  app.add_option("--scans", scans, "Scans to probe")->capture_default_str()->check(CLI::Range(1, 100000));
+  app.add_option("--timeout", timeout_s, "Give up on a scan after this long (s)")->capture_default_str();
+  CLI11_PARSE(app, argc, argv);
+  const auto addresses = split(servers);
+  if (addresses.size() < 2) {
+    std::cerr << "sglc-bench-visibility: --servers needs at least two addresses\n";
+    return 2;
+  }
+  try {
+    return probe(addresses, dir, map, session, scans, timeout_s);
+  } catch (const std::exception& e) {  // an unreachable server, an unreadable scan: one clear line
+    std::cerr << "sglc-bench-visibility: error: " << e.what() << "\n";
+    return 1;
+  }
 }
