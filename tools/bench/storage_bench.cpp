@@ -343,20 +343,26 @@ int main(int argc, char** argv) {
   addOptions(app, options);
   CLI11_PARSE(app, argc, argv);
 
-  fs::remove_all(options.dir);
-  fs::create_directories(options.dir);
-  nlohmann::ordered_json out;
-  const Pipeline pipeline;
-  const auto base = simulatedFingerprints(pipeline, bench::kitti00OrLoopRoute(options.data), options.frames, out);
-  std::mt19937_64 rng(42);
-  storage::StoreOptions full;
-  full.path = options.dir + "/full.db";
-  full.sync = storage::StoreOptions::Sync::kFull;
-  benchStoreAndFetch(full, base, out);
-  benchWriteRates(options, base, out);
-  benchLargeMap(options.dir, base, options.scans, rng, out);
-  if (options.million) benchMillion(options.dir, base, options.nprobes, rng, out);
-  std::cout << out.dump(2) << std::endl;
+  try {
+    fs::remove_all(options.dir);
+    fs::create_directories(options.dir);
+    nlohmann::ordered_json out;
+    const Pipeline pipeline;
+    const auto base = simulatedFingerprints(pipeline, bench::kitti00OrLoopRoute(options.data), options.frames, out);
+    std::mt19937_64 rng(42);
+    storage::StoreOptions full;
+    full.path = options.dir + "/full.db";
+    full.sync = storage::StoreOptions::Sync::kFull;
+    benchStoreAndFetch(full, base, out);
+    benchWriteRates(options, base, out);
+    benchLargeMap(options.dir, base, options.scans, rng, out);
+    if (options.million) benchMillion(options.dir, base, options.nprobes, rng, out);
+    std::cout << out.dump(2) << std::endl;
+  } catch (const std::exception& e) {  // an unreachable database, a full disk: one clear line
+    std::cerr << "sglc-bench-storage: error: " << e.what() << std::endl;
+    fs::remove_all(options.dir);
+    return 1;
+  }
   fs::remove_all(options.dir);
   return 0;
 }
