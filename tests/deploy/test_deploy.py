@@ -185,6 +185,9 @@ def test_kubernetes():
 def test_nginx():
     conf = read(os.path.join(DEPLOY, "nginx", "sglc-grpc.conf"))
     assert "grpc_pass grpc://sglc_replicas" in conf and "http2" in conf
+    deletes = conf[conf.index("MapAdmin/(DeleteSession|DeleteRobot|DeleteMap|Backup)"):]
+    deletes = deletes[:deletes.index("}")]
+    assert "non_idempotent" not in deletes, "deletes and backups must not be resent to another replica"
     nginx = shutil.which("nginx") or ("/usr/sbin/nginx" if os.path.exists("/usr/sbin/nginx") else None)
     if not nginx:
         print("skip nginx -t: nginx is not installed (scripts/install-deps.sh installs it)")
