@@ -1,10 +1,12 @@
 #include "sglc/pipeline.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
 #include "fast_math.hpp"
 #include "sglc/bev_search.hpp"
+#include "sglc/consensus.hpp"
 #include "sglc/labeller.hpp"
 #include "sglc/voxel_map.hpp"
 
@@ -47,6 +49,18 @@ bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
 
 double rotationAngleDeg(const Mat3d& R) {
   return std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / std::numbers::pi;
+}
+
+// RANSAC over the matched node centres (not found with fewer than 3 matches).
+RansacResult coarsePose(const Fingerprint& query, const Fingerprint& candidate, const std::vector<Match>& matches,
+                        const RansacConfig& config) {
+  if (matches.size() < 3) return {};
+  std::vector<Vec3d> q, t;
+  for (const auto& [i, j] : matches) {
+    q.push_back(query.nodes[i].center.cast<double>());
+    t.push_back(candidate.nodes[j].center.cast<double>());
+  }
+  return ransacRigid(q, t, config);
 }
 
 }  // namespace
@@ -153,19 +167,22 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   if (auto pruned = pruneMatches(query.nodes, candidate.nodes, matches, c.match);
       static_cast<int>(pruned.size()) >= c.match.prune_min_kept)
     matches = std::move(pruned);
+  auto ransac = coarsePose(query, candidate, matches, c.ransac);
+  // Small graphs: descriptors too unstable to pair nodes; let geometry pair them. Pairs found by geometry
+  // alone carry less evidence, so their graph similarity must reach the stricter consensus_t_g.
+  double t_g = c.verify.t_g;
+  if (!ransac.found && consensusApplies(c.match, query.nodes.size(), candidate.nodes.size())) {
+    auto agreed = consensusMatches(query.nodes, query.node_descriptors, candidate.nodes, candidate.node_descriptors,
+                                   c.match, c.ransac);
+    if (auto second = coarsePose(query, candidate, agreed, c.ransac); second.found) {
+      matches = std::move(agreed);
+      ransac = std::move(second);
+      t_g = std::max(t_g, c.match.consensus_t_g);
+    }
+  }
   r.matches = static_cast<int>(matches.size());
-  if (r.matches < 3) {
-    r.reason = "fewer than 3 node matches";
-    return r;
-  }
-  std::vector<Vec3d> q, t;
-  for (const auto& [i, j] : matches) {
-    q.push_back(query.nodes[i].center.cast<double>());
-    t.push_back(candidate.nodes[j].center.cast<double>());
-  }
-  const auto ransac = ransacRigid(q, t, c.ransac);
   if (!ransac.found) {
-    r.reason = "no pose agrees with enough node matches";
+    r.reason = r.matches < 3 ? "fewer than 3 node matches" : "no pose agrees with enough node matches";
     return r;
   }
   r.T = ransac.T;
@@ -177,7 +194,7 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   r.score = r.graph_similarity * r.background_similarity * (1.0 - std::exp(-r.inliers / 3.0));
   // Nearer revisits rank first: they share more of the scene, so their pose is the more reliable.
   if (c.verify.score_distance_m > 0) r.score *= std::exp(-translation / c.verify.score_distance_m);
-  if (r.graph_similarity < c.verify.t_g)
+  if (r.graph_similarity < t_g)
     r.reason = "graph similarity below t_g";
   else if (r.background_similarity < c.verify.t_b)
     r.reason = "background similarity below t_b";

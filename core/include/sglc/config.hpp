@@ -72,6 +72,14 @@ struct MatchConfig {
   // two neighbours placed within triangle_tol in both scans; under label noise or a large change of heading
   // they can all fail for a true loop, while RANSAC and the verification still reject false ones.
   int prune_min_kept = 6;
+  // Ours: consensus matching (sglc/consensus.hpp) for small graphs. When either scan has at most this many
+  // nodes and the descriptor matches give no pose, every compatible node pair becomes a candidate and the
+  // largest set one rigid motion aligns is kept. 0 switches it off.
+  int consensus_max_nodes = 16;
+  double consensus_min_cosine = 0.0;     // descriptor similarity floor of a candidate pair
+  int consensus_per_node = 8;            // candidates kept per node of the smaller graph (most similar first)
+  int consensus_max_hypotheses = 20000;  // triples tried at most, in a fixed order
+  double consensus_t_g = 0.7;            // graph similarity consensus matches need (verify.t_g if higher)
 };
 
 struct RansacConfig {
