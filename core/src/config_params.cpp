@@ -136,11 +136,12 @@ void addMatching(Table<Config>& t) {
       field<Config>(SGLC_KEY(match.prune_min_kept), atLeast(0), "fewer kept than this: RANSAC gets the unpruned ones"));
   t.add(field<Config>(SGLC_KEY(match.consensus_max_nodes), closed(0, 64),
                       "a scan with at most this many nodes may be matched by geometric consensus (0: never)"));
-  t.add(
-      field<Config>(SGLC_KEY(match.consensus_min_cosine), closed(-1, 1), "descriptor floor of a consensus candidate"));
+  t.add(field<Config>(SGLC_KEY(match.consensus_min_cosine), closed(0, 1),
+                      "descriptor floor of a consensus candidate (0: every compatible pair)"));
   t.add(field<Config>(SGLC_KEY(match.consensus_per_node), closed(1, 32),
                       "consensus candidates per node of the smaller graph"));
-  t.add(field<Config>(SGLC_KEY(match.consensus_max_hypotheses), closed(1, 1e7), "consensus triples tried at most"));
+  t.add(field<Config>(SGLC_KEY(match.consensus_max_hypotheses), closed(1, 1e7),
+                      "agreeing consensus triples examined at most (flat ones count)"));
   t.add(field<Config>(SGLC_KEY(match.consensus_t_g), closed(0, 1), "graph similarity that consensus matches need"));
   t.add(field<Config>(SGLC_KEY(ransac.inlier_threshold), above(0), "node-centre residual of an inlier (m)"));
   t.add(field<Config>(SGLC_KEY(ransac.max_iterations), closed(1, 1e6), "hypotheses (all triples when fewer)"));

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
-#include <numeric>
 
 #include "sglc/registration.hpp"
 
@@ -43,7 +43,7 @@ std::vector<Candidate> candidates(const std::vector<Node>& query, const Eigen::M
       if (query[i].cls != candidate[j].cls) continue;
       if (((query[i].size - candidate[j].size).cwiseAbs().array() > db).any()) continue;
       const double cosine = cosineOf(query_desc, i, candidate_desc, j);
-      if (cosine < config.consensus_min_cosine) continue;
+      if (!(cosine >= config.consensus_min_cosine)) continue;  // NaN fails too
       own.push_back({i, j, static_cast<float>(cosine)});
     }
     // Most similar first; equal cosines keep their index order, so the choice never varies.
@@ -55,26 +55,69 @@ std::vector<Candidate> candidates(const std::vector<Node>& query, const Eigen::M
   return out;
 }
 
-// Residuals of every candidate under T, and the one-to-one inliers taken greedily, nearest first.
-std::vector<int> oneToOneInliers(const std::vector<Candidate>& pairs, const std::vector<Vec3d>& q,
-                                 const std::vector<Vec3d>& c, const Mat4d& T, double threshold, double* sum) {
-  const Mat3d R = T.topLeftCorner<3, 3>();
-  const Vec3d t = T.topRightCorner<3, 1>();
-  std::vector<std::pair<double, int>> near;
-  for (int k = 0; k < static_cast<int>(pairs.size()); ++k)
-    if (const double r = (R * c[k] + t - q[k]).norm(); r < threshold) near.emplace_back(r, k);
-  std::sort(near.begin(), near.end());
-  std::vector<int> kept;
-  *sum = 0;
-  for (const auto& entry : near) {
-    const Candidate& next = pairs[entry.second];
-    const bool taken =
-        std::any_of(kept.begin(), kept.end(), [&](int o) { return pairs[o].i == next.i || pairs[o].j == next.j; });
-    if (taken) continue;
-    kept.push_back(entry.second);
-    *sum += entry.first;
+// splitmix64, as RANSAC's sampler: a seeded order that is the same on every platform.
+struct SplitMix {
+  std::uint64_t state;
+  std::uint64_t next() {
+    std::uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
   }
-  return kept;
+};
+
+// Scores motions: how many candidates one motion aligns one-to-one, nearest first. Buffers are reused.
+class Scorer {
+ public:
+  Scorer(const std::vector<Candidate>& pairs, const std::vector<Vec3d>& q, const std::vector<Vec3d>& c,
+         double threshold)
+      : pairs_(pairs), q_(q), c_(c), threshold_(threshold) {}
+
+  // One-to-one inliers of T (greedy, nearest first; ties by index) and their residual sum; the count is
+  // returned without the pairing when even the raw count cannot beat `to_beat`.
+  int score(const Mat4d& T, int to_beat, double* sum) {
+    const Mat3d R = T.topLeftCorner<3, 3>();
+    const Vec3d t = T.topRightCorner<3, 1>();
+    near_.clear();
+    for (int k = 0; k < static_cast<int>(pairs_.size()); ++k)
+      if (const double r = (R * c_[k] + t - q_[k]).norm(); r < threshold_) near_.emplace_back(r, k);
+    if (static_cast<int>(near_.size()) < to_beat) return 0;
+    std::sort(near_.begin(), near_.end());
+    kept_.clear();
+    *sum = 0;
+    for (const auto& entry : near_) {
+      const Candidate& next = pairs_[entry.second];
+      const bool taken = std::any_of(kept_.begin(), kept_.end(),
+                                     [&](int o) { return pairs_[o].i == next.i || pairs_[o].j == next.j; });
+      if (taken) continue;
+      kept_.push_back(entry.second);
+      *sum += entry.first;
+    }
+    return static_cast<int>(kept_.size());
+  }
+  const std::vector<int>& kept() const { return kept_; }
+
+ private:
+  const std::vector<Candidate>& pairs_;
+  const std::vector<Vec3d>& q_;
+  const std::vector<Vec3d>& c_;
+  double threshold_;
+  std::vector<std::pair<double, int>> near_;
+  std::vector<int> kept_;
+};
+
+// The most nodes any motion could align: distinct query nodes and distinct candidate nodes among the pairs.
+int mostAlignable(const std::vector<Candidate>& pairs) {
+  std::vector<int> is, js;
+  for (const auto& p : pairs) {
+    is.push_back(p.i);
+    js.push_back(p.j);
+  }
+  for (auto* v : {&is, &js}) {
+    std::sort(v->begin(), v->end());
+    v->erase(std::unique(v->begin(), v->end()), v->end());
+  }
+  return static_cast<int>(std::min(is.size(), js.size()));
 }
 
 }  // namespace
@@ -87,49 +130,58 @@ bool consensusApplies(const MatchConfig& config, std::size_t query_nodes, std::s
 std::vector<Match> consensusMatches(const std::vector<Node>& query, const Eigen::MatrixXf& query_desc,
                                     const std::vector<Node>& candidate, const Eigen::MatrixXf& candidate_desc,
                                     const MatchConfig& match, const RansacConfig& ransac) {
+  if (!consensusApplies(match, query.size(), candidate.size())) return {};
   const auto pairs = candidates(query, query_desc, candidate, candidate_desc, match);
-  const int n = static_cast<int>(pairs.size());
+  const auto n = pairs.size();  // <= consensus_max_nodes * consensus_per_node (64 * 32 at most)
   if (n < 3) return {};
   std::vector<Vec3d> q(n), c(n);
-  for (int k = 0; k < n; ++k) {
+  for (std::size_t k = 0; k < n; ++k) {
     q[k] = query[pairs[k].i].center.cast<double>();
     c[k] = candidate[pairs[k].j].center.cast<double>();
   }
   // Two candidates agree when they use four distinct nodes and keep their distance (rigid motions do).
   const double tol = 2 * ransac.inlier_threshold;
-  std::vector<char> agree(static_cast<std::size_t>(n) * n, 0);
-  for (int a = 0; a < n; ++a)
-    for (int b = a + 1; b < n; ++b)
+  std::vector<char> agree(n * n, 0);
+  std::vector<std::pair<int, int>> edges;
+  for (std::size_t a = 0; a < n; ++a)
+    for (std::size_t b = a + 1; b < n; ++b)
       if (pairs[a].i != pairs[b].i && pairs[a].j != pairs[b].j &&
-          std::abs((q[a] - q[b]).norm() - (c[a] - c[b]).norm()) <= tol)
+          std::abs((q[a] - q[b]).norm() - (c[a] - c[b]).norm()) <= tol) {
         agree[a * n + b] = agree[b * n + a] = 1;
-  int best_count = 0, hypotheses = 0;
+        edges.emplace_back(static_cast<int>(a), static_cast<int>(b));
+      }
+  // Edges in a seeded shuffled order, so that a budget spent early is not spent on the first nodes only.
+  SplitMix rng{ransac.seed};
+  for (std::size_t e = edges.size(); e > 1; --e) std::swap(edges[e - 1], edges[rng.next() % e]);
+  Scorer scorer(pairs, q, c, ransac.inlier_threshold);
+  const int ceiling = mostAlignable(pairs);
+  int best_count = 0;
   double best_sum = std::numeric_limits<double>::max();
   Mat4d best_T = Mat4d::Identity();
-  for (int a = 0; a < n && hypotheses < match.consensus_max_hypotheses; ++a)
-    for (int b = a + 1; b < n && hypotheses < match.consensus_max_hypotheses; ++b) {
-      if (!agree[a * n + b]) continue;
-      for (int k = b + 1; k < n && hypotheses < match.consensus_max_hypotheses; ++k) {
-        if (!agree[a * n + k] || !agree[b * n + k]) continue;
-        if (smallestHeight(q[a], q[b], q[k]) < ransac.min_triangle_height ||
-            smallestHeight(c[a], c[b], c[k]) < ransac.min_triangle_height)
-          continue;
-        ++hypotheses;
-        const Mat4d T = fitRigid({c[a], c[b], c[k]}, {q[a], q[b], q[k]});
-        double sum = 0;
-        const int count = static_cast<int>(oneToOneInliers(pairs, q, c, T, ransac.inlier_threshold, &sum).size());
-        if (count > best_count || (count == best_count && sum < best_sum)) {
-          best_count = count;
-          best_sum = sum;
-          best_T = T;
-        }
+  long long budget = match.consensus_max_hypotheses;  // every third candidate looked at counts, flat or not
+  for (const auto& [a, b] : edges) {
+    if (budget <= 0 || best_count >= ceiling) break;
+    for (std::size_t k = static_cast<std::size_t>(b) + 1; k < n && budget > 0; ++k) {
+      if (!agree[a * n + k] || !agree[b * n + k]) continue;
+      --budget;
+      if (smallestHeight(q[a], q[b], q[k]) < ransac.min_triangle_height ||
+          smallestHeight(c[a], c[b], c[k]) < ransac.min_triangle_height)
+        continue;
+      const Mat4d T = fitRigid({c[a], c[b], c[k]}, {q[a], q[b], q[k]});
+      double sum = 0;
+      const int count = scorer.score(T, best_count, &sum);
+      if (count > best_count || (count == best_count && count > 0 && sum < best_sum)) {
+        best_count = count;
+        best_sum = sum;
+        best_T = T;
       }
     }
+  }
   if (best_count < 3) return {};
   double sum = 0;
+  scorer.score(best_T, 0, &sum);
   std::vector<Match> out;
-  for (int k : oneToOneInliers(pairs, q, c, best_T, ransac.inlier_threshold, &sum))
-    out.emplace_back(pairs[k].i, pairs[k].j);
+  for (int k : scorer.kept()) out.emplace_back(pairs[k].i, pairs[k].j);
   std::sort(out.begin(), out.end());
   return out;
 }

@@ -195,7 +195,8 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   // Nearer revisits rank first: they share more of the scene, so their pose is the more reliable.
   if (c.verify.score_distance_m > 0) r.score *= std::exp(-translation / c.verify.score_distance_m);
   if (r.graph_similarity < t_g)
-    r.reason = "graph similarity below t_g";
+    r.reason = t_g > c.verify.t_g ? "graph similarity below match.consensus_t_g (nodes paired by consensus)"
+                                  : "graph similarity below t_g";
   else if (r.background_similarity < c.verify.t_b)
     r.reason = "background similarity below t_b";
   else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)

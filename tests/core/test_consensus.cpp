@@ -4,21 +4,29 @@
 #include <algorithm>
 #include <filesystem>
 #include <random>
+#include <set>
 
 #include "sglc/consensus.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
+#include "test_util.hpp"
 
 namespace sglc {
 namespace {
 
+// Uniform in [lo, hi) from mt19937's raw output, which the standard fixes on every platform (its
+// distributions it does not).
+float uniform(std::mt19937& rng, float lo, float hi) {
+  return lo + (hi - lo) * static_cast<float>(rng() >> 8) / static_cast<float>(1u << 24);
+}
+
 // n nodes of three classes spread over 60 m x 60 m, poles and trunks thin, vehicles car-sized.
 std::vector<Node> scene(int n, std::uint32_t seed) {
   std::mt19937 rng(seed);
-  std::uniform_real_distribution<float> xy(-30.0f, 30.0f), z(0.0f, 2.0f);
   std::vector<Node> nodes(n);
   for (int k = 0; k < n; ++k) {
-    nodes[k].center = Vec3f(xy(rng), xy(rng), z(rng));
+    const float x = uniform(rng, -30, 30), y = uniform(rng, -30, 30), z = uniform(rng, 0, 2);
+    nodes[k].center = Vec3f(x, y, z);
     nodes[k].cls = static_cast<std::uint8_t>(k % 3);
     nodes[k].size = nodes[k].cls == 0 ? Vec3f(4.2f, 1.8f, 1.5f) : Vec3f(0.4f, 0.3f, 4.0f);
   }
@@ -45,16 +53,15 @@ Pair makePair(int n, int kept, int extra, std::uint32_t seed) {
   const auto others = scene(extra, seed + 1000);
   const Mat4d inv = motion().inverse();
   std::mt19937 rng(seed + 1);
-  std::normal_distribution<float> noise(0.0f, 0.05f);
   std::vector<std::pair<Node, int>> seen;  // node, query index (-1: only in the candidate)
   for (int k = 0; k < kept; ++k) {
     Node m = p.query[k];
     m.center = (inv.topLeftCorner<3, 3>() * m.center.cast<double>() + inv.topRightCorner<3, 1>()).cast<float>() +
-               Vec3f(noise(rng), noise(rng), noise(rng));
+               Vec3f(uniform(rng, -0.05f, 0.05f), uniform(rng, -0.05f, 0.05f), uniform(rng, -0.05f, 0.05f));
     seen.emplace_back(m, k);
   }
   for (const auto& o : others) seen.emplace_back(o, -1);
-  std::shuffle(seen.begin(), seen.end(), rng);
+  for (std::size_t e = seen.size(); e > 1; --e) std::swap(seen[e - 1], seen[rng() % e]);  // portable shuffle
   for (int j = 0; j < static_cast<int>(seen.size()); ++j) {
     p.candidate.push_back(seen[j].first);
     if (seen[j].second >= 0) p.truth.emplace_back(seen[j].second, j);
@@ -75,32 +82,62 @@ TEST(Consensus, FindsTheTrueNodePairsWhereDescriptorsSayNothing) {
 
 TEST(Consensus, KeepsOnlyNodesOfEqualClassAndSize) {
   auto p = makePair(12, 6, 8, 5);
-  // The first true pair's candidate node becomes a vehicle-sized pole: it may not be paired any more.
-  auto& node = p.candidate[p.truth.front().second];
-  node.size = Vec3f(5.0f, 2.5f, 4.0f);
+  // The first true pair's candidate node becomes 2.5 m wider: beyond d_b, it may not be paired any more.
+  p.candidate[p.truth.front().second].size += Vec3f(0.0f, 2.5f, 0.0f);
+  // The second one's class changes (a pole where the query has a trunk, or the reverse; a car becomes a pole).
+  auto& changed = p.candidate[p.truth[1].second];
+  changed.cls = static_cast<std::uint8_t>(changed.cls == 1 ? 2 : 1);
+  changed.size = Vec3f(0.4f, 0.3f, 4.0f);
   const auto got = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), MatchConfig{},
                                     RansacConfig{});
-  EXPECT_EQ(std::count(got.begin(), got.end(), p.truth.front()), 0);
-  EXPECT_EQ(got.size(), p.truth.size() - 1);
+  const std::vector<Match> expected(p.truth.begin() + 2, p.truth.end());
+  EXPECT_EQ(got, expected);
 }
 
-TEST(Consensus, UnrelatedScenesAgreeOnFewerNodesThanTrueOnes) {
-  // Twelve against twenty unrelated nodes: chance alignments exist but are smaller than a real overlap.
-  const auto q = scene(12, 21), c = scene(20, 77);
-  const auto got = consensusMatches(q, flat(q.size()), c, flat(c.size()), MatchConfig{}, RansacConfig{});
-  EXPECT_LT(got.size(), 6u);
+TEST(Consensus, WorksWhicheverGraphIsSmaller) {
+  // The candidate scan is the smaller one here: candidates are then chosen per candidate node.
+  const auto p = makePair(30, 7, 2, 13);
+  ASSERT_LT(p.candidate.size(), p.query.size());
+  const auto got = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), MatchConfig{},
+                                    RansacConfig{});
+  EXPECT_EQ(got, p.truth);
 }
 
-TEST(Consensus, IsDeterministicAndBounded) {
+TEST(Consensus, PairsEachNodeOnce) {
+  auto p = makePair(12, 6, 4, 17);
+  // A twin 0.3 m beside every true candidate node: each could align, but a node is paired once.
+  const auto n = p.candidate.size();
+  for (const auto& [i, j] : p.truth) {
+    Node twin = p.candidate[j];
+    twin.center += Vec3f(0.3f, 0.0f, 0.0f);
+    p.candidate.push_back(twin);
+  }
+  const auto got = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), MatchConfig{},
+                                    RansacConfig{});
+  ASSERT_EQ(got.size(), p.truth.size());
+  std::set<int> is, js;
+  for (const auto& [i, j] : got) {
+    EXPECT_TRUE(is.insert(i).second);
+    EXPECT_TRUE(js.insert(j).second);
+  }
+  EXPECT_GT(n, 0u);
+}
+
+TEST(Consensus, TheBudgetAndThePerNodeLimitBoundTheSearch) {
   const auto p = makePair(16, 7, 30, 9);
   MatchConfig m;
-  const auto a = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {});
-  const auto b = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {});
-  EXPECT_EQ(a, b);
-  // One hypothesis: the first agreeing triple only, which need not be the best.
+  m.consensus_per_node = 32;  // every same-class partner (about 12 per node here)
+  const auto all = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {});
+  EXPECT_EQ(all, p.truth);
+  // One triple examined: among hundreds of agreeing decoy triples, it is not the true motion.
   m.consensus_max_hypotheses = 1;
-  const auto one = consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {});
-  EXPECT_LE(one.size(), a.size());
+  EXPECT_LT(consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {}).size(),
+            p.truth.size());
+  // One partner per node, the first of equal (flat) descriptors: most true partners are cut.
+  m.consensus_max_hypotheses = MatchConfig{}.consensus_max_hypotheses;
+  m.consensus_per_node = 1;
+  EXPECT_LT(consensusMatches(p.query, flat(p.query.size()), p.candidate, flat(p.candidate.size()), m, {}).size(),
+            p.truth.size());
 }
 
 TEST(Consensus, AppliesToSmallGraphsOnly) {
@@ -115,6 +152,49 @@ TEST(Consensus, AppliesToSmallGraphsOnly) {
 TEST(Consensus, TooFewCandidatesGiveNothing) {
   const auto q = scene(2, 1), c = scene(2, 1);
   EXPECT_TRUE(consensusMatches(q, flat(2), c, flat(2), MatchConfig{}, RansacConfig{}).empty());
+}
+
+// The pipeline's use of it: two views of a synthetic street whose descriptor matches are all forbidden
+// (min_cosine above any cosine), so only consensus can pair the nodes.
+class ConsensusInVerify : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const LabelledScan world = test::makeStreetWorld();
+    truth_ = test::makeT(8.0, 3.0, 0.5, 0.0);  // maps view b into view a
+    a_ = test::viewFrom(world, Mat4d::Identity(), 30.0);
+    b_ = test::viewFrom(world, truth_, 30.0);
+  }
+  static Config config() {
+    Config c;
+    c.match.min_cosine = 1.0;
+    return c;
+  }
+  LabelledScan a_, b_;
+  Mat4d truth_;
+};
+
+TEST_F(ConsensusInVerify, VerifiesWhatDescriptorsCannotPair) {
+  const Pipeline p(config());
+  const auto a = p.fingerprint(a_), b = p.fingerprint(b_);
+  ASSERT_TRUE(consensusApplies(p.config().match, a.nodes.size(), b.nodes.size()));
+  auto r = p.verify(a, b);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  EXPECT_GE(r.inliers, 3);
+  EXPECT_EQ(r.inlier_pairs.size(), static_cast<std::size_t>(r.inliers));
+  EXPECT_LT(test::translationError(r.T, truth_), 0.5);
+  Config off = config();
+  off.match.consensus_max_nodes = 0;
+  EXPECT_STREQ(Pipeline(off).verify(a, b).reason, "fewer than 3 node matches");
+}
+
+TEST_F(ConsensusInVerify, ConsensusMatchesNeedTheStricterGraphSimilarity) {
+  Config strict = config();
+  strict.match.consensus_t_g = 1.0;  // no real alignment has a zero residual
+  const Pipeline p(strict);
+  const auto r = p.verify(p.fingerprint(a_), p.fingerprint(b_));
+  EXPECT_FALSE(r.is_loop);
+  EXPECT_STREQ(r.reason, "graph similarity below match.consensus_t_g (nodes paired by consensus)");
+  EXPECT_GT(r.graph_similarity, strict.verify.t_g);  // verify.t_g alone would have let it through
 }
 
 // Real HDL-32E scans (nuScenes scene 1072, 4 m apart): consecutive scans whose few nodes the descriptors

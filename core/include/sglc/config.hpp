@@ -76,9 +76,9 @@ struct MatchConfig {
   // nodes and the descriptor matches give no pose, every compatible node pair becomes a candidate and the
   // largest set one rigid motion aligns is kept. 0 switches it off.
   int consensus_max_nodes = 16;
-  double consensus_min_cosine = 0.0;     // descriptor similarity floor of a candidate pair
+  double consensus_min_cosine = 0.0;     // descriptor similarity floor of a candidate pair (0: no floor)
   int consensus_per_node = 8;            // candidates kept per node of the smaller graph (most similar first)
-  int consensus_max_hypotheses = 20000;  // triples tried at most, in a fixed order
+  int consensus_max_hypotheses = 20000;  // agreeing triples examined at most (flat ones count), seeded order
   double consensus_t_g = 0.7;            // graph similarity consensus matches need (verify.t_g if higher)
 };
 

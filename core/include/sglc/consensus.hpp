@@ -16,11 +16,14 @@ namespace sglc {
 bool consensusApplies(const MatchConfig& config, std::size_t query_nodes, std::size_t candidate_nodes);
 
 // Candidates: node pairs of equal class whose box dimensions differ by <= d_b and whose descriptor cosine is
-// >= consensus_min_cosine; each node of the smaller graph keeps its consensus_per_node most similar. Every
-// triple of candidates whose side lengths agree within 2 * inlier_threshold (and that is not flat) proposes a
-// rigid motion, in a fixed order, at most consensus_max_hypotheses of them; the motion that aligns most
-// nodes one-to-one within inlier_threshold wins (ties: smaller residual sum). Returns that one-to-one set,
-// sorted by query node, for RANSAC and the usual verification; empty when no triple agrees. Deterministic.
+// >= consensus_min_cosine; each node of the smaller graph keeps its consensus_per_node most similar. Two
+// candidates agree when they use four distinct nodes and keep their distance within 2 * inlier_threshold;
+// every triple of mutually agreeing candidates that is not flat proposes a rigid motion. Triples are visited
+// through their agreeing pairs in an order shuffled by ransac.seed, at most consensus_max_hypotheses of them
+// (flat ones count), stopping early once a motion aligns every node it could. The motion that aligns most
+// nodes one-to-one within inlier_threshold (greedy, nearest first; ties: smaller residual sum) wins. Returns
+// that set, sorted by query node, for RANSAC and the usual verification; empty when consensus does not
+// apply (consensusApplies) or no triple agrees. Deterministic on every platform.
 std::vector<Match> consensusMatches(const std::vector<Node>& query, const Eigen::MatrixXf& query_desc,
                                     const std::vector<Node>& candidate, const Eigen::MatrixXf& candidate_desc,
                                     const MatchConfig& match, const RansacConfig& ransac);
