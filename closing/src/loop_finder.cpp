@@ -144,13 +144,15 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
     std::shared_ptr<const Fingerprint> fp;
   };
   auto t0 = Clock::now();
-  // Candidates are verified independently (at once where exec allows) and kept in search order.
+  // Candidates are verified independently (at once where exec allows) and kept in search order. Loops from the
+  // background alone cost more to find: only the nearest candidates in descriptor space may give one.
+  const auto background = static_cast<std::size_t>(pipeline_.config().verify.background_candidates);
   std::vector<std::optional<Verified>> verified(hits.size());
   exec.forEach(hits.size(), [&](std::size_t i) {
     exec.checkAlive();
     auto fp = store_.fingerprint(hits[i].scan_id);
     if (!fp) return;  // deleted meanwhile
-    auto r = pipeline_.verify(query, *fp);
+    auto r = pipeline_.verify(query, *fp, i < background);
     if (!r.is_loop && !(ranking.include_rejected || ranking.known_loops)) return;
     Verified v;
     v.loop.scan_id = hits[i].scan_id;

@@ -15,40 +15,60 @@ namespace sglc {
 
 using detail::ClassVotes;
 
-std::vector<float> ringKey(const Points& points, const std::vector<Background>& point_bg,
-                           const DescriptorConfig& config) {
-  const int rings = config.rings, sectors = config.sectors;
-  const float rmin = static_cast<float>(config.ring_min_m), rmax = static_cast<float>(config.ring_max_m);
-  const float inv_ring = static_cast<float>(rings / (config.ring_max_m - config.ring_min_m));
-  const float inv_sector = static_cast<float>(sectors / (2.0 * std::numbers::pi));
-  std::vector<std::uint8_t> occupied(static_cast<std::size_t>(2 * rings * sectors), 0);
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Background b = point_bg[i];
-    if (b != Background::kBuilding && b != Background::kRoad) continue;
-    const Vec3f& p = points[i];
-    const float rho = std::sqrt(p.x() * p.x() + p.y() * p.y());
-    if (rho < rmin || rho >= rmax) continue;
-    const int ring = std::min(static_cast<int>((rho - rmin) * inv_ring), rings - 1);
-    const int sector = std::min(
-        static_cast<int>((detail::fastAtan2(p.y(), p.x()) + std::numbers::pi_v<float>)*inv_sector), sectors - 1);
-    const int part = b == Background::kBuilding ? 0 : 1;
-    occupied[(static_cast<std::size_t>(part) * rings + ring) * sectors + sector] = 1;
+std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
+                                     const DescriptorConfig& config) {
+  const int sectors = config.sectors;
+  const double rmin = config.ring_min_m, rmax = config.ring_max_m;
+  const double inv_ring = rings / (rmax - rmin), inv_sector = sectors / (2.0 * std::numbers::pi);
+  // Occupancy per (part, ring, sector) in [0, 1]. A cell is shared between the two rings whose centres are
+  // nearest, in proportion to its distance from each: a wall a few metres nearer on another visit (the other
+  // lane, a wider turn) moves weight to the next ring gradually instead of at once.
+  std::vector<float> occupied(static_cast<std::size_t>(2) * rings * sectors, 0.0f);
+  for (const auto& c : cells) {
+    if (c.cls < static_cast<std::uint8_t>(Background::kVegetation) ||
+        c.cls > static_cast<std::uint8_t>(Background::kFence))
+      continue;
+    const double x = (c.ix + 0.5) * cell, y = (c.iy + 0.5) * cell;
+    const double rho = std::sqrt(x * x + y * y);
+    if (!(rho >= rmin && rho < rmax)) continue;
+    const double at = (rho - rmin) * inv_ring - 0.5;  // ring coordinate: ring k's centre at k
+    const int lo = static_cast<int>(std::floor(at));
+    const auto w = static_cast<float>(at - lo);  // share of ring lo + 1
+    const int sector = std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors - 1);
+    const int part = c.cls == static_cast<std::uint8_t>(Background::kVegetation) ? 1 : 0;
+    for (const auto& [ring, share] : {std::pair{lo, 1.0f - w}, std::pair{lo + 1, w}}) {
+      if (ring < 0 || ring >= rings) continue;  // the innermost and outermost half rings keep their own share only
+      float& o = occupied[(static_cast<std::size_t>(part) * rings + ring) * sectors + sector];
+      o = std::min(1.0f, o + share);
+    }
   }
-  std::vector<float> key(2 * rings, 0.0f);
+  // cos and sin of 2 pi k s / sectors, one table for every ring.
+  const int K = orders + 1;
+  std::vector<double> cs(static_cast<std::size_t>(K) * sectors), sn(cs.size());
+  for (int k = 0; k < K; ++k)
+    for (int s = 0; s < sectors; ++s) {
+      const double a = 2.0 * std::numbers::pi * k * s / sectors;
+      cs[static_cast<std::size_t>(k) * sectors + s] = std::cos(a);
+      sn[static_cast<std::size_t>(k) * sectors + s] = std::sin(a);
+    }
+  std::vector<float> out(static_cast<std::size_t>(2) * rings * K, 0.0f);
   for (int r = 0; r < 2 * rings; ++r) {
-    int count = 0;
-    for (int s = 0; s < sectors; ++s) count += occupied[static_cast<std::size_t>(r) * sectors + s];
-    key[r] = static_cast<float>(count);
+    const float* occ = &occupied[static_cast<std::size_t>(r) * sectors];
+    for (int k = 0; k < K; ++k) {
+      double re = 0, im = 0;
+      for (int s = 0; s < sectors; ++s)
+        if (occ[s] > 0) {
+          re += occ[s] * cs[static_cast<std::size_t>(k) * sectors + s];
+          im += occ[s] * sn[static_cast<std::size_t>(k) * sectors + s];
+        }
+      out[static_cast<std::size_t>(r) * K + k] = static_cast<float>(std::hypot(re, im));
+    }
   }
-  double norm = 0;
-  for (float v : key) norm += double(v) * v;
-  if (norm > 0)
-    for (float& v : key) v = static_cast<float>(v / std::sqrt(norm));
-  return key;
+  return out;
 }
 
 std::vector<BevCell> bevCells(const Points& points, const std::vector<Background>& point_bg, double cell,
-                              double max_range) {
+                              double max_range, double max_z) {
   // A dense grid over the disc: cheaper than hashing ~100k points, and the scan comes out sorted.
   const float inv = static_cast<float>(1.0 / cell);
   const float r2 = static_cast<float>(max_range * max_range);
@@ -59,6 +79,7 @@ std::vector<BevCell> bevCells(const Points& points, const std::vector<Background
     if (point_bg[i] == Background::kNone) continue;
     const Vec3f& p = points[i];
     if (p.x() * p.x() + p.y() * p.y() > r2) continue;
+    if (p.z() > max_z && point_bg[i] != Background::kRoad) continue;  // above the band every sensor sees
     const int ix = detail::floorInt(p.x() * inv) + half, iy = detail::floorInt(p.y() * inv) + half;
     grid[static_cast<std::size_t>(iy) * side + ix].add(point_bg[i]);
   }
@@ -71,16 +92,36 @@ std::vector<BevCell> bevCells(const Points& points, const std::vector<Background
   return cells;
 }
 
+namespace {
+
+// Sums of one plane voxel's points, relative to its corner (so floats suffice), and its class votes.
+struct Acc {
+  int n = 0;
+  Vec3f corner = Vec3f::Zero();
+  std::array<int, 3> cell{0, 0, 0};
+  float s[3] = {0, 0, 0};
+  float ss[6] = {0, 0, 0, 0, 0, 0};  // xx, xy, xz, yy, yz, zz
+  int votes[5] = {0, 0, 0, 0, 0};
+  void add(const Vec3f& p, Background b) {
+    const float x = p.x() - corner.x(), y = p.y() - corner.y(), z = p.z() - corner.z();
+    ++n;
+    s[0] += x;
+    s[1] += y;
+    s[2] += z;
+    ss[0] += x * x;
+    ss[1] += x * y;
+    ss[2] += x * z;
+    ss[3] += y * y;
+    ss[4] += y * z;
+    ss[5] += z * z;
+    ++votes[static_cast<int>(b)];
+  }
+};
+
+}  // namespace
+
 std::vector<Plane> extractPlanes(const Points& points, const std::vector<Background>& point_bg,
                                  const FingerprintConfig& config) {
-  struct Acc {
-    int n = 0;
-    Vec3f corner = Vec3f::Zero();  // sums are taken relative to the voxel corner, so floats suffice
-    std::array<int, 3> cell{0, 0, 0};
-    float s[3] = {0, 0, 0};
-    float ss[6] = {0, 0, 0, 0, 0, 0};  // xx, xy, xz, yy, yz, zz
-    int votes[5] = {0, 0, 0, 0, 0};
-  };
   const float voxel = static_cast<float>(config.plane_voxel_m);
   const float inv = 1.0f / voxel;
   const float r2 = static_cast<float>(config.plane_max_range_m * config.plane_max_range_m);
@@ -106,19 +147,7 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
       }
       last_key = key;
     }
-    Acc& a = acc[last];
-    const float x = p.x() - a.corner.x(), y = p.y() - a.corner.y(), z = p.z() - a.corner.z();
-    ++a.n;
-    a.s[0] += x;
-    a.s[1] += y;
-    a.s[2] += z;
-    a.ss[0] += x * x;
-    a.ss[1] += x * y;
-    a.ss[2] += x * z;
-    a.ss[3] += y * y;
-    a.ss[4] += y * z;
-    a.ss[5] += z * z;
-    ++a.votes[static_cast<int>(b)];
+    acc[last].add(p, b);
   }
   const double max_var = config.plane_max_thickness_m * config.plane_max_thickness_m;
   // Emit in voxel order (z, y, x), so the result does not depend on the order of the points.
@@ -174,14 +203,31 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
     const double x = (cell.ix + 0.5) * stored_cell, y = (cell.iy + 0.5) * stored_cell;
     put(c, r00 * x + r01 * y + tx, r10 * x + r11 * y + ty, cell.cls);
   }
-  std::size_t same = 0, either = 0;
+  std::vector<std::uint8_t> wq(q.size()), wc(q.size());
   for (std::size_t i = 0; i < q.size(); ++i) {
-    const std::uint8_t a = q[i].winner(), b = c[i].winner();
-    if (a == 0 && b == 0) continue;
-    ++either;
-    if (a == b) ++same;
+    wq[i] = q[i].winner();
+    wc[i] = c[i].winner();
   }
-  return either == 0 ? 0.0 : static_cast<double>(same) / static_cast<double>(either);
+  // A view has seen a cell when it holds something (road included) in the cell or next to it. Where one view
+  // holds nothing, the other's structure there may be hidden from it or out of its field of view: no evidence.
+  auto seen = [g](const std::vector<std::uint8_t>& w, int x, int y) {
+    for (int yy = std::max(0, y - 1); yy <= std::min(g - 1, y + 1); ++yy)
+      for (int xx = std::max(0, x - 1); xx <= std::min(g - 1, x + 1); ++xx)
+        if (w[static_cast<std::size_t>(yy) * g + xx]) return true;
+    return false;
+  };
+  constexpr auto kRoad = static_cast<std::uint8_t>(Background::kRoad);
+  std::size_t same = 0, judged = 0;
+  for (int y = 0; y < g; ++y)
+    for (int x = 0; x < g; ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * g + x;
+      const std::uint8_t a = wq[i], b = wc[i];
+      if (a <= kRoad && b <= kRoad) continue;  // no structure in either: road agrees with any street
+      if (!seen(wq, x, y) || !seen(wc, x, y)) continue;
+      ++judged;
+      same += a == b;
+    }
+  return judged == 0 ? 0.0 : static_cast<double>(same) / static_cast<double>(judged);
 }
 
 }  // namespace sglc

@@ -1,6 +1,7 @@
 #include "sglc/bev_search.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <tuple>
@@ -111,10 +112,50 @@ struct Hypothesis {
   double score, yaw, tx, ty;
 };
 
+// Whether coarse heading step s (of `steps`) lies within one step of a wanted heading (every step when none is).
+bool wanted(int s, int steps, const std::vector<double>& headings) {
+  if (headings.empty()) return true;
+  const double step = 2.0 * std::numbers::pi / steps;
+  return std::any_of(headings.begin(), headings.end(), [&](double h) {
+    return std::abs(std::remainder(s * step - h, 2.0 * std::numbers::pi)) <= step * 1.001;
+  });
+}
+
 }  // namespace
 
+std::vector<double> wallHeadings(const std::vector<Plane>& query, const std::vector<Plane>& candidate, int peaks) {
+  constexpr int kBins = 180;
+  constexpr float kMaxNormalZ = 0.3f;  // |n_z| of a wall's normal at most (about 17 deg from horizontal)
+  auto histogram = [](const std::vector<Plane>& planes) {
+    std::array<double, kBins> h{};
+    for (const auto& p : planes) {
+      if (std::abs(p.normal.z()) > kMaxNormalZ) continue;
+      const double deg = std::atan2(p.normal.y(), p.normal.x()) * 180.0 / std::numbers::pi;
+      const int b = static_cast<int>(std::floor(std::fmod(deg + 360.0, 180.0))) % kBins;
+      h[b] += 1.0;  // spread over the neighbours: normals of one wall scatter by a degree or two
+      h[(b + 1) % kBins] += 0.5;
+      h[(b + kBins - 1) % kBins] += 0.5;
+    }
+    return h;
+  };
+  const auto hq = histogram(query), hc = histogram(candidate);
+  std::array<double, kBins> corr{};
+  for (int s = 0; s < kBins; ++s)
+    for (int i = 0; i < kBins; ++i) corr[s] += hq[(i + s) % kBins] * hc[i];
+  std::vector<std::pair<double, int>> maxima;  // (correlation, shift in degrees)
+  for (int s = 0; s < kBins; ++s)
+    if (corr[s] > 0 && corr[s] >= corr[(s + 1) % kBins] && corr[s] > corr[(s + kBins - 1) % kBins])
+      maxima.emplace_back(corr[s], s);
+  std::stable_sort(maxima.begin(), maxima.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<double> out;
+  for (int k = 0; k < peaks && k < static_cast<int>(maxima.size()); ++k)
+    for (double turn : {0.0, 180.0}) out.push_back((maxima[k].second + turn) * std::numbers::pi / 180.0);
+  return out;
+}
+
 std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate,
-                                   double stored_cell, const BevSearchConfig& config) {
+                                   double stored_cell, const BevSearchConfig& config,
+                                   const std::vector<double>& headings, bool fine) {
   const double cell = config.cell_m;
   const double range = config.max_range_m;
   const double half = range + config.max_shift_m + 2.0 * cell;
@@ -131,6 +172,7 @@ std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std:
   std::vector<Hypothesis> per_yaw;
   std::vector<std::uint32_t> acc(static_cast<std::size_t>(w) * w);
   for (int s = 0; s < steps; ++s) {
+    if (!wanted(s, steps, headings)) continue;
     const double yaw = 2.0 * std::numbers::pi * s / steps;
     const double cy = std::cos(yaw), sy = std::sin(yaw);
     std::fill(acc.begin(), acc.end(), 0u);
@@ -160,10 +202,15 @@ std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std:
     if (distinct) picked.push_back(h);
   }
 
-  // Fine: around each, a quarter of the heading step and a quarter of the cell, on a grid of the stored cell.
-  const ScoreGrid fine(q, stored_cell, half);
-  const double yaw_step = config.yaw_step_deg * std::numbers::pi / 180.0 / 4.0, shift_step = cell / 4.0;
   std::vector<BevPose> out;
+  if (!fine) {
+    for (const auto& h : picked)
+      out.push_back({planar(h.yaw, h.tx, h.ty), h.score / (2.0 * static_cast<double>(c.size()))});
+    return out;
+  }
+  // Fine: around each, a quarter of the heading step and a quarter of the cell, on a grid of the stored cell.
+  const ScoreGrid fine_grid(q, stored_cell, half);
+  const double yaw_step = config.yaw_step_deg * std::numbers::pi / 180.0 / 4.0, shift_step = cell / 4.0;
   for (const auto& h : picked) {
     Hypothesis best{-1.0, h.yaw, h.tx, h.ty};
     for (int a = -4; a <= 4; ++a) {
@@ -173,7 +220,7 @@ std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std:
         for (int ix = -4; ix <= 4; ++ix) {
           const double tx = h.tx + ix * shift_step, ty = h.ty + iy * shift_step;
           std::uint32_t sum = 0;
-          for (const auto& p : c_all) sum += fine.get(p.k, cy * p.x - sy * p.y + tx, sy * p.x + cy * p.y + ty);
+          for (const auto& p : c_all) sum += fine_grid.get(p.k, cy * p.x - sy * p.y + tx, sy * p.x + cy * p.y + ty);
           if (sum > best.score) best = {static_cast<double>(sum), yaw, tx, ty};
         }
     }

@@ -115,14 +115,21 @@ void addGraph(Table<Config>& t) {
                       "clusters shorter and lower than this are fragments, not landmarks (m)"));
   t.add(field<Config>(SGLC_KEY(descriptor.d_i), above(0), "histogram bin width (m); bins = d_max / d_i"));
   t.add(field<Config>(SGLC_KEY(descriptor.k_eigen), closed(1, 1000), "adjacency eigenvectors in the node descriptor"));
-  t.add(field<Config>(SGLC_KEY(descriptor.rings), closed(1, 1000), "rings of the background ring key"));
-  t.add(field<Config>(SGLC_KEY(descriptor.ring_min_m), atLeast(0), "ring key inner radius (m)"));
-  t.add(field<Config>(SGLC_KEY(descriptor.ring_max_m), finite(), "ring key outer radius (m)"));
-  t.add(field<Config>(SGLC_KEY(descriptor.sectors), closed(1, 3600), "sectors of the background ring key"));
+  t.add(field<Config>(SGLC_KEY(descriptor.rings), closed(1, 1000), "rings of the background spectrum"));
+  t.add(field<Config>(SGLC_KEY(descriptor.orders), closed(0, 64), "highest angular order of the background spectrum"));
+  t.add(field<Config>(SGLC_KEY(descriptor.ring_min_m), atLeast(0), "background spectrum inner radius (m)"));
+  t.add(field<Config>(SGLC_KEY(descriptor.ring_max_m), finite(), "background spectrum outer radius (m)"));
+  t.add(field<Config>(SGLC_KEY(descriptor.sectors), closed(1, 3600), "sectors of the background spectrum"));
+  t.add(field<Config>(SGLC_KEY(descriptor.background_weight), closed(0, 1000),
+                      "weight of the background spectrum against the graph part"));
   t.rule({"graph.d_max", "descriptor.d_i"}, "at most 1000 bins apart",
          [](const Config& c) { return c.graph.d_max / c.descriptor.d_i <= 1000; });
   t.rule({"descriptor.ring_min_m", "descriptor.ring_max_m"}, "min < max",
          [](const Config& c) { return c.descriptor.ring_max_m > c.descriptor.ring_min_m; });
+  t.rule({"descriptor.orders", "descriptor.sectors"}, "orders below half the sectors",
+         [](const Config& c) { return 2 * c.descriptor.orders < c.descriptor.sectors; });
+  t.rule({"descriptor.rings", "descriptor.orders"}, "at most 65535 values",
+         [](const Config& c) { return 2L * c.descriptor.rings * (c.descriptor.orders + 1) <= 65535; });
 }
 
 void addMatching(Table<Config>& t) {
@@ -165,6 +172,28 @@ void addVerification(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(verify.confirm_max_rmse_m), above(0), "confirming planes: largest RMSE (m)"));
   t.add(field<Config>(SGLC_KEY(verify.confirm_min_constraint), atLeast(0),
                       "confirming planes: smallest horizontal constraint (0: any)"));
+  t.add(field<Config>(SGLC_KEY(verify.align_min_background), closed(0, 1),
+                      "plane alignment: least background agreement at the coarse pose"));
+  t.add(field<Config>(SGLC_KEY(verify.align_max_shift_m), finite(),
+                      "plane alignment: largest move from the coarse pose (m; <= 0 disables)"));
+  t.add(field<Config>(SGLC_KEY(verify.align_max_turn_deg), closed(0, 180),
+                      "plane alignment: largest turn from the coarse pose (deg)"));
+  t.add(field<Config>(SGLC_KEY(verify.align_node_gate_m), above(0),
+                      "plane alignment: node inliers must stay this close (m)"));
+  t.add(field<Config>(SGLC_KEY(verify.background_max_nodes), closed(0, 2000),
+                      "background-only loops: only when a scan has at most this many nodes (0: never)"));
+  t.add(field<Config>(SGLC_KEY(verify.background_candidates), closed(0, 200),
+                      "background-only loops: tried on this many candidates per query"));
+  t.add(field<Config>(SGLC_KEY(verify.background_min_overlap), closed(0, 1),
+                      "background-only loops: least band plane overlap"));
+  t.add(
+      field<Config>(SGLC_KEY(verify.background_max_rmse_m), above(0), "background-only loops: largest plane RMSE (m)"));
+  t.add(field<Config>(SGLC_KEY(verify.background_min_constraint), atLeast(0),
+                      "background-only loops: least horizontal constraint of the planes"));
+  t.add(field<Config>(SGLC_KEY(verify.background_min_agreement), closed(0, 1),
+                      "background-only loops: least background agreement"));
+  t.add(field<Config>(SGLC_KEY(verify.background_min_overlay), closed(0, 1),
+                      "background-only loops: least agreement of an overlay before its plane fit"));
   t.rule({"verify.bev_radius_m", "verify.bev_cell_m"}, "at most 2000 cells apart",
          [](const Config& c) { return c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000; });
 }
@@ -176,6 +205,8 @@ void addFingerprint(Table<Config>& t) {
                       "stored labelled background: BEV cell (m)"));
   t.add(
       field<Config>(SGLC_KEY(fingerprint.background_max_range_m), openClosed(0, 320), "stored background: range (m)"));
+  t.add(field<Config>(SGLC_KEY(fingerprint.background_max_z_m), closed(-100, 1000),
+                      "stored background: highest structure point above the sensor (m)"));
   t.add(field<Config>(SGLC_KEY(fingerprint.plane_voxel_m), above(0.05), "background plane features: voxel (m)"));
   t.add(field<Config>(SGLC_KEY(fingerprint.plane_min_points), atLeast(3), "points a plane voxel needs"));
   t.add(field<Config>(SGLC_KEY(fingerprint.plane_max_thickness_m), above(0),

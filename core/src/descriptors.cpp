@@ -35,6 +35,7 @@ DescriptorLayout descriptorLayout(int num_classes, const GraphConfig& graph, con
   layout.bins = static_cast<int>(std::ceil(graph.d_max / config.d_i - 1e-9));
   layout.k_eigen = config.k_eigen;
   layout.rings = config.rings;
+  layout.orders = config.orders;
   return layout;
 }
 
@@ -81,8 +82,8 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
   return f;
 }
 
-std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& ring_key,
-                                  const DescriptorLayout& layout, double d_max, double d_i) {
+std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& spectrum,
+                                  const DescriptorLayout& layout, double d_max, double d_i, double background_weight) {
   const int C = layout.num_classes;
   Eigen::VectorXf counts = Eigen::VectorXf::Zero(C);
   Eigen::VectorXf edges = Eigen::VectorXf::Zero(layout.edgeTypes() * layout.bins);
@@ -93,8 +94,7 @@ std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vec
     for (std::size_t j = i + 1; j < nodes.size(); ++j) {
       const float d = (nodes[i].center - nodes[j].center).norm();
       if (d >= dmax) continue;
-      // Soft bins as in nodeDescriptors. Fingerprint format 1 had hard bins here; its blobs are upgraded on
-      // load (deserialize) and map databases of schema 4 or older on open, so one map never mixes the two.
+      // Soft bins as in nodeDescriptors (fingerprint format 1 had hard bins here).
       const auto [lo, hi, w] = softBin(d, inv_bin, layout.bins);
       const int base = edgeType(nodes[i].cls, nodes[j].cls, C) * layout.bins;
       edges[base + lo] += 1.0f - w;
@@ -106,18 +106,12 @@ std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vec
   Eigen::VectorXf fg(C + edges.size());
   fg << counts, edges;
   l2normalise(fg);
-  Eigen::VectorXf bg = Eigen::Map<const Eigen::VectorXf>(ring_key.data(), static_cast<Eigen::Index>(ring_key.size()));
-  l2normalise(bg);  // zero stays zero: no NaN for scans without road or building
+  Eigen::VectorXf bg = Eigen::Map<const Eigen::VectorXf>(spectrum.data(), static_cast<Eigen::Index>(spectrum.size()));
+  l2normalise(bg);  // zero stays zero: no NaN for scans without structure
   Eigen::VectorXf all(fg.size() + bg.size());
-  all << fg, bg;
+  all << fg, static_cast<float>(background_weight) * bg;
   l2normalise(all);
   return std::vector<float>(all.data(), all.data() + all.size());
-}
-
-std::vector<float> storedRingKey(std::span<const float> descriptor, const DescriptorLayout& layout) {
-  const auto n = static_cast<std::size_t>(2 * layout.rings);
-  if (descriptor.size() < n) return std::vector<float>(n, 0.0f);
-  return {descriptor.end() - static_cast<std::ptrdiff_t>(n), descriptor.end()};
 }
 
 }  // namespace sglc

@@ -75,10 +75,12 @@ std::vector<std::uint8_t> serialize(const Fingerprint& fp) {
   w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.bins));
   w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.k_eigen));
   w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.rings));
+  w.put<std::uint16_t>(static_cast<std::uint16_t>(fp.layout.orders));
   w.put(fp.d_max);
   w.put(fp.d_i);
   w.put(fp.background_cell);
   w.put(fp.plane_voxel);
+  w.put(fp.background_max_z);
   w.put(fp.num_points);
   w.put(static_cast<std::uint32_t>(fp.nodes.size()));
   for (std::size_t i = 0; i < fp.nodes.size(); ++i) {
@@ -133,30 +135,47 @@ std::uint32_t checkedVersion(std::span<const std::uint8_t> bytes) {
   return header[1];
 }
 
+// The descriptor layout and geometry parameters of the header, checked: derived data (node descriptors, plane
+// lookup) is rebuilt from them on load.
+void readGeometry(Reader& r, std::uint32_t version, Fingerprint& fp) {
+  fp.layout.num_classes = r.get<std::uint8_t>();
+  fp.layout.bins = r.get<std::uint16_t>();
+  fp.layout.k_eigen = r.get<std::uint16_t>();
+  fp.layout.rings = r.get<std::uint16_t>();
+  if (version >= 3) {
+    fp.layout.orders = r.get<std::uint16_t>();
+  } else {
+    // Formats 1 and 2 held a ring key of 2 * rings values: the spectrum that replaces it keeps the length.
+    fp.layout.orders = fp.layout.rings % 3 == 0 ? 2 : 0;
+    fp.layout.rings /= fp.layout.orders + 1;
+  }
+  if (fp.layout.num_classes < 1 || fp.layout.num_classes > 16 || fp.layout.bins < 1 || fp.layout.k_eigen < 1 ||
+      fp.layout.rings < 1 || fp.layout.orders > 64)
+    throw InputError("fingerprint: invalid descriptor layout");
+  fp.d_max = r.f32();
+  fp.d_i = r.f32();
+  fp.background_cell = r.f32();
+  fp.plane_voxel = r.f32();
+  if (version >= 3) {
+    fp.background_max_z = r.get<float>();
+    if (std::isnan(fp.background_max_z) || fp.background_max_z == -std::numeric_limits<float>::infinity())
+      throw InputError("fingerprint: invalid background height band");
+  }
+  // The same ranges validateConfig enforces, and a layout that agrees with them.
+  if (!(fp.d_max > 0 && fp.d_max < 1000 && fp.d_i > 0 && fp.d_max / fp.d_i <= 1000 && fp.background_cell >= 0.05f &&
+        fp.plane_voxel > 0.05f && fp.layout.k_eigen <= 1000 && fp.layout.rings <= 1000))
+    throw InputError("fingerprint: invalid geometry parameters");
+  if (fp.layout.bins != static_cast<int>(std::ceil(static_cast<double>(fp.d_max) / fp.d_i - 1e-9)))
+    throw InputError("fingerprint: descriptor bins do not match d_max / d_i");
+}
+
 }  // namespace
 
 Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   const auto version = checkedVersion(bytes);
   Reader r(bytes.data() + kHeaderBytes, bytes.size() - kHeaderBytes);
   Fingerprint fp;
-  fp.layout.num_classes = r.get<std::uint8_t>();
-  fp.layout.bins = r.get<std::uint16_t>();
-  fp.layout.k_eigen = r.get<std::uint16_t>();
-  fp.layout.rings = r.get<std::uint16_t>();
-  if (fp.layout.num_classes < 1 || fp.layout.num_classes > 16 || fp.layout.bins < 1 || fp.layout.k_eigen < 1 ||
-      fp.layout.rings < 1)
-    throw InputError("fingerprint: invalid descriptor layout");
-  fp.d_max = r.f32();
-  fp.d_i = r.f32();
-  fp.background_cell = r.f32();
-  fp.plane_voxel = r.f32();
-  // The same ranges validateConfig enforces, and a layout that agrees with them: derived data (node
-  // descriptors, plane lookup) is rebuilt from these values on load.
-  if (!(fp.d_max > 0 && fp.d_max < 1000 && fp.d_i > 0 && fp.d_max / fp.d_i <= 1000 && fp.background_cell >= 0.05f &&
-        fp.plane_voxel > 0.05f && fp.layout.k_eigen <= 1000 && fp.layout.rings <= 1000))
-    throw InputError("fingerprint: invalid geometry parameters");
-  if (fp.layout.bins != static_cast<int>(std::ceil(static_cast<double>(fp.d_max) / fp.d_i - 1e-9)))
-    throw InputError("fingerprint: descriptor bins do not match d_max / d_i");
+  readGeometry(r, version, fp);
   fp.num_points = r.get<std::uint32_t>();
   const auto n_nodes = r.count(29);
   fp.nodes.resize(n_nodes);
@@ -197,10 +216,15 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes) {
   fp.descriptor.resize(dim);
   for (auto& v : fp.descriptor) v = r.f32();
   if (!r.done()) throw InputError("fingerprint: trailing bytes after the payload");
-  // Format 1 binned the scan descriptor's edge histogram hard: recompute it as this build does, from the
-  // stored nodes and the stored ring key, so that old and new scans compare alike.
-  if (version == 1)
-    fp.descriptor = scanDescriptor(fp.nodes, storedRingKey(fp.descriptor, fp.layout), fp.layout, fp.d_max, fp.d_i);
+  // Formats 1 and 2 had another descriptor (hard-binned edges in 1, a ring key of building and road points in
+  // both): recompute it as this build does, from the stored nodes and background view, so that old and new
+  // scans compare alike. The spectrum's other settings are the defaults.
+  if (version < 3) {
+    const DescriptorConfig defaults;
+    fp.descriptor = scanDescriptor(
+        fp.nodes, structureSpectrum(fp.background, fp.background_cell, fp.layout.rings, fp.layout.orders, defaults),
+        fp.layout, fp.d_max, fp.d_i, defaults.background_weight);
+  }
   fp.finalize();
   return fp;
 }
@@ -213,6 +237,16 @@ std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes) {
 }
 
 bool sameScan(const Fingerprint& a, const Fingerprint& b) {
+  if (a.background_max_z != b.background_max_z) {
+    // Another height band: compare the rest (nodes, instances, planes); its background view must differ.
+    Fingerprint x = a, y = b;
+    for (Fingerprint* f : {&x, &y}) {
+      f->background.clear();
+      f->descriptor.assign(f->descriptor.size(), 0.0f);
+      f->background_max_z = 0.0f;
+    }
+    return sameScan(x, y);
+  }
   const auto& da = a.descriptor;
   const auto& db = b.descriptor;
   if (da.size() != db.size()) return false;

@@ -2,11 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numbers>
 
 #include "fast_math.hpp"
+#include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
-#include "sglc/consensus.hpp"
 #include "sglc/labeller.hpp"
 #include "sglc/voxel_map.hpp"
 
@@ -40,28 +39,6 @@ void downsampleInstance(const Points& points, const Cluster& cluster, double vox
 }
 
 constexpr float kMaxCoordinate = 320.0f;
-
-bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
-  return a.layout.num_classes == b.layout.num_classes && a.layout.bins == b.layout.bins &&
-         a.layout.k_eigen == b.layout.k_eigen && a.layout.rings == b.layout.rings && a.d_max == b.d_max &&
-         a.d_i == b.d_i && a.background_cell == b.background_cell && a.plane_voxel == b.plane_voxel;
-}
-
-double rotationAngleDeg(const Mat3d& R) {
-  return std::acos(std::clamp((R.trace() - 1.0) / 2.0, -1.0, 1.0)) * 180.0 / std::numbers::pi;
-}
-
-// RANSAC over the matched node centres (not found with fewer than 3 matches).
-RansacResult coarsePose(const Fingerprint& query, const Fingerprint& candidate, const std::vector<Match>& matches,
-                        const RansacConfig& config) {
-  if (matches.size() < 3) return {};
-  std::vector<Vec3d> q, t;
-  for (const auto& [i, j] : matches) {
-    q.push_back(query.nodes[i].center.cast<double>());
-    t.push_back(candidate.nodes[j].center.cast<double>());
-  }
-  return ransacRigid(q, t, config);
-}
 
 }  // namespace
 
@@ -144,10 +121,13 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
     downsampleInstance(node_points, clusters[k], c.fingerprint.instance_voxel_m, fp.instance_points);
     fp.instance_offsets.push_back(static_cast<std::uint32_t>(fp.instance_points.size()));
   }
-  fp.background =
-      bevCells(bg_points, background, c.fingerprint.background_cell_m, c.fingerprint.background_max_range_m);
+  fp.background_max_z = static_cast<float>(c.fingerprint.background_max_z_m);
+  fp.background = bevCells(bg_points, background, c.fingerprint.background_cell_m, c.fingerprint.background_max_range_m,
+                           c.fingerprint.background_max_z_m);
   fp.planes = extractPlanes(bg_points, background, c.fingerprint);
-  fp.descriptor = scanDescriptor(fp.nodes, ringKey(bg_points, background, c.descriptor), fp.layout, fp.d_max, fp.d_i);
+  fp.descriptor = scanDescriptor(
+      fp.nodes, structureSpectrum(fp.background, fp.background_cell, fp.layout.rings, fp.layout.orders, c.descriptor),
+      fp.layout, fp.d_max, fp.d_i, c.descriptor.background_weight);
   fp.finalize();
   if (n > 0 && node_points.empty() && bg_points.empty())
     rep.warnings.push_back("no point carries a label the active label map (labels.preset: " + c.labels.preset +
@@ -156,70 +136,6 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
     rep.warnings.push_back("only " + std::to_string(fp.nodes.size()) +
                            " landmarks (vehicle, trunk and pole instances): loops cannot be verified from this scan");
   return fp;
-}
-
-LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candidate) const {
-  if (!sameGeometry(query, candidate))
-    throw InputError("fingerprints were built with different descriptor or voxel parameters");
-  const auto& c = config_;
-  LoopResult r;
-  auto matches = matchNodes(query.nodes, query.node_descriptors, candidate.nodes, candidate.node_descriptors, c.match);
-  if (auto pruned = pruneMatches(query.nodes, candidate.nodes, matches, c.match);
-      static_cast<int>(pruned.size()) >= c.match.prune_min_kept)
-    matches = std::move(pruned);
-  auto ransac = coarsePose(query, candidate, matches, c.ransac);
-  // Small graphs: descriptors too unstable to pair nodes; let geometry pair them. Pairs found by geometry
-  // alone carry less evidence, so their graph similarity must reach the stricter consensus_t_g.
-  double t_g = c.verify.t_g;
-  if (!ransac.found && consensusApplies(c.match, query.nodes.size(), candidate.nodes.size())) {
-    auto agreed = consensusMatches(query.nodes, query.node_descriptors, candidate.nodes, candidate.node_descriptors,
-                                   c.match, c.ransac);
-    if (auto second = coarsePose(query, candidate, agreed, c.ransac); second.found) {
-      matches = std::move(agreed);
-      ransac = std::move(second);
-      t_g = std::max(t_g, c.match.consensus_t_g);
-    }
-  }
-  r.matches = static_cast<int>(matches.size());
-  if (!ransac.found) {
-    r.reason = r.matches < 3 ? "fewer than 3 node matches" : "no pose agrees with enough node matches";
-    return r;
-  }
-  r.T = ransac.T;
-  r.inliers = static_cast<int>(ransac.inliers.size());
-  r.graph_similarity = std::exp(-ransac.mean_residual);
-  r.background_similarity = bevAgreement(query.background, candidate.background, query.background_cell, r.T,
-                                         c.verify.bev_cell_m, c.verify.bev_radius_m);
-  const double translation = r.T.topRightCorner<3, 1>().norm();
-  r.score = r.graph_similarity * r.background_similarity * (1.0 - std::exp(-r.inliers / 3.0));
-  // Nearer revisits rank first: they share more of the scene, so their pose is the more reliable.
-  if (c.verify.score_distance_m > 0) r.score *= std::exp(-translation / c.verify.score_distance_m);
-  if (r.graph_similarity < t_g)
-    r.reason = t_g > c.verify.t_g ? "graph similarity below match.consensus_t_g (nodes paired by consensus)"
-                                  : "graph similarity below t_g";
-  else if (r.background_similarity < c.verify.t_b)
-    r.reason = "background similarity below t_b";
-  else if (c.verify.max_translation > 0 && translation > c.verify.max_translation)
-    r.reason = "translation exceeds verify.max_translation";
-  else
-    r.is_loop = true;
-  // Few node inliers are weak evidence (three or four landmarks align by chance between look-alike streets):
-  // such a loop stands only if the background planes, aligned from the coarse pose, agree with it.
-  if (r.is_loop && r.inliers < c.verify.confirm_below_inliers) {
-    const auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
-    const Mat4d d = r.T.inverse() * planes.T;  // confirming means staying near the coarse pose
-    if (planes.iterations == 0 || planes.fitness < c.verify.confirm_min_fitness ||
-        planes.rmse > c.verify.confirm_max_rmse_m || planes.horizontal_constraint < c.verify.confirm_min_constraint ||
-        d.topRightCorner<3, 1>().norm() > c.refine.max_shift_m ||
-        rotationAngleDeg(d.topLeftCorner<3, 3>()) > c.refine.max_turn_deg) {
-      r.is_loop = false;
-      r.reason = "few node inliers and the background planes do not confirm the pose";
-    }
-  }
-  // The inlier node pairs, for the fine stage.
-  r.inlier_pairs.reserve(ransac.inliers.size());
-  for (int k : ransac.inliers) r.inlier_pairs.push_back(matches[k]);
-  return r;
 }
 
 void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r, bool known_loop) const {
@@ -253,7 +169,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
     // Guard: the fine stage only polishes; a large jump means it locked onto something else.
     const Mat4d d = r.T.inverse() * icp.T;
     if (icp.correspondences >= c.fine.min_correspondences && d.topRightCorner<3, 1>().norm() < c.fine.max_shift_m &&
-        rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.fine.max_turn_deg) {
+        detail::rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.fine.max_turn_deg) {
       T = icp.T;
       r.fitness = icp.fitness;
       r.rmse = icp.rmse;
@@ -266,7 +182,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     const Mat4d d = T.inverse() * ref.T;
     kept = ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < c.refine.max_shift_m &&
-           rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.refine.max_turn_deg;
+           detail::rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.refine.max_turn_deg;
     if (kept) {
       T = ref.T;
       r.information = ref.information;

@@ -5,16 +5,53 @@
 #include <iterator>
 
 #include "pg_core.hpp"
+#include "sglc/fingerprint.hpp"
 
 namespace sglc::storage::pg {
 namespace {
 
 using Code = StorageError::Code;
 
+// Scans whose fingerprint is of an older format than this build writes get the current descriptor in their
+// indexed column, as the SQLite store's 5 -> 6 does (schema.cpp): the blob stays, and deserialize recomputes its
+// descriptor whenever it is read. Blobs that do not load, or whose descriptor does not fit the map, stay as they
+// were. Read in batches of ids, so that a large map never sits in memory at once.
+void upgradeDescriptors(const Conn& db) {
+  std::int64_t after = 0;
+  for (;;) {
+    const auto rows = db.query(
+        "SELECT s.id, m.descriptor_dim, b.fingerprint FROM scans s JOIN maps m ON m.id = s.map_id"
+        " JOIN scan_blobs b ON b.scan_id = s.id WHERE s.id > $1 ORDER BY s.id LIMIT 256",
+        {after});
+    if (rows.rows() == 0) return;
+    for (int r = 0; r < rows.rows(); ++r) {
+      after = rows.i64(r, 0);
+      const auto blob = rows.blob(r, 2);
+      if (fingerprintFormat(blob) >= kFingerprintVersion) continue;
+      std::vector<float> d;
+      try {
+        d = deserialize(blob).descriptor;
+      } catch (const std::exception&) {  // InputError, or bad_alloc for an absurd node count
+        continue;
+      }
+      if (static_cast<std::int64_t>(d.size()) != rows.i64(r, 1)) continue;
+      db.query(
+          "UPDATE scans SET descriptor = $1 WHERE id = $2",
+          {std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(d.data()), d.size() * sizeof(float)),
+           after});
+    }
+  }
+}
+
+struct Migration {
+  const char* sql;                  // run first
+  void (*rewrite)(const Conn& db);  // then this, when set
+};
+
 // kMigrations[v] upgrades a database from schema v to v + 1 (version 0: no tables of ours yet).
-const char* const kMigrations[] = {
+const Migration kMigrations[] = {
     // 0 -> 1: the initial schema.
-    R"sql(
+    {R"sql(
     CREATE TABLE sglc_meta(key text PRIMARY KEY, value text NOT NULL);
     CREATE TABLE maps(
       id bigserial PRIMARY KEY, name text NOT NULL UNIQUE, descriptor_dim integer NOT NULL,
@@ -52,6 +89,9 @@ const char* const kMigrations[] = {
     CREATE TABLE sglc_changes(
       id bigserial PRIMARY KEY, map_id bigint NOT NULL, kind smallint NOT NULL, ref bigint NOT NULL);
     )sql",
+     nullptr},
+    // 1 -> 2: the structure spectrum in the scan descriptors (fingerprint format 3).
+    {"", upgradeDescriptors},
 };
 
 // The schema version of the database, 0 for one without our tables; kCorrupt for a database that holds
@@ -92,7 +132,9 @@ void openSchema(const Conn& db, const std::string& url) {
     const auto version = checkedVersion(db, url);
     for (auto v = version; v < kSchemaVersion; ++v) {
       Transaction tx(db);
-      db.exec(kMigrations[v]);
+      const auto& step = kMigrations[static_cast<std::size_t>(v)];
+      if (*step.sql) db.exec(step.sql);
+      if (step.rewrite) step.rewrite(db);
       db.query(
           "INSERT INTO sglc_meta(key, value) VALUES('schema_version', $1) ON CONFLICT(key) DO UPDATE SET "
           "value = excluded.value",

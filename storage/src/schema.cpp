@@ -18,10 +18,12 @@ using Code = StorageError::Code;
 
 constexpr std::int32_t kApplicationId = 0x53474C43;  // "SGLC": marks our SQLite files
 
-// 4 -> 5: scans whose fingerprint is of format 1 (hard-binned scan-descriptor edges) get the current descriptor
-// in their indexed column. The blob itself stays: deserialize recomputes its descriptor whenever it is read, so
-// only the small rows are written. A blob that does not load, or whose descriptor does not fit its map, is left
-// as it was (reading it reports it, as before). Maps' generations move, so index snapshots are rebuilt.
+// Scans whose fingerprint is of an older format than this build writes get the current descriptor in their
+// indexed column (5 -> 6: format 1 had hard-binned scan-descriptor edges, formats 1 and 2 a ring key where the
+// structure spectrum is now). The blob itself stays: deserialize recomputes its descriptor whenever
+// it is read, so only the small rows are written. A blob that does not load, or whose descriptor does not fit its
+// map, is left as it was (reading it reports it, as before). Maps' generations move, so index snapshots are
+// rebuilt.
 void upgradeDescriptors(const sql::Db& db) {
   std::vector<std::pair<std::int64_t, std::int64_t>> scans;  // scan id, its map's descriptor dimension
   {
@@ -33,7 +35,7 @@ void upgradeDescriptors(const sql::Db& db) {
   for (const auto& [id, dim] : scans) {
     read.reset();
     read.bind(1, id);
-    if (!read.step() || fingerprintFormat(read.blob(0)) != 1) continue;
+    if (!read.step() || fingerprintFormat(read.blob(0)) >= kFingerprintVersion) continue;
     std::vector<float> d;
     try {
       d = deserialize(read.blob(0)).descriptor;
@@ -103,7 +105,10 @@ const Migration kMigrations[] = {
     ALTER TABLE maps ADD COLUMN graph_loop INTEGER NOT NULL DEFAULT 0;
     )sql",
      nullptr},
-    // 4 -> 5: soft-binned scan descriptors (fingerprint format 2) in the index.
+    // 4 -> 5: soft-binned scan descriptors (fingerprint format 2) in the index. Since schema 6 the step 5 -> 6
+    // writes the current descriptor of every older format, so this one has nothing left to do.
+    {"", nullptr},
+    // 5 -> 6: the structure spectrum in the scan descriptors (fingerprint format 3).
     {"", upgradeDescriptors},
 };
 static_assert(std::size(kMigrations) == kSchemaVersion, "one migration per schema version");

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "closing_test_util.hpp"
+#include "older_formats.hpp"
 #include "sglc/closing/ingestor.hpp"
 #include "sglc/rigid.hpp"
 
@@ -77,8 +78,9 @@ TEST_F(IngestorTest, AnIdenticalRetryAnswersAsTheFirstCallAndADifferentScanIsRef
   EXPECT_EQ(reports, 1);
 }
 
-// A scan stored before fingerprint format 2 is read back with its descriptor recomputed, which may differ from a
-// fresh one in the last bits: an identical retry after the upgrade still answers as the first call did.
+// A scan stored before fingerprint format 3 is read back with its descriptor recomputed and no height band,
+// so it differs from a fresh fingerprint of the same scan: an identical retry after the upgrade still answers
+// as the first call did.
 TEST_F(IngestorTest, AnIdenticalRetryAfterAFormatUpgradeAnswersAsTheFirstCall) {
   const auto first = ingest(Ingestor(pipeline, *store), input(0));
   store.reset();
@@ -92,25 +94,17 @@ TEST_F(IngestorTest, AnIdenticalRetryAfterAFormatUpgradeAnswersAsTheFirstCall) {
     sqlite3_bind_int64(st, 1, first.scan_id);
     ASSERT_EQ(sqlite3_step(st), SQLITE_ROW);
     const auto* p = static_cast<const std::uint8_t*>(sqlite3_column_blob(st, 0));
-    std::vector<std::uint8_t> blob(p, p + sqlite3_column_bytes(st, 0));
+    const Fingerprint written = deserialize(std::span<const std::uint8_t>(p, sqlite3_column_bytes(st, 0)));
     sqlite3_finalize(st);
-    // Format 1 with its ring part scaled (the edge part is recomputed anyway): a descriptor that is not
-    // bit-identical to the fresh one after the upgrade.
-    const std::uint32_t one = 1;
-    std::memcpy(blob.data() + 4, &one, 4);
-    float last;
-    std::memcpy(&last, blob.data() + blob.size() - 4, 4);
-    last *= 1.0f + 1e-6f;
-    std::memcpy(blob.data() + blob.size() - 4, &last, 4);
-    const auto crc = static_cast<std::uint32_t>(crc32(0L, blob.data() + 16, static_cast<uInt>(blob.size() - 16)));
-    std::memcpy(blob.data() + 12, &crc, 4);
+    // Format 2, with the descriptor it had then (whatever it was: it is recomputed on reading).
+    const auto blob = test::olderFormatBlob(written, 2, std::vector<float>(written.descriptor.size(), 0.05f));
     ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE scan_blobs SET fingerprint = ? WHERE scan_id = ?", -1, &st, nullptr),
               SQLITE_OK);
     sqlite3_bind_blob(st, 1, blob.data(), static_cast<int>(blob.size()), SQLITE_TRANSIENT);
     sqlite3_bind_int64(st, 2, first.scan_id);
     EXPECT_EQ(sqlite3_step(st), SQLITE_DONE);
     sqlite3_finalize(st);
-    EXPECT_EQ(sqlite3_exec(db, "PRAGMA user_version=4", nullptr, nullptr, nullptr), SQLITE_OK);
+    EXPECT_EQ(sqlite3_exec(db, "PRAGMA user_version=5", nullptr, nullptr, nullptr), SQLITE_OK);
     sqlite3_close(db);
   }
   storage::StoreOptions o;

@@ -1,6 +1,9 @@
 // Planar pose from the labelled bird's-eye views alone.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <numbers>
+
 #include "sglc/bev_search.hpp"
 #include "sglc/pipeline.hpp"
 #include "test_util.hpp"
@@ -83,6 +86,63 @@ TEST(BevSearch, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
   LoopResult o = Pipeline(off).verify(q, c);
   Pipeline(off).refine(q, c, o, true);
   EXPECT_FALSE(o.refined);
+}
+
+// Vertical planes with their normals at the given headings (degrees), one per entry, and a ground plane.
+std::vector<Plane> walls(const std::vector<double>& headings_deg) {
+  std::vector<Plane> out;
+  for (const double h : headings_deg) {
+    Plane p;
+    const double r = h * std::numbers::pi / 180.0;
+    p.normal = Vec3f(static_cast<float>(std::cos(r)), static_cast<float>(std::sin(r)), 0.05f).normalized();
+    out.push_back(p);
+  }
+  out.push_back(Plane{});  // the ground: normal up, no heading
+  return out;
+}
+
+double degrees(double rad) { return rad * 180.0 / std::numbers::pi; }
+
+TEST(WallHeadings, TurnTheCandidatesWallsOntoTheQuerys) {
+  // A street of square walls (10 and 100 deg), seen again turned by 37 deg: the candidate's normals are the
+  // query's minus 37 deg, some of them flipped (the wall seen from its other side).
+  const auto q = walls({10, 10, 10, 100, 100, 190});
+  const auto c = walls({-27, 153, -27, 63, 63, 243});
+  const auto h = wallHeadings(q, c, 2);
+  ASSERT_EQ(h.size(), 4u);  // two peaks, each as h and h + 180
+  EXPECT_NEAR(degrees(h[0]), 37.0, 1.0);
+  EXPECT_NEAR(degrees(h[1]), 217.0, 1.0);
+  // The second peak is the square walls' cross match, 90 deg off.
+  EXPECT_NEAR(std::abs(std::remainder(degrees(h[2]) - 37.0, 180.0)), 90.0, 1.0);
+  for (const double a : h) {
+    EXPECT_GE(a, 0.0);
+    EXPECT_LT(a, 2.0 * std::numbers::pi);
+  }
+  EXPECT_EQ(wallHeadings(q, c, 2), h);  // deterministic
+  EXPECT_EQ(wallHeadings(q, c, 1).size(), 2u);
+  // No wall in either scan (the ground only): nothing to say.
+  EXPECT_TRUE(wallHeadings(q, {Plane{}}, 2).empty());
+  EXPECT_TRUE(wallHeadings({}, c, 2).empty());
+}
+
+TEST(BevSearch, RestrictedHeadingsFindThePoseOnlyWhereItIs) {
+  const Pipeline p;
+  const LabelledScan world = test::makeStreetWorld();
+  const Mat4d T = test::makeT(130.0, 3.0, -2.0, 0.0);
+  const Fingerprint q = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
+  const Fingerprint c = p.fingerprint(test::viewFrom(world, T));
+  const double true_yaw = 130.0 * std::numbers::pi / 180.0;
+  // Given the true heading (and a wrong one), the coarse overlay alone is within a cell and a heading step.
+  const auto coarse = searchBevPose(q.background, c.background, q.background_cell, p.config().bev_search,
+                                    {true_yaw, true_yaw + 1.0}, /*fine=*/false);
+  ASSERT_FALSE(coarse.empty());
+  EXPECT_LT(translationError(coarse[0].T, T), p.config().bev_search.cell_m * 1.5) << coarse[0].T;
+  EXPECT_LT(rotationErrorDeg(coarse[0].T, T), p.config().bev_search.yaw_step_deg * 1.5) << coarse[0].T;
+  // Given only headings far from the truth, no proposal is near it.
+  const auto wrong = searchBevPose(q.background, c.background, q.background_cell, p.config().bev_search,
+                                   {true_yaw + 1.0, true_yaw - 1.2}, false);
+  ASSERT_FALSE(wrong.empty());  // the best overlays at the headings it was given, poor as they are
+  for (const auto& h : wrong) EXPECT_GT(rotationErrorDeg(h.T, T), 40.0) << h.T;
 }
 
 }  // namespace

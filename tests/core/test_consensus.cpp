@@ -231,8 +231,8 @@ TEST_F(RealSparseScans, ConsecutiveScansVerifyThroughConsensusOnly) {
     SCOPED_TRACE("scans " + std::to_string(i) + " and " + std::to_string(i + 1));
     const auto a = load(on, i), b = load(on, i + 1);
     ASSERT_LE(std::min(a.nodes.size(), b.nodes.size()), 16u);
-    EXPECT_FALSE(off.verify(a, b).is_loop);
-    auto r = on.verify(a, b);
+    EXPECT_FALSE(off.verify(a, b, /*background=*/false).is_loop);
+    auto r = on.verify(a, b, /*background=*/false);
     ASSERT_TRUE(r.is_loop) << r.reason;
     on.refine(a, b, r);
     const Mat4d recorded = poses_[i].inverse() * poses_[i + 1];  // maps scan i+1 into scan i

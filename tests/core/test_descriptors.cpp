@@ -33,10 +33,12 @@ TEST(Descriptors, LayoutSizes) {
   const DescriptorLayout l = descriptorLayout(3, GraphConfig{}, DescriptorConfig{});
   EXPECT_EQ(l.bins, 30);  // 60 / 2
   EXPECT_EQ(l.k_eigen, 30);
-  EXPECT_EQ(l.rings, 24);
+  EXPECT_EQ(l.rings, 8);
+  EXPECT_EQ(l.orders, 2);
   EXPECT_EQ(l.nodeDim(), 120);  // 3 * 30 + 30 (paper: D = 120)
   EXPECT_EQ(l.edgeTypes(), 6);
-  EXPECT_EQ(l.scanDim(), 231);  // 3 + 6 * 30 + 2 * 24 (paper: D' = 231)
+  EXPECT_EQ(l.spectrumDim(), 48);  // 2 parts * 8 rings * orders 0-2
+  EXPECT_EQ(l.scanDim(), 231);     // 3 + 6 * 30 + 48 (paper: D' = 231, with a ring key of 48)
   // Bins round up when d_max is not a multiple of d_i.
   EXPECT_EQ(layoutFor(3, 61.0).bins, 31);
   EXPECT_EQ(layoutFor(3, 10.0).bins, 5);
@@ -263,19 +265,22 @@ TEST(Descriptors, ScanDescriptorUnitNormAndFinite) {
   const auto nodes = randomLayout(30, 4, 60.0, 2.0);
   std::vector<float> ring(48, 0.0f);
   for (int k = 0; k < 48; k += 3) ring[k] = static_cast<float>(k + 1);
-  const auto d = scanDescriptor(nodes, ring, l, 60.0, 2.0);
-  ASSERT_EQ(static_cast<int>(d.size()), 231);
-  double norm = 0;
-  for (float v : d) {
-    ASSERT_TRUE(std::isfinite(v));
-    EXPECT_GE(v, 0.0f);
-    norm += double(v) * v;
+  for (const double weight : {1.0, 3.0}) {
+    const auto d = scanDescriptor(nodes, ring, l, 60.0, 2.0, weight);
+    ASSERT_EQ(static_cast<int>(d.size()), 231);
+    double norm = 0;
+    for (float v : d) {
+      ASSERT_TRUE(std::isfinite(v));
+      EXPECT_GE(v, 0.0f);
+      norm += double(v) * v;
+    }
+    EXPECT_NEAR(std::sqrt(norm), 1.0, 1e-5);
+    // Graph and background parts are each L2-normalised, the background one then weighted: the graph part
+    // carries 1 / (1 + weight^2) of the energy.
+    double g = 0;
+    for (int k = 0; k < 183; ++k) g += double(d[k]) * d[k];
+    EXPECT_NEAR(g, 1.0 / (1.0 + weight * weight), 1e-5) << weight;
   }
-  EXPECT_NEAR(std::sqrt(norm), 1.0, 1e-5);
-  // Graph part and background part each carry half of the energy (each L2-normalised before concatenation).
-  double g = 0;
-  for (int k = 0; k < 183; ++k) g += double(d[k]) * d[k];
-  EXPECT_NEAR(g, 0.5, 1e-5);
 }
 
 TEST(Descriptors, ScanDescriptorHandChecked) {
@@ -284,11 +289,11 @@ TEST(Descriptors, ScanDescriptorHandChecked) {
   // shares its count between bins 6 and 7.
   const std::vector<Node> nodes{node(0, 0, 0, 0), node(5, 0, 0, 0), node(0, 13, 0, 2)};
   const DescriptorLayout l = layoutFor(3, 60.0);
-  const auto d = scanDescriptor(nodes, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
+  const auto d = scanDescriptor(nodes, std::vector<float>(48, 0.0f), l, 60.0, 2.0, 3.0);
   ASSERT_EQ(d.size(), 231u);
   const double w = std::hypot(5.0, 13.0) / 2.0 - 0.5 - 6.0;  // 0.465: bin 7's share
   // counts (2, 0, 1) / sqrt5; edges: type(0,0)=0 bin 2: 1; type(0,2)=2 bin 6: 1 + (1 - w), bin 7: w.
-  // fg = [counts | edges] has norm sqrt2 -> each / sqrt2; ring key zero -> stays zero.
+  // fg = [counts | edges] has norm sqrt2 -> each / sqrt2; spectrum zero -> stays zero, whatever its weight.
   const double ne = std::sqrt(1.0 + (2.0 - w) * (2.0 - w) + w * w);
   const double kc = 1.0 / std::sqrt(5.0) / std::sqrt(2.0), ke = 1.0 / ne / std::sqrt(2.0);
   std::vector<double> expected(231, 0.0);
@@ -305,7 +310,8 @@ TEST(Descriptors, ScanDescriptorMovesSmoothlyWithDistance) {
   const DescriptorLayout l = layoutFor(2, 60.0);
   std::vector<float> previous;
   for (double d = 9.0; d <= 11.0 + 1e-9; d += 0.1) {  // across the edge between bins 4 and 5 at 10 m
-    const auto now = scanDescriptor({node(0, 0, 0, 0), node(d, 0, 0, 1)}, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
+    const auto now =
+        scanDescriptor({node(0, 0, 0, 0), node(d, 0, 0, 1)}, std::vector<float>(48, 0.0f), l, 60.0, 2.0, 3.0);
     if (!previous.empty()) {
       double step = 0;
       for (std::size_t k = 0; k < now.size(); ++k) step += (now[k] - previous[k]) * (now[k] - previous[k]);
@@ -315,22 +321,9 @@ TEST(Descriptors, ScanDescriptorMovesSmoothlyWithDistance) {
   }
 }
 
-// The descriptor can be recomputed from stored nodes and the stored descriptor's ring part.
-TEST(Descriptors, StoredRingKeyRecomputesTheDescriptor) {
+TEST(Descriptors, ScanDescriptorZeroSpectrumNoNaN) {
   const DescriptorLayout l = layoutFor(3, 60.0);
-  const auto nodes = randomLayout(30, 5, 60.0, 2.0);
-  std::vector<float> ring(48, 0.0f);
-  for (int k = 1; k < 48; k += 5) ring[k] = static_cast<float>(k);
-  const auto d = scanDescriptor(nodes, ring, l, 60.0, 2.0);
-  const auto again = scanDescriptor(nodes, storedRingKey(d, l), l, 60.0, 2.0);
-  ASSERT_EQ(again.size(), d.size());
-  for (std::size_t k = 0; k < d.size(); ++k) EXPECT_NEAR(again[k], d[k], 1e-6) << k;
-  EXPECT_EQ(storedRingKey(std::vector<float>(3, 1.0f), l), std::vector<float>(48, 0.0f));  // too short: none
-}
-
-TEST(Descriptors, ScanDescriptorZeroRingKeyNoNaN) {
-  const DescriptorLayout l = layoutFor(3, 60.0);
-  const auto d = scanDescriptor(randomLayout(10, 9, 60.0, 2.0), std::vector<float>(48, 0.0f), l, 60.0, 2.0);
+  const auto d = scanDescriptor(randomLayout(10, 9, 60.0, 2.0), std::vector<float>(48, 0.0f), l, 60.0, 2.0, 3.0);
   double norm = 0;
   for (float v : d) {
     ASSERT_TRUE(std::isfinite(v));
@@ -342,14 +335,14 @@ TEST(Descriptors, ScanDescriptorZeroRingKeyNoNaN) {
 
 TEST(Descriptors, ScanDescriptorEmptyNodes) {
   const DescriptorLayout l = layoutFor(3, 60.0);
-  const auto none = scanDescriptor({}, std::vector<float>(48, 0.0f), l, 60.0, 2.0);
+  const auto none = scanDescriptor({}, std::vector<float>(48, 0.0f), l, 60.0, 2.0, 3.0);
   ASSERT_EQ(none.size(), 231u);
   for (float v : none) EXPECT_TRUE(std::isfinite(v));
-  // With a ring key only the background part is non-zero, and the whole is unit norm.
+  // With a spectrum only the background part is non-zero, and the whole is unit norm.
   std::vector<float> ring(48, 0.0f);
   ring[5] = 3;
   ring[30] = 4;
-  const auto bg = scanDescriptor({}, ring, l, 60.0, 2.0);
+  const auto bg = scanDescriptor({}, ring, l, 60.0, 2.0, 3.0);
   for (int k = 0; k < 183; ++k) EXPECT_EQ(bg[k], 0.0f);
   EXPECT_NEAR(bg[183 + 5], 0.6, 1e-6);
   EXPECT_NEAR(bg[183 + 30], 0.8, 1e-6);
@@ -359,8 +352,8 @@ TEST(Descriptors, ScanDescriptorInvariantToRigidMotion) {
   const DescriptorLayout l = layoutFor(3, 60.0);
   const auto nodes = randomLayout(30, 21, 60.0, 2.0);
   std::vector<float> ring(48, 0.1f);
-  const auto a = scanDescriptor(nodes, ring, l, 60.0, 2.0);
-  const auto b = scanDescriptor(moved(nodes, test::makeT(123.0, -40.0, 17.0, 1.0)), ring, l, 60.0, 2.0);
+  const auto a = scanDescriptor(nodes, ring, l, 60.0, 2.0, 3.0);
+  const auto b = scanDescriptor(moved(nodes, test::makeT(123.0, -40.0, 17.0, 1.0)), ring, l, 60.0, 2.0, 3.0);
   ASSERT_EQ(a.size(), b.size());
   for (std::size_t k = 0; k < a.size(); ++k) EXPECT_NEAR(a[k], b[k], 1e-6) << k;
 }

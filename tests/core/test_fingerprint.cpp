@@ -7,7 +7,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <limits>
 
+#include "older_formats.hpp"
 #include "sglc/fingerprint.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
@@ -263,28 +265,53 @@ TEST_F(FingerprintBlob, BadMagicAndVersions) {
   EXPECT_NO_THROW(deserialize(t));
 }
 
-// A format-1 blob (hard-binned edge histogram in its scan descriptor) loads with the descriptor recomputed
-// from its nodes and its ring key; everything else is as stored, and it serialises in the current format.
-TEST_F(FingerprintBlob, Version1BlobGetsTheCurrentDescriptor) {
-  std::vector<std::uint8_t> t = *blob_;
+// Blobs of formats 1 and 2 (another scan descriptor: hard-binned edges in 1, a ring key of building and road
+// points in both, and no height band) load with the descriptor recomputed from their nodes and background view;
+// everything else is as stored, and they serialise in the current format.
+TEST_F(FingerprintBlob, OlderFormatBlobsGetTheCurrentDescriptor) {
   const auto dim = fp_->descriptor.size();
-  const auto rings = static_cast<std::size_t>(2 * fp_->layout.rings);
-  ASSERT_GT(dim, rings);
-  // An old descriptor: a different graph part (all equal values), the same ring part scaled.
-  std::vector<float> old(dim, 0.05f);
-  for (std::size_t k = dim - rings; k < dim; ++k) old[k] = 0.5f * fp_->descriptor[k];
-  std::memcpy(t.data() + t.size() - 4 * dim, old.data(), 4 * dim);
-  setHeaderWord(t, 1, 1);
-  fixChecksum(t);
-  const Fingerprint loaded = deserialize(t);
-  ASSERT_EQ(loaded.descriptor.size(), dim);
-  for (std::size_t k = 0; k < dim; ++k) EXPECT_NEAR(loaded.descriptor[k], fp_->descriptor[k], 1e-6) << k;
-  EXPECT_EQ(loaded.nodes.size(), fp_->nodes.size());
-  EXPECT_EQ(headerWord(serialize(loaded), 1), kFingerprintVersion);
-  EXPECT_TRUE(sameScan(loaded, *fp_));  // so an identical ingest retry across the upgrade still answers OK
-  // The same bytes labelled as the current format keep the descriptor as written.
-  setHeaderWord(t, 1, kFingerprintVersion);
-  EXPECT_EQ(deserialize(t).descriptor, old);
+  const std::vector<float> old(dim, 0.05f);  // whatever the old definition gave
+  for (const std::uint32_t version : {1u, 2u}) {
+    SCOPED_TRACE("format " + std::to_string(version));
+    auto t = test::olderFormatBlob(*fp_, version, old);
+    const Fingerprint loaded = deserialize(t);
+    // The fixture's fingerprint comes from the default configuration, whose spectrum the recomputation uses.
+    ASSERT_EQ(loaded.descriptor.size(), dim);
+    for (std::size_t k = 0; k < dim; ++k) EXPECT_NEAR(loaded.descriptor[k], fp_->descriptor[k], 1e-6) << k;
+    EXPECT_EQ(loaded.layout.rings, fp_->layout.rings);  // 24 ring-key rings become 8 rings of orders 0-2
+    EXPECT_EQ(loaded.layout.orders, fp_->layout.orders);
+    EXPECT_EQ(loaded.background_max_z, std::numeric_limits<float>::infinity());  // every height was kept
+    EXPECT_EQ(loaded.nodes.size(), fp_->nodes.size());
+    EXPECT_EQ(loaded.background.size(), fp_->background.size());
+    EXPECT_EQ(headerWord(serialize(loaded), 1), kFingerprintVersion);
+    EXPECT_EQ(deserialize(serialize(loaded)).background_max_z, std::numeric_limits<float>::infinity());
+    EXPECT_TRUE(sameScan(loaded, *fp_));  // so an identical ingest retry across the upgrade still answers OK
+  }
+  // A ring key whose length does not divide by 3 becomes rings of order 0 only, keeping the length.
+  Fingerprint odd = *fp_;
+  odd.layout.rings = 5;
+  odd.layout.orders = 0;
+  odd.descriptor.assign(static_cast<std::size_t>(odd.layout.scanDim()), 0.1f);
+  const Fingerprint loaded = deserialize(test::olderFormatBlob(odd, 2));
+  EXPECT_EQ(loaded.layout.rings, 5);
+  EXPECT_EQ(loaded.layout.orders, 0);
+  EXPECT_EQ(static_cast<int>(loaded.descriptor.size()), odd.layout.scanDim());
+}
+
+// The same scan fingerprinted with another height band (stored by a build before format 3, sent again): its
+// background view differs, everything else must match.
+TEST_F(FingerprintBlob, SameScanAcrossTheHeightBandComparesTheRest) {
+  Fingerprint before = *fp_;
+  before.background_max_z = std::numeric_limits<float>::infinity();
+  before.background.push_back({-90, -90, 3});  // a crown the band now leaves out
+  before.descriptor[5] += 0.2f;
+  EXPECT_TRUE(sameScan(before, *fp_));
+  Fingerprint same_band = before;
+  same_band.background_max_z = fp_->background_max_z;
+  EXPECT_FALSE(sameScan(same_band, *fp_));  // with the same band, the views must agree
+  Fingerprint moved = before;
+  moved.nodes[0].center.x() += 0.01f;
+  EXPECT_FALSE(sameScan(moved, *fp_));
 }
 
 TEST_F(FingerprintBlob, SameScanToleratesOnlyDescriptorRounding) {
@@ -314,15 +341,15 @@ TEST_F(FingerprintBlob, SameScanToleratesOnlyDescriptorRounding) {
 TEST_F(FingerprintBlob, SingleByteMutationsAreHandled) {
   const auto& b = *blob_;
   const Fingerprint& fp = *fp_;
-  const std::size_t geometry_begin = 16 + 7, geometry_end = geometry_begin + 16;
-  const std::size_t nodes_end = geometry_end + 8 + 29 * fp.nodes.size();
+  const std::size_t geometry_begin = 16 + 9, geometry_end = geometry_begin + 16;
+  const std::size_t nodes_end = geometry_end + 12 + 29 * fp.nodes.size();
   const std::size_t bg_count = nodes_end + 6 * fp.instance_points.size();
   const std::size_t plane_count = bg_count + 4 + 5 * fp.background.size();
   const std::size_t desc_count = plane_count + 4 + 13 * fp.planes.size();
   ASSERT_EQ(desc_count + 4 + 4 * fp.descriptor.size(), b.size());
   // All header fields, the first three node records (the others have the same layout) and the last one, the
   // section counts; every 7th byte elsewhere.
-  const std::size_t first_nodes_end = geometry_end + 8 + 29 * std::min<std::size_t>(3, fp.nodes.size());
+  const std::size_t first_nodes_end = geometry_end + 12 + 29 * std::min<std::size_t>(3, fp.nodes.size());
   std::vector<std::size_t> positions;
   for (std::size_t pos = 16; pos < b.size(); ++pos) {
     const bool fixed = pos < first_nodes_end || (pos >= nodes_end - 29 && pos < nodes_end) ||

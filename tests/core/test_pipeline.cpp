@@ -174,9 +174,10 @@ TEST_F(RealPipeline, LoopPairAgreesWithDenseRegistration) {
   expectPoseWithin(r.T, from_reference, 0.015, 0.15, "engine_vs_dense");
 }
 
-// The same real loop with the candidate's landmarks unlabelled (no node matches): verification rejects it,
-// and a caller who knows it is a loop still gets its pose, from the background views and planes.
-TEST_F(RealPipeline, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
+// The same real loop with the candidate's landmarks unlabelled (no node matches). From the landmarks alone
+// verification rejects it, and a caller who knows it is a loop still gets its pose, from the background views
+// and planes; with loops from the background allowed (the default), verification accepts it with that pose.
+TEST_F(RealPipeline, LoopWithoutLandmarksIsFoundFromTheBackground) {
   const PairRow& row = loopRow();
   LabelledScan bare = scan00("004501");
   const LabelMap labels(pipeline_->config().labels);
@@ -184,12 +185,20 @@ TEST_F(RealPipeline, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
     if (labels.nodeClass(l) >= 0) l = 0;
   const Fingerprint b = pipeline_->fingerprint(bare);
   ASSERT_TRUE(b.nodes.empty());
-  LoopResult r = pipeline_->verify(fp("00/000052"), b);
+  LoopResult r = pipeline_->verify(fp("00/000052"), b, /*background=*/false);
   ASSERT_FALSE(r.is_loop);
   pipeline_->refine(fp("00/000052"), b, r, /*known_loop=*/true);
   ASSERT_TRUE(r.refined);
   EXPECT_FALSE(r.is_loop);
   expectPoseWithin(r.T, row.T_a_b, 0.10, 0.5, "background_only_error");
+  const LoopResult found = pipeline_->match(fp("00/000052"), b);
+  ASSERT_TRUE(found.is_loop) << found.reason;
+  EXPECT_TRUE(found.refined);
+  EXPECT_EQ(found.inliers, 0);
+  EXPECT_GT(found.score, 0.0);
+  expectPoseWithin(found.T, row.T_a_b, 0.10, 0.5, "background_loop_error");
+  // Its information matrix is the planes' (the pose graph weighs the loop with it).
+  EXPECT_GT(found.information.trace(), 0.0);
 }
 
 TEST_F(RealPipeline, LoopPairReverseDirection) {
@@ -250,6 +259,35 @@ TEST_F(RealPipeline, NegativesRejectedBothWays) {
     const LoopResult ab = pipeline_->match(a, b), ba = pipeline_->match(b, a);
     expectSane(ab);
     expectSane(ba);
+    EXPECT_FALSE(ab.is_loop) << row.a << " vs " << row.b << " score " << ab.score;
+    EXPECT_FALSE(ba.is_loop) << row.b << " vs " << row.a << " score " << ba.score;
+  }
+  EXPECT_EQ(negatives, 5);
+}
+
+// Background-only loops must not open a door to false ones: the real non-loop pairs, with every landmark's label
+// removed from both scans (so only the background can speak), are still rejected both ways, while the true pair
+// stripped the same way is found.
+TEST_F(RealPipeline, WithoutLandmarksNegativesStayRejected) {
+  const LabelMap labels(pipeline_->config().labels);
+  std::map<std::string, Fingerprint> bare;
+  for (const char* frame : {"000052", "000088", "000850", "004501"}) {
+    LabelledScan s = scan00(frame);
+    for (auto& l : s.labels)
+      if (labels.nodeClass(l) >= 0) l = 0;
+    bare.emplace(frame, pipeline_->fingerprint(s));
+  }
+  int negatives = 0;
+  for (const auto& row : *pairs_) {
+    if (row.seq != "00" || !bare.count(row.a) || !bare.count(row.b)) continue;
+    const LoopResult ab = pipeline_->match(bare.at(row.a), bare.at(row.b));
+    const LoopResult ba = pipeline_->match(bare.at(row.b), bare.at(row.a));
+    if (row.is_loop) {
+      EXPECT_TRUE(ab.is_loop) << ab.reason;
+      EXPECT_TRUE(ba.is_loop) << ba.reason;
+      continue;
+    }
+    ++negatives;
     EXPECT_FALSE(ab.is_loop) << row.a << " vs " << row.b << " score " << ab.score;
     EXPECT_FALSE(ba.is_loop) << row.b << " vs " << row.a << " score " << ba.score;
   }
@@ -347,16 +385,19 @@ TEST(SyntheticPipeline, TwoViewsOfTheSameStreet) {
 }
 
 // The guards of the fine and plane stages are parameters: a stage whose move exceeds its limit is dropped and
-// the coarse pose stays; with the default limits each stage moves it.
+// the coarse pose stays; with the default limits each stage moves it. (Verification's own plane alignment is
+// off here, so that the pose it hands on is RANSAC's.)
 TEST(SyntheticPipeline, StageGuardsAreParameters) {
   const LabelledScan world = test::makeStreetWorld();
-  const Pipeline p;
+  Config base;
+  base.verify.align_max_shift_m = 0;
+  const Pipeline p(base);
   const Fingerprint a = p.fingerprint(test::viewFrom(world, test::makeT(0.0, 0.0, 0.0, 0.0)));
   const Fingerprint b = p.fingerprint(test::viewFrom(world, test::makeT(25.0, 4.0, 1.5, 0.0)));
   const LoopResult coarse = p.verify(a, b);
   ASSERT_TRUE(coarse.is_loop) << coarse.reason;
   auto poseWith = [&](const std::function<void(Config&)>& edit) {
-    Config c;
+    Config c = base;
     edit(c);
     return Pipeline(c).match(a, b).T;
   };
@@ -451,8 +492,9 @@ LabelledScan streetWithCrossFacades() {
 }
 
 // A loop with few node inliers must be confirmed by the background planes. The candidate below shows the same
-// street with both facades moved 0.8 m towards its middle: nodes and the bird's-eye view still agree, but no
-// rigid motion fits both facades' planes.
+// street with both facades moved 0.8 m towards its middle: the nodes still agree, but no rigid motion fits both
+// facades' planes. (The bird's-eye view sees the moved facades too; its threshold is off here, so that the
+// planes alone decide.)
 TEST(SyntheticPipeline, FewInliersNeedThePlanesToConfirm) {
   const LabelledScan world = streetWithCrossFacades();
   LabelledScan squeezed = world;
@@ -461,6 +503,7 @@ TEST(SyntheticPipeline, FewInliersNeedThePlanesToConfirm) {
   const Mat4d T = test::makeT(1.0, 2.0, 0.5, 0.0);
   Config always;
   always.verify.confirm_below_inliers = 1000;  // every loop needs confirmation
+  always.verify.t_b = 0;
   Config never = always;
   never.verify.confirm_below_inliers = 0;
   const Pipeline p_always(always), p_never(never);

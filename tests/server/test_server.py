@@ -196,36 +196,50 @@ def test_inter_robot_loop_and_restart(tmp):
 
 
 def test_known_loop_pose(tmp):
-    """A known loop that verification rejects (the candidate's landmarks unlabelled) gets a pose only when asked."""
+    """A candidate whose landmarks are unlabelled is verified from its background alone; with background-only
+    loops switched off verification rejects it, and the known loop gets a pose only when asked."""
     if not HAVE_DATA:
         print("  skipped: real scans absent")
         return
-    s = Server(os.path.join(tmp, "known.db"))
-    try:
-        s.admin.CreateMap(pb.CreateMapRequest(name="m"))
-        bare = load_scan("004501")
-        lab = np.frombuffer(bare.labels, dtype="<u4").copy()
-        lab[np.isin(lab & 0xFFFF, [10, 18, 20, 71, 80])] = 0  # cars, trucks, other vehicles, trunks, poles
-        bare.labels = lab.tobytes()
-        r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=bare))
-        r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=load_scan("000052")))
+    bare = load_scan("004501")
+    lab = np.frombuffer(bare.labels, dtype="<u4").copy()
+    lab[np.isin(lab & 0xFFFF, [10, 18, 20, 71, 80])] = 0  # cars, trucks, other vehicles, trunks, poles
+    bare.labels = lab.tobytes()
+    for background in (True, False):
+        extra = () if background else ("--set", "engine.verify.background_max_nodes=0")
+        s = Server(os.path.join(tmp, f"known-{background}.db"), extra)
+        try:
+            check_known_loop(s, bare, background)
+        finally:
+            assert s.stop() == 0
 
-        def ask(**kw):
-            return s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
-                                                options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id], **kw)))
-        assert len(ask().candidates) == 0, "not a verified loop"
-        rejected = ask(include_rejected=True).candidates
-        assert len(rejected) == 1 and not rejected[0].verified and not rejected[0].refined
-        known = ask(known_loops=True).candidates
-        assert len(known) == 1 and not known[0].verified and known[0].refined, known
-        dt, dr = pose_error(np.array(known[0].t_query_candidate.m).reshape(4, 4), reference_pose())
-        assert dt < 0.10 and dr < 0.5, f"known-loop pose error {dt:.3f} m {dr:.3f} deg"
-        assert len(known[0].information) == 36 and 0 < known[0].fitness <= 1
-        print(f"  known loop without landmarks: RTE {dt:.4f} m, RRE {dr:.4f} deg, fitness {known[0].fitness:.3f}")
-        expect_code(grpc.StatusCode.INVALID_ARGUMENT, lambda: ask(known_loops=True, refine=False, refine_set=True),
-                    "known_loops without refinement")
-    finally:
-        assert s.stop() == 0
+
+def check_known_loop(s, bare, background):
+    s.admin.CreateMap(pb.CreateMapRequest(name="m"))
+    r_b = s.loop.Ingest(pb.IngestRequest(key=key("b", 4501), scan=bare))
+    r_a = s.loop.Ingest(pb.IngestRequest(key=key("a", 52), scan=load_scan("000052")))
+
+    def ask(**kw):
+        return s.loop.Query(pb.QueryRequest(map="m", scan_id=r_a.scan_id,
+                                            options=pb.QueryOptions(verify_scan_ids=[r_b.scan_id], **kw)))
+    if background:
+        found = ask().candidates
+        assert len(found) == 1 and found[0].verified and found[0].refined, found
+        dt, dr = pose_error(np.array(found[0].t_query_candidate.m).reshape(4, 4), reference_pose())
+        assert dt < 0.10 and dr < 0.5, f"background-only loop pose error {dt:.3f} m {dr:.3f} deg"
+        print(f"  loop from the background alone: RTE {dt:.4f} m, RRE {dr:.4f} deg")
+        return
+    assert len(ask().candidates) == 0, "not a verified loop"
+    rejected = ask(include_rejected=True).candidates
+    assert len(rejected) == 1 and not rejected[0].verified and not rejected[0].refined
+    known = ask(known_loops=True).candidates
+    assert len(known) == 1 and not known[0].verified and known[0].refined, known
+    dt, dr = pose_error(np.array(known[0].t_query_candidate.m).reshape(4, 4), reference_pose())
+    assert dt < 0.10 and dr < 0.5, f"known-loop pose error {dt:.3f} m {dr:.3f} deg"
+    assert len(known[0].information) == 36 and 0 < known[0].fitness <= 1
+    print(f"  known loop without landmarks: RTE {dt:.4f} m, RRE {dr:.4f} deg, fitness {known[0].fitness:.3f}")
+    expect_code(grpc.StatusCode.INVALID_ARGUMENT, lambda: ask(known_loops=True, refine=False, refine_set=True),
+                "known_loops without refinement")
 
 
 def test_unlabelled_scans(tmp):

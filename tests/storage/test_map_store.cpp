@@ -10,6 +10,7 @@
 #include <set>
 
 #include "backend.hpp"
+#include "older_formats.hpp"
 #include "storage_test_util.hpp"
 
 namespace sglc::storage {
@@ -723,11 +724,16 @@ void setBlob(const std::string& path, std::int64_t id, std::vector<std::uint8_t>
   sqlite3_close(db);
 }
 
-std::vector<std::uint8_t> formatOneBlob(const Fingerprint& fp) {
-  auto bytes = serialize(fp);
-  const std::uint32_t one = 1;
-  std::memcpy(bytes.data() + 4, &one, 4);  // the checksum covers the payload only
-  return bytes;
+void setDescriptor(const std::string& path, std::int64_t id, const std::vector<float>& d) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(path.c_str(), &db), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE scans SET descriptor = ? WHERE id = ?", -1, &st, nullptr), SQLITE_OK);
+  sqlite3_bind_blob(st, 1, d.data(), static_cast<int>(d.size() * sizeof(float)), SQLITE_TRANSIENT);
+  sqlite3_bind_int64(st, 2, id);
+  EXPECT_EQ(sqlite3_step(st), SQLITE_DONE) << sqlite3_errmsg(db);
+  sqlite3_finalize(st);
+  sqlite3_close(db);
 }
 
 std::uint32_t blobVersion(const std::string& path, std::int64_t id) {
@@ -744,41 +750,51 @@ std::uint32_t blobVersion(const std::string& path, std::int64_t id) {
   return version;
 }
 
-// A schema-4 file holds fingerprints of format 1, whose scan descriptors had hard-binned edges. Opening it
-// recomputes every indexed descriptor (a saved index snapshot of the old ones is not used) and leaves a blob
-// that does not load as it was.
-TEST(MapStore, MigratesVersion4FingerprintsToTheCurrentDescriptor) {
-  TempDir dir;
-  const auto path = dir.file("map.db");
-  std::vector<Stored> all;
-  {
-    auto store = MapStore::open(options(path));  // snapshot_index: the close saves an index of the old values
-    all = fill(*store, 1, 1, 5);
+// A file of schema 4 holds fingerprints of format 1 (hard-binned edges), one of schema 5 of format 2 (a ring
+// key): both had other scan descriptors. Opening the file recomputes every indexed descriptor (a saved index
+// snapshot of the old ones is not used) and leaves a blob that does not load as it was.
+TEST(MapStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
+  for (const std::uint32_t format : {1u, 2u}) {
+    SCOPED_TRACE("format " + std::to_string(format));
+    TempDir dir;
+    const auto path = dir.file("map.db");
+    std::vector<Stored> all;
+    {
+      auto store = MapStore::open(options(path));  // snapshot_index: the close saves an index of the old values
+      all = fill(*store, 1, 1, 5);
+    }
+    const std::vector<float> old(all[0].fp.descriptor.size(), 0.05f);
+    for (std::size_t k = 0; k + 1 < all.size(); ++k) {
+      setBlob(path, all[k].id, test::olderFormatBlob(all[k].fp, format, old));
+      setDescriptor(path, all[k].id, old);
+    }
+    setBlob(path, all.back().id, {1, 2, 3});
+    execSql(path, format == 1 ? "PRAGMA user_version=4;" : "PRAGMA user_version=5;");
+    auto store = MapStore::open(options(path));
+    for (std::size_t k = 0; k + 1 < all.size(); ++k) {
+      // Recomputed from the stored nodes and background view, with the spectrum's default settings.
+      const auto& f = all[k].fp;
+      const DescriptorConfig defaults;
+      const auto expected = scanDescriptor(
+          f.nodes, structureSpectrum(f.background, f.background_cell, f.layout.rings, f.layout.orders, defaults),
+          f.layout, f.d_max, f.d_i, defaults.background_weight);
+      const auto fp = store->fingerprint(all[k].id);
+      ASSERT_TRUE(fp);
+      ASSERT_EQ(fp->descriptor.size(), expected.size());
+      for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(fp->descriptor[i], expected[i], 1e-6) << i;
+      EXPECT_EQ(blobVersion(path, all[k].id), format);  // the blob stays: it is upgraded whenever it is read
+      SearchRequest q;
+      q.map = "m";
+      q.descriptor = fp->descriptor;
+      q.k = 1;
+      const auto hits = store->search(q);
+      ASSERT_EQ(hits.size(), 1u);
+      EXPECT_EQ(hits[0].scan_id, all[k].id);
+      EXPECT_LT(hits[0].distance, 1e-3f);
+    }
+    EXPECT_EQ(errorCode([&] { store->fingerprint(all.back().id); }), StorageError::Code::kCorrupt);
+    EXPECT_EQ(store->stats("m").scans, static_cast<std::int64_t>(all.size()));
   }
-  for (std::size_t k = 0; k + 1 < all.size(); ++k) setBlob(path, all[k].id, formatOneBlob(all[k].fp));
-  setBlob(path, all.back().id, {1, 2, 3});
-  execSql(path, "PRAGMA user_version=4;");
-  auto store = MapStore::open(options(path));
-  for (std::size_t k = 0; k + 1 < all.size(); ++k) {
-    const auto& old = all[k].fp;
-    const auto expected =
-        scanDescriptor(old.nodes, storedRingKey(old.descriptor, old.layout), old.layout, old.d_max, old.d_i);
-    const auto fp = store->fingerprint(all[k].id);
-    ASSERT_TRUE(fp);
-    ASSERT_EQ(fp->descriptor.size(), expected.size());
-    for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(fp->descriptor[i], expected[i], 1e-6) << i;
-    EXPECT_EQ(blobVersion(path, all[k].id), 1u);  // the blob stays: it is upgraded whenever it is read
-    SearchRequest q;
-    q.map = "m";
-    q.descriptor = fp->descriptor;
-    q.k = 1;
-    const auto hits = store->search(q);
-    ASSERT_EQ(hits.size(), 1u);
-    EXPECT_EQ(hits[0].scan_id, all[k].id);
-    EXPECT_LT(hits[0].distance, 1e-3f);
-  }
-  EXPECT_EQ(errorCode([&] { store->fingerprint(all.back().id); }), StorageError::Code::kCorrupt);
-  EXPECT_EQ(store->stats("m").scans, static_cast<std::int64_t>(all.size()));
 }
 
 Mat6d someInformation() {

@@ -6,7 +6,10 @@
 #include <thread>
 
 #include "backend.hpp"
+#include "older_formats.hpp"
 #include "pg_core.hpp"
+#include "sglc/background.hpp"
+#include "sglc/descriptors.hpp"
 
 namespace sglc::storage {
 namespace {
@@ -76,6 +79,56 @@ TEST_F(PostgresStore, RefusesAForeignDatabaseAndANewerSchemaWithoutTouchingThem)
     EXPECT_NE(std::string(e.what()).find("newer"), std::string::npos) << e.what();
   }
   EXPECT_EQ(conn.query("SELECT count(*) FROM maps").i64(0, 0), 1);
+}
+
+// Schema 1 -> 2: the scans of older fingerprint formats get the current descriptor in their indexed column,
+// in batches; a blob that does not load keeps its row as it was (it is corrupt when read, not lost).
+TEST_F(PostgresStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
+  std::vector<std::int64_t> ids;
+  std::vector<Fingerprint> fps;
+  const auto dim = static_cast<int>(randomFingerprint(1).descriptor.size());
+  {
+    auto store = backend_.open();
+    store->createMap("m", dim);
+    for (int k = 0; k < 300; ++k) {  // more than one batch of the migration
+      fps.push_back(randomFingerprint(100 + k));
+      ids.push_back(store->addScan({.map = "m", .robot = "r", .session = "s", .seq = k, .fingerprint = &fps.back()}));
+    }
+  }
+  pg::Conn conn(backend_.options().path);
+  const std::vector<float> old(static_cast<std::size_t>(dim), 0.05f);
+  const std::span<const std::uint8_t> old_bytes(reinterpret_cast<const std::uint8_t*>(old.data()),
+                                                old.size() * sizeof(float));
+  for (std::size_t k = 0; k + 1 < ids.size(); ++k) {
+    const auto blob = test::olderFormatBlob(fps[k], k % 2 ? 1u : 2u, old);
+    conn.query("UPDATE scan_blobs SET fingerprint = $1 WHERE scan_id = $2",
+               {std::span<const std::uint8_t>(blob), ids[k]});
+    conn.query("UPDATE scans SET descriptor = $1 WHERE id = $2", {old_bytes, ids[k]});
+  }
+  const std::vector<std::uint8_t> junk{1, 2, 3};
+  conn.query("UPDATE scan_blobs SET fingerprint = $1 WHERE scan_id = $2",
+             {std::span<const std::uint8_t>(junk), ids.back()});
+  exec("UPDATE sglc_meta SET value = '1' WHERE key = 'schema_version'");
+
+  auto store = backend_.open();
+  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "2");
+  const DescriptorConfig defaults;
+  for (std::size_t k = 0; k + 1 < ids.size(); k += 37) {
+    SCOPED_TRACE("scan " + std::to_string(k));
+    const auto& f = fps[k];
+    const auto expected = scanDescriptor(
+        f.nodes, structureSpectrum(f.background, f.background_cell, f.layout.rings, f.layout.orders, defaults),
+        f.layout, f.d_max, f.d_i, defaults.background_weight);
+    const auto fp = store->fingerprint(ids[k]);
+    ASSERT_TRUE(fp);
+    ASSERT_EQ(fp->descriptor.size(), expected.size());
+    for (std::size_t i = 0; i < expected.size(); ++i) EXPECT_NEAR(fp->descriptor[i], expected[i], 1e-6) << i;
+    const auto found = hits(*store, *fp, 1);
+    ASSERT_EQ(found.size(), 1u);
+    EXPECT_EQ(found[0], ids[k]);  // the index holds the new descriptor, not the old one
+  }
+  EXPECT_EQ(errorCode([&] { store->fingerprint(ids.back()); }), StorageError::Code::kCorrupt);
+  EXPECT_EQ(store->stats("m").scans, static_cast<std::int64_t>(ids.size()));
 }
 
 TEST_F(PostgresStore, DamagedRowsAreCorruptNotServed) {

@@ -26,23 +26,34 @@ struct Plane {
   std::uint8_t cls = 0;  // Background value
 };
 
-// Rotation-invariant ring key: for building and road, the number of occupied one-degree sectors per ring.
-// 2 * rings values, L2-normalised; all zero when no ring is occupied.
-std::vector<float> ringKey(const Points& points, const std::vector<Background>& point_bg,
-                           const DescriptorConfig& config);
-
-// Labelled BEV cells within max range, sorted by (iy, ix).
+// Labelled BEV cells within max range, sorted by (iy, ix). Structure points (fence, building, vegetation) higher
+// than max_z in the sensor frame are left out: the band every LiDAR sees (FingerprintConfig::background_max_z_m).
 std::vector<BevCell> bevCells(const Points& points, const std::vector<Background>& point_bg, double cell,
-                              double max_range);
+                              double max_range, double max_z);
+
+// Rotation-invariant background part of the scan descriptor (ours). The structure cells of a labelled BEV
+// (`cell` metres) between config.ring_min_m and ring_max_m fall, in two parts (building and fence; vegetation),
+// in `rings` rings of config.sectors sectors; each cell is shared between the two rings whose centres are
+// nearest, linearly, and a (ring, sector) holds at most 1. Per part and ring, the magnitudes
+// |sum_s occupied(s) exp(-2 pi i k s / sectors)| for k = 0..orders: order 0 counts the occupied sectors, higher
+// orders keep how the structure spreads around the sensor, and turning the scan changes only their phases.
+// 2 * rings * (orders + 1) values in that order (part, ring, k), unnormalised; all zero without structure.
+std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
+                                     const DescriptorConfig& config);
 
 // Plane features of road, building and fence points: one per voxel with enough, flat enough points.
 // Normals face the sensor. Sorted by voxel.
 std::vector<Plane> extractPlanes(const Points& points, const std::vector<Background>& point_bg,
                                  const FingerprintConfig& config);
 
-// Agreement of two labelled BEV clouds once `candidate` is moved by T_q_c into the query frame:
-// (cells holding the same class) / (cells occupied in either), over a square grid of +-radius around the query.
-// A grid cell's class is the majority of the stored cells falling in it, by the same rule as BevCell::cls.
+// Agreement of two labelled BEV clouds once `candidate` is moved by T_q_c into the query frame, over a square
+// grid of +-radius around the query whose cells take the majority class of the stored cells falling in them
+// (the rule of BevCell::cls). Judged are the cells where either view has structure (fence, building,
+// vegetation) and both views have seen something in the cell or a neighbouring one; the value is the share of
+// them holding the same class in both (0 when none is judged). Road against road says little (any two streets
+// agree), and structure that one view has no return near was hidden from it or outside its field of view: a
+// sparser or differently aimed sensor is not counted against (ours; the paper compares background descriptors,
+// the reference scores a polar grid by priority class).
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
                     const Mat4d& T_q_c, double grid_cell, double radius);
 

@@ -19,8 +19,21 @@ struct BevPose {
 
 // The best `config.keep` distinct planar poses (best first) overlaying the candidate's structure cells
 // (fence, building, vegetation; road says little about a shift) on the query's, with shifts up to
-// config.max_shift_m on each axis and any heading. Deterministic. Empty when either view has no structure.
+// config.max_shift_m on each axis and any heading, or, when `headings` (radians) is not empty, only the coarse
+// heading steps within one step of one of them. Without `fine`, the coarse overlays are returned as they are
+// (within a cell and a heading step; the plane refinement converges from there) instead of being searched
+// again around on the stored cells, which costs most of the time. Deterministic. Empty when either view has no
+// structure.
 std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate,
-                                   double stored_cell, const BevSearchConfig& config);
+                                   double stored_cell, const BevSearchConfig& config,
+                                   const std::vector<double>& headings = {}, bool fine = true);
+
+// Headings (radians, in [0, 2 pi)) that turn the candidate's walls parallel to the query's: the vertical planes'
+// horizontal normal directions, folded to [0, 180) deg, are histogrammed per degree in each scan, and the best
+// `peaks` circular correlation maxima give each heading twice (h and h + 180 deg: a normal's side depends on where
+// the sensor stood). A shift does not change a wall's direction, so they hold however far apart the scans are;
+// streets of parallel and square walls give peaks 90 deg apart, hence more than one. Empty when either scan has
+// no vertical plane. Deterministic.
+std::vector<double> wallHeadings(const std::vector<Plane>& query, const std::vector<Plane>& candidate, int peaks);
 
 }  // namespace sglc

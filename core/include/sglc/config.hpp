@@ -55,10 +55,18 @@ struct GraphConfig {
 struct DescriptorConfig {
   double d_i = 2.0;  // distance bin width of node and edge histograms (m); bins = d_max / d_i
   int k_eigen = 30;  // eigenvectors of the adjacency matrix used in the node descriptor
-  int rings = 24;    // background ring key
+  // Background part of the scan descriptor (ours): the stored BEV's structure cells (building and fence;
+  // vegetation) between ring_min_m and ring_max_m fall in `rings` rings of `sectors` sectors; per part and ring,
+  // the magnitudes of the occupancy's angular Fourier series, orders 0 to `orders` (rotation invariant). It is
+  // weighted by background_weight against the graph part (node counts and edges): the background outlasts parked
+  // cars and is seen alike by every LiDAR in the stored height band, while the number of landmarks a scan holds
+  // changes with the sensor (docs/METHOD.md, section 4).
+  int rings = 8;
+  int orders = 2;
   double ring_min_m = 5.0;
   double ring_max_m = 50.0;
   int sectors = 360;
+  double background_weight = 3.0;
 };
 
 struct MatchConfig {
@@ -108,10 +116,11 @@ struct VerifyConfig {
   // that max_translation rejects).
   double bev_radius_m = 25.0;
   // Ours: a loop with fewer node inliers than this must be confirmed by the plane stage run from the coarse
-  // pose: at least confirm_min_fitness of the candidate's plane features explained, with a point-to-plane RMSE
-  // of at most confirm_max_rmse_m. Chance alignments of three or four landmarks between look-alike streets
-  // pass t_g and t_b; their planes do not fit (simulated KITTI 00, ten descriptor neighbours per frame: 262
-  // such false loops against 4482 true ones without this check, 1 with it, no true loop lost). 0 disables.
+  // pose: of the plane features in the stored height band (fingerprint.background_max_z_m) of whichever scan has
+  // fewer, at least confirm_min_fitness explained, with a point-to-plane RMSE of at most confirm_max_rmse_m. Chance
+  // alignments of three or four landmarks between look-alike streets pass t_g and t_b; their planes do not fit
+  // (simulated KITTI 00, ten descriptor neighbours per frame: 262 such false loops against 4482 true ones without this
+  // check, 1 with it, no true loop lost). 0 disables.
   int confirm_below_inliers = 8;
   double confirm_min_fitness = 0.5;
   double confirm_max_rmse_m = 0.1;
@@ -120,12 +129,49 @@ struct VerifyConfig {
   // a fit confirms nothing. Simulated KITTI 00 without labels (labeller), verified top-1 candidates with few
   // inliers: false loops 0.0-0.9 (one 5.3), true loops 3.3-90. 0 disables.
   double confirm_min_constraint = 2.0;
+  // Ours: before the background is judged, the candidate's planes are aligned to the query's from the coarse
+  // pose, as the refine stage does but without instance anchor. A pose from three or four landmarks, or from
+  // landmarks another sensor sees from other sides (their box centres then differ by about a metre), is often
+  // 0.5-2 m and several degrees off, and the background judged there disagrees; the planes bring it within
+  // centimetres. The aligned pose stands when it moved at most align_max_shift_m and align_max_turn_deg, its
+  // plane RMSE is at most confirm_max_rmse_m, and at least 3 of the node inliers lie within align_node_gate_m of
+  // it; the background, the plane confirmation and the result's T then use it. A candidate whose background
+  // agreement at the coarse pose is below align_min_background is not aligned (it stays rejected on t_b), which
+  // spares the plane fit for most wrong candidates. align_max_shift_m <= 0 disables the step.
+  double align_min_background = 0.25;
+  double align_max_shift_m = 3.0;
+  double align_max_turn_deg = 15.0;
+  double align_node_gate_m = 2.0;
+  // Ours: loops from the background alone, for places with few landmarks (a sparse sensor, a street without
+  // parked cars: 4-17 nodes on the real nuScenes HDL-32E scans). When the landmarks give no loop and either scan
+  // has at most background_max_nodes nodes, the walls' directions give candidate headings (wallHeadings), the
+  // BEV overlay at those headings a shift (searchBevPose with bev_search's grid), and the planes the pose. With
+  // no landmark to vouch for it, the pose must meet stricter bars than a weak node loop's confirmation: band
+  // plane overlap (as confirm_min_fitness) at least background_min_overlap, plane RMSE at most
+  // background_max_rmse_m, horizontal constraint at least background_min_constraint, background agreement at
+  // least background_min_agreement, and |t| within max_translation. Overlays whose background agreement is
+  // below background_min_overlay before the plane fit are dropped (simulated VLP-16 queries against an HDL-64
+  // map: accepted true loops had 0.45 or more, the best overlay of other places a median of 0.26). A search
+  // costs a few milliseconds, so a loop finder tries it on the first background_candidates candidates of a
+  // query only (in descriptor order). background_max_nodes 0 disables it.
+  int background_max_nodes = 24;
+  int background_candidates = 3;
+  double background_min_overlap = 0.3;
+  double background_max_rmse_m = 0.1;
+  double background_min_constraint = 0.5;
+  double background_min_agreement = 0.55;
+  double background_min_overlay = 0.4;
 };
 
 struct FingerprintConfig {
   double instance_voxel_m = 0.25;  // downsampling of instance points kept for fine ICP
   double background_cell_m = 0.5;  // BEV cell of the stored labelled background cloud
   double background_max_range_m = 50.0;
+  // Ours: structure points (building, fence, vegetation) higher than this above the sensor are left out of the
+  // stored BEV, so that it holds the band every LiDAR sees: an HDL-64 looks at most 2 deg up, a VLP-16 15 deg
+  // and an OS1 22.5 deg, so without the band tree crowns and upper storeys over the street turned road cells
+  // into vegetation or building for one sensor and not for another.
+  double background_max_z_m = 1.0;
   double plane_voxel_m = 1.0;  // background plane features
   int plane_min_points = 8;
   double plane_max_thickness_m = 0.08;  // sqrt of the smallest eigenvalue of the voxel's covariance

@@ -1,7 +1,6 @@
 // Node descriptors (local edge histogram + spectral embedding) and the scan descriptor for retrieval.
 #pragma once
 
-#include <span>
 #include <vector>
 
 #include "sglc/config.hpp"
@@ -13,10 +12,12 @@ struct DescriptorLayout {
   int num_classes = 3;
   int bins = 30;  // d_max / d_i
   int k_eigen = 30;
-  int rings = 24;
+  int rings = 8;   // of the background spectrum
+  int orders = 2;  // of the background spectrum: orders 0..orders per ring and part
   int nodeDim() const { return num_classes * bins + k_eigen; }
   int edgeTypes() const { return num_classes * (num_classes + 1) / 2; }
-  int scanDim() const { return num_classes + edgeTypes() * bins + 2 * rings; }
+  int spectrumDim() const { return 2 * rings * (orders + 1); }
+  int scanDim() const { return num_classes + edgeTypes() * bins + spectrumDim(); }
 };
 
 DescriptorLayout descriptorLayout(int num_classes, const GraphConfig& graph, const DescriptorConfig& config);
@@ -29,13 +30,10 @@ Eigen::MatrixXf nodeDescriptors(const std::vector<Node>& nodes, const Descriptor
 // Index of the unordered class pair (a, b) among the layout's edge types.
 int edgeType(int a, int b, int num_classes);
 
-// scanDim() floats: L2([L2([L2(node counts) | L2(edge histogram)]) | L2(ring key)]). ring_key may be all zero.
-// The edge histogram is soft-binned by distance like the node descriptors.
-std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& ring_key,
-                                  const DescriptorLayout& layout, double d_max, double d_i);
-
-// The ring-key part of a scan descriptor (its last 2 * rings values, up to scale), enough to recompute the
-// descriptor from stored nodes with scanDescriptor: the ring key's own normalisation removes the scale.
-std::vector<float> storedRingKey(std::span<const float> descriptor, const DescriptorLayout& layout);
+// scanDim() floats: L2([L2([L2(node counts) | L2(edge histogram)]) | background_weight * L2(spectrum)]), with
+// `spectrum` from structureSpectrum (spectrumDim() values, may be all zero). The edge histogram is soft-binned
+// by distance like the node descriptors.
+std::vector<float> scanDescriptor(const std::vector<Node>& nodes, const std::vector<float>& spectrum,
+                                  const DescriptorLayout& layout, double d_max, double d_i, double background_weight);
 
 }  // namespace sglc

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -22,6 +23,9 @@ struct Fingerprint {
   float d_i = 2.0f;
   float background_cell = 0.5f;
   float plane_voxel = 1.0f;
+  // Structure points above this height (sensor frame) were left out of `background` (format 3 on); +inf for
+  // fingerprints of formats 1 and 2, whose background view holds every height.
+  float background_max_z = std::numeric_limits<float>::infinity();
 
   std::vector<Node> nodes;
   std::vector<std::uint32_t> instance_offsets;  // node i owns instance_points[offsets[i] .. offsets[i+1])
@@ -43,13 +47,18 @@ struct Fingerprint {
   void finalize();
 };
 
-// 2: the scan descriptor's edge histogram is soft-binned. Version 1 blobs are read and their descriptor
-// recomputed, so a loaded fingerprint is always of the current definition (serialize writes version 2).
-inline constexpr std::uint32_t kFingerprintVersion = 2;
+// 2: the scan descriptor's edge histogram is soft-binned. 3: the background view holds only structure within
+// background_max_z of the sensor, and the descriptor's background part is the structure spectrum of that view
+// (the ring key of building and road points before). Blobs of versions 1 and 2 are read with their descriptor
+// recomputed from their stored nodes and background view, so a loaded fingerprint's descriptor is always of the
+// current definition (serialize writes version 3).
+inline constexpr std::uint32_t kFingerprintVersion = 3;
 
 std::vector<std::uint8_t> serialize(const Fingerprint& fp);
-// Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob. A version-1 blob
-// comes back with its scan descriptor recomputed (and so serialises to different bytes).
+// Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob. A blob of version 1 or
+// 2 comes back with its scan descriptor recomputed (and so serialises to different bytes): the layout keeps its
+// length (2 * rings old ring-key values become rings / 3 rings of orders 0-2 when rings divides by 3, else
+// rings rings of order 0) and the spectrum's other settings are DescriptorConfig's defaults.
 Fingerprint deserialize(std::span<const std::uint8_t> bytes);
 
 // The format version a blob's header names (0 when it is too short or not a fingerprint). Nothing is checked
@@ -57,8 +66,9 @@ Fingerprint deserialize(std::span<const std::uint8_t> bytes);
 std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes);
 
 // Whether two fingerprints describe the same scan: equal in everything stored, and scan descriptors equal
-// within float rounding (one read from format 1 had its descriptor recomputed, which can differ from a fresh
-// computation in the last bits).
+// within float rounding (one read from an older format had its descriptor recomputed, which can differ from a
+// fresh computation in the last bits). When their background height bands differ (a scan stored by a build
+// before format 3, sent again), the background view and the descriptor built from it are left out.
 bool sameScan(const Fingerprint& a, const Fingerprint& b);
 
 }  // namespace sglc

@@ -54,8 +54,9 @@ class Pipeline {
   // landmark role (no ids for trunk, pole or vehicle) gets those from the labeller; "always" ignores given
   // labels. `report` (optional) says which happened and warns about scans that cannot close loops.
   Fingerprint fingerprint(const LabelledScan& scan, ScanReport* report = nullptr) const;
-  // Coarse pose and the loop decision.
-  LoopResult verify(const Fingerprint& query, const Fingerprint& candidate) const;
+  // Coarse pose and the loop decision. When the landmarks give no loop, `background` allows a loop from the
+  // background alone (config.verify.background_*: scans with few nodes only).
+  LoopResult verify(const Fingerprint& query, const Fingerprint& candidate, bool background = true) const;
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
   // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result: from
   // its coarse pose and, when there is none, verification rejected it or the plane stage would leave its
@@ -67,6 +68,9 @@ class Pipeline {
   LoopResult match(const Fingerprint& query, const Fingerprint& candidate) const;
 
  private:
+  // A loop from the background alone (walls' headings, BEV overlay, planes), judged by the verify.background_*
+  // bars; `nodes` is the landmark result it replaces when it is one.
+  LoopResult backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes) const;
   // The fine and refine stages from the coarse pose; true when the plane stage's pose was kept.
   bool refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const;
   // The labels the scan is fingerprinted with when they are not the given ones: computed by the labeller, or

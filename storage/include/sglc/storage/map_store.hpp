@@ -278,6 +278,6 @@ bool isPostgresUrl(const std::string& path);
 std::string printableLocation(const std::string& path);
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 5;
+inline constexpr int kSchemaVersion = 6;
 
 }  // namespace sglc::storage
