@@ -19,6 +19,7 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
                                      const DescriptorConfig& config) {
   const int sectors = config.sectors;
   const double rmin = config.ring_min_m, rmax = config.ring_max_m;
+  const double half_ring = 0.5 * (rmax - rmin) / rings;
   const double inv_ring = rings / (rmax - rmin), inv_sector = sectors / (2.0 * std::numbers::pi);
   // Occupancy per (part, ring, sector) in [0, 1]. A cell is shared between the two rings whose centres are
   // nearest, in proportion to its distance from each: a wall a few metres nearer on another visit (the other
@@ -30,7 +31,9 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
       continue;
     const double x = (c.ix + 0.5) * cell, y = (c.iy + 0.5) * cell;
     const double rho = std::sqrt(x * x + y * y);
-    if (!(rho >= rmin && rho < rmax)) continue;
+    // Half a ring beyond each edge the outer rings' shares taper to zero instead of stopping at once (a facade
+    // standing near ring_min_m would otherwise count fully or not at all).
+    if (!(rho >= rmin - half_ring && rho < rmax + half_ring)) continue;
     const double at = (rho - rmin) * inv_ring - 0.5;  // ring coordinate: ring k's centre at k
     const int lo = static_cast<int>(std::floor(at));
     const auto w = static_cast<float>(at - lo);  // share of ring lo + 1

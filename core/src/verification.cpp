@@ -103,7 +103,7 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
       static_cast<int>(std::min(query.nodes.size(), candidate.nodes.size())) <= v.background_max_nodes;
   if (!ransac.found) {
     r.reason = r.matches < 3 ? "fewer than 3 node matches" : "no pose agrees with enough node matches";
-    return background && few_nodes ? backgroundLoop(query, candidate, std::move(r)) : r;
+    return background && few_nodes ? backgroundLoop(query, candidate, std::move(r), false) : r;
   }
   r.T = ransac.T;
   r.inliers = static_cast<int>(ransac.inliers.size());
@@ -116,7 +116,8 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   // are judged there.
   RefineResult planes;
   bool aligned = false;
-  if (r.graph_similarity >= t_g && v.align_max_shift_m > 0 && r.background_similarity >= v.align_min_background) {
+  const bool align_on = v.align_max_shift_m > 0 && c.refine.enabled;
+  if (r.graph_similarity >= t_g && align_on && r.background_similarity >= v.align_min_background) {
     planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
     aligned = planes.iterations > 0 && planes.rmse <= v.confirm_max_rmse_m &&
               detail::movedWithin(r.T, planes.T, v.align_max_shift_m, v.align_max_turn_deg) &&
@@ -138,16 +139,16 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
     r.is_loop = true;
   // Few node inliers are weak evidence (three or four landmarks align by chance between look-alike streets):
   // such a loop stands only if the background planes, aligned from the coarse pose, agree with it.
+  bool refuted = false;  // the planes, aligned from the landmarks' pose, did not confirm it
   if (r.is_loop && r.inliers < v.confirm_below_inliers) {
-    if (v.align_max_shift_m <= 0)
-      planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
-    const bool near = v.align_max_shift_m > 0
-                          ? aligned
-                          : detail::movedWithin(r.T, planes.T, c.refine.max_shift_m, c.refine.max_turn_deg);
+    if (!align_on) planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
+    const bool near =
+        align_on ? aligned : detail::movedWithin(r.T, planes.T, c.refine.max_shift_m, c.refine.max_turn_deg);
     if (!near || planes.iterations == 0 ||
         bandOverlap(query, candidate, planes.T, c.fingerprint.background_max_z_m, c.refine) < v.confirm_min_fitness ||
         planes.rmse > v.confirm_max_rmse_m || planes.horizontal_constraint < v.confirm_min_constraint) {
       r.is_loop = false;
+      refuted = true;
       r.reason = "few node inliers and the background planes do not confirm the pose";
     }
   }
@@ -155,12 +156,20 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   // The inlier node pairs, for the fine stage.
   r.inlier_pairs.reserve(ransac.inliers.size());
   for (int k : ransac.inliers) r.inlier_pairs.push_back(matches[k]);
-  return !r.is_loop && background && few_nodes ? backgroundLoop(query, candidate, std::move(r)) : r;
+  return !r.is_loop && background && few_nodes ? backgroundLoop(query, candidate, std::move(r), refuted) : r;
 }
 
-LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes) const {
+LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes,
+                                    bool refuted) const {
   const auto& c = config_;
   const auto& v = c.verify;
+  if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
+  // Planes that already refused the landmarks' pose are not overruled on a lower bar: then the background must
+  // also pass the plane confirmation's own limits.
+  const double min_overlap =
+      refuted ? std::max(v.background_min_overlap, v.confirm_min_fitness) : v.background_min_overlap;
+  const double min_constraint =
+      refuted ? std::max(v.background_min_constraint, v.confirm_min_constraint) : v.background_min_constraint;
   const auto headings = wallHeadings(query.planes, candidate.planes, 2);
   if (headings.empty()) return nodes;
   LoopResult best;
@@ -184,9 +193,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   const double translation = best.T.topRightCorner<3, 1>().norm();
   best.background_similarity =
       bevAgreement(query.background, candidate.background, query.background_cell, best.T, v.bev_cell_m, v.bev_radius_m);
-  if (best_overlap < v.background_min_overlap || best_planes.rmse > v.background_max_rmse_m ||
-      best_planes.horizontal_constraint < v.background_min_constraint ||
-      best.background_similarity < v.background_min_agreement ||
+  if (best_overlap < min_overlap || best_planes.rmse > v.background_max_rmse_m ||
+      best_planes.horizontal_constraint < min_constraint || best.background_similarity < v.background_min_agreement ||
       (v.max_translation > 0 && translation > v.max_translation))
     return nodes;  // the landmarks' verdict stands
   best.is_loop = true;

@@ -32,7 +32,7 @@ float squaredL2(const float* a, const float* b, int dim) {
 }
 
 constexpr std::uint32_t kSnapshotMagic = 0x58494753;  // "SGIX"
-constexpr std::uint32_t kSnapshotVersion = 2;         // 2: descriptors with soft-binned edges (fingerprint format 2)
+constexpr std::uint32_t kSnapshotVersion = 3;  // 2: soft-binned edges (fingerprint format 2); 3: structure spectrum (3)
 
 class FilterSelector : public faiss::IDSelector {
  public:

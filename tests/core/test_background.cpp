@@ -43,13 +43,25 @@ std::vector<BevCell> cellsAt(const std::vector<std::pair<double, double>>& range
 
 TEST(StructureSpectrum, ZeroWithoutStructure) {
   const DescriptorConfig cfg;
-  // Road only, and structure outside [ring_min, ring_max).
+  // Road only, and structure more than half a ring (2.81 m) outside [ring_min, ring_max).
   auto cells = cellsAt({{10, 0.1}, {20, 1.0}, {30, 2.0}}, Background::kRoad);
-  for (const auto& c : cellsAt({{3.0, 0.3}, {51.0, 0.3}, {70.0, 1.3}}, Background::kBuilding)) cells.push_back(c);
+  for (const auto& c : cellsAt({{2.0, 0.3}, {53.2, 0.3}, {70.0, 1.3}}, Background::kBuilding)) cells.push_back(c);
   const auto s = structureSpectrum(cells, 0.5, 8, 2, cfg);
   ASSERT_EQ(s.size(), 48u);
   for (float v : s) EXPECT_EQ(v, 0.0f);
   EXPECT_EQ(structureSpectrum({}, 0.5, 8, 2, cfg), std::vector<float>(48, 0.0f));
+  // Just outside the edges, the outer rings get a share that tapers: less than half, and less the farther out.
+  double previous = 0.5;
+  for (const double r : {50.5, 51.5, 52.5}) {
+    const auto t = structureSpectrum(cellsAt({{r, 0.3}}, Background::kBuilding), 0.5, 8, 2, cfg);
+    EXPECT_GT(t[7 * 3], 0.0f) << r;
+    EXPECT_LT(t[7 * 3], previous) << r;
+    previous = t[7 * 3];
+    for (int k = 0; k < 7 * 3; ++k) EXPECT_EQ(t[k], 0.0f) << r;
+  }
+  const auto inner = structureSpectrum(cellsAt({{4.0, 0.3}}, Background::kBuilding), 0.5, 8, 2, cfg);
+  EXPECT_GT(inner[0], 0.0f);
+  EXPECT_LT(inner[0], 0.5f);
 }
 
 TEST(StructureSpectrum, HandChecked) {

@@ -199,6 +199,14 @@ TEST_F(RealPipeline, LoopWithoutLandmarksIsFoundFromTheBackground) {
   expectPoseWithin(found.T, row.T_a_b, 0.10, 0.5, "background_loop_error");
   // Its information matrix is the planes' (the pose graph weighs the loop with it).
   EXPECT_GT(found.information.trace(), 0.0);
+  // Switched off (no background-only loops; or no BEV search, or no plane stage, which it needs): rejected.
+  for (const auto off :
+       {+[](Config& c) { c.verify.background_max_nodes = 0; }, +[](Config& c) { c.bev_search.enabled = false; },
+        +[](Config& c) { c.refine.enabled = false; }}) {
+    Config config = pipeline_->config();
+    off(config);
+    EXPECT_FALSE(Pipeline(config).match(fp("00/000052"), b).is_loop);
+  }
 }
 
 TEST_F(RealPipeline, LoopPairReverseDirection) {
@@ -236,7 +244,15 @@ TEST_F(RealPipeline, StagesCanBeDisabled) {
   none.refine.enabled = false;
   const LoopResult n = Pipeline(none).match(a, b);
   EXPECT_TRUE(n.refined);
-  EXPECT_TRUE((n.T.array() == coarse.T.array()).all());  // nothing moved the coarse pose
+  // Nothing moved the coarse pose: not the fine or plane stage, nor the plane alignment in verification (it is
+  // the plane stage's too).
+  const LoopResult unaligned = Pipeline(none).verify(a, b);
+  ASSERT_TRUE(unaligned.is_loop);
+  EXPECT_TRUE((n.T.array() == unaligned.T.array()).all());
+  Config no_align;
+  no_align.verify.align_max_shift_m = 0;
+  EXPECT_TRUE((Pipeline(no_align).verify(a, b).T.array() == unaligned.T.array()).all());
+  EXPECT_FALSE((coarse.T.array() == unaligned.T.array()).all());  // by default, verification aligns it
   // Fine stage only: fitness / rmse are the instance ICP's (header: "with the plane stage disabled").
   Config fine_only;
   fine_only.refine.enabled = false;

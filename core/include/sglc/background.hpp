@@ -34,10 +34,11 @@ std::vector<BevCell> bevCells(const Points& points, const std::vector<Background
 // Rotation-invariant background part of the scan descriptor (ours). The structure cells of a labelled BEV
 // (`cell` metres) between config.ring_min_m and ring_max_m fall, in two parts (building and fence; vegetation),
 // in `rings` rings of config.sectors sectors; each cell is shared between the two rings whose centres are
-// nearest, linearly, and a (ring, sector) holds at most 1. Per part and ring, the magnitudes
-// |sum_s occupied(s) exp(-2 pi i k s / sectors)| for k = 0..orders: order 0 counts the occupied sectors, higher
-// orders keep how the structure spreads around the sensor, and turning the scan changes only their phases.
-// 2 * rings * (orders + 1) values in that order (part, ring, k), unnormalised; all zero without structure.
+// nearest, linearly (tapering to nothing half a ring beyond either edge), and a (ring, sector) holds at most 1. Per
+// part and ring, the magnitudes |sum_s occupied(s) exp(-2 pi i k s / sectors)| for k = 0..orders: order 0 counts the
+// occupied sectors, higher orders keep how the structure spreads around the sensor, and turning the scan changes only
+// their phases. 2 * rings * (orders + 1) values in that order (part, ring, k), unnormalised; all zero without
+// structure.
 std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
                                      const DescriptorConfig& config);
 

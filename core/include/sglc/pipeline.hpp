@@ -69,8 +69,10 @@ class Pipeline {
 
  private:
   // A loop from the background alone (walls' headings, BEV overlay, planes), judged by the verify.background_*
-  // bars; `nodes` is the landmark result it replaces when it is one.
-  LoopResult backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes) const;
+  // bars, and also by the plane confirmation's when `refuted` (the planes already refused the landmarks' pose);
+  // `nodes` is the landmark result it replaces when it is one.
+  LoopResult backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes,
+                            bool refuted) const;
   // The fine and refine stages from the coarse pose; true when the plane stage's pose was kept.
   bool refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const;
   // The labels the scan is fingerprinted with when they are not the given ones: computed by the labeller, or
