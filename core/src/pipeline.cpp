@@ -167,9 +167,8 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
     for (const auto& [i, j] : r.inlier_pairs) instances.emplace_back(query.instance(i), candidate.instance(j));
     auto icp = icpInstances(instances, T, c.fine);
     // Guard: the fine stage only polishes; a large jump means it locked onto something else.
-    const Mat4d d = r.T.inverse() * icp.T;
-    if (icp.correspondences >= c.fine.min_correspondences && d.topRightCorner<3, 1>().norm() < c.fine.max_shift_m &&
-        detail::rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.fine.max_turn_deg) {
+    if (icp.correspondences >= c.fine.min_correspondences &&
+        detail::movedWithin(r.T, icp.T, c.fine.max_shift_m, c.fine.max_turn_deg)) {
       T = icp.T;
       r.fitness = icp.fitness;
       r.rmse = icp.rmse;
@@ -180,9 +179,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   bool kept = false;
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
-    const Mat4d d = T.inverse() * ref.T;
-    kept = ref.iterations > 0 && d.topRightCorner<3, 1>().norm() < c.refine.max_shift_m &&
-           detail::rotationAngleDeg(d.topLeftCorner<3, 3>()) < c.refine.max_turn_deg;
+    kept = ref.iterations > 0 && detail::movedWithin(T, ref.T, c.refine.max_shift_m, c.refine.max_turn_deg);
     if (kept) {
       T = ref.T;
       r.information = ref.information;
