@@ -209,6 +209,33 @@ TEST_F(FingerprintBlob, HeaderLayout) {
   EXPECT_EQ(headerWord(b, 3), crc32Ieee(b.data() + 16, b.size() - 16));
 }
 
+// A hostile height band (NaN, or minus infinity: no point could be kept) with a valid checksum is refused by
+// name; plus infinity (every height) is what older formats mean and loads.
+TEST_F(FingerprintBlob, BadHeightBandRejected) {
+  constexpr std::size_t kMaxZ = 16 + 5 + 2 + 2 + 16;  // after rings, orders and the four geometry floats
+  for (const float band : {std::numeric_limits<float>::quiet_NaN(), -std::numeric_limits<float>::infinity(),
+                           std::numeric_limits<float>::infinity()}) {
+    auto b = *blob_;
+    std::memcpy(b.data() + kMaxZ, &band, 4);
+    const auto crc = static_cast<std::uint32_t>(crc32(0L, b.data() + 16, static_cast<std::uint32_t>(b.size() - 16)));
+    std::memcpy(b.data() + 12, &crc, 4);
+    if (std::isinf(band) && band > 0) {
+      EXPECT_EQ(deserialize(b).background_max_z, band);
+      continue;
+    }
+    try {
+      deserialize(b);
+      ADD_FAILURE() << "loaded a band of " << band;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("height band"), std::string::npos) << e.what();
+    }
+  }
+  // The offset above is the band's: the stored value sits there.
+  float stored = 0;
+  std::memcpy(&stored, blob_->data() + kMaxZ, 4);
+  EXPECT_EQ(stored, fp_->background_max_z);
+}
+
 TEST_F(FingerprintBlob, TruncatedRejected) {
   const auto& b = *blob_;
   for (std::size_t len : {std::size_t{0}, std::size_t{3}, std::size_t{15}, std::size_t{16}, std::size_t{17},
