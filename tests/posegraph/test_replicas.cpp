@@ -126,7 +126,7 @@ TEST_F(Replicas, DeletionsAndLostLocksAreSeenByEveryServer) {
   ASSERT_TRUE(a->waitForVersion("m", 0, 120s));
   // a's lock connection ends (a network blip); b takes the map over, deletes robot "bad" and solves without it.
   storage::pg::Conn(db.options().path)
-      .exec("SELECT pg_terminate_backend(pid) FROM pg_locks WHERE locktype = 'advisory' AND granted");
+      .exec(storage::testing::kEndThisDatabasesLockHolders);
   auto b = std::make_unique<GraphOptimiser>(*store_b, fastPolls());
   const auto taken = solvedUntil(*b, 0, [](const GraphEvent&) { return true; });
   ASSERT_TRUE(taken && !taken->failed);

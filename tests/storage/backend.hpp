@@ -90,6 +90,12 @@ class Backend {
   std::vector<std::string> extra_;  // restored copies
 };
 
+// Ends the sessions holding an advisory lock (a map's graph lock) in the connection's own database: a network
+// blip as the store sees it. The cluster is shared by the tests CTest runs beside each other, so never wider.
+inline constexpr const char* kEndThisDatabasesLockHolders =
+    "SELECT pg_terminate_backend(pid) FROM pg_locks WHERE locktype = 'advisory' AND granted"
+    " AND database = (SELECT oid FROM pg_database WHERE datname = current_database())";
+
 // A test that runs once per back-end: TEST_P(OnBothBackends, Name) { auto store = db().open(); ... }
 class OnBothBackends : public ::testing::TestWithParam<std::string> {
  protected:

@@ -308,7 +308,7 @@ TEST_F(PostgresStore, OneStoreAtATimeHoldsAMapsGraphAndItsCloseFreesIt) {
   auto c = backend_.open();
   EXPECT_EQ(c->claimGraph(id), Claim::kElsewhere);
   pg::Conn(backend_.options().path)
-      .exec("SELECT pg_terminate_backend(pid) FROM pg_locks WHERE locktype = 'advisory' AND granted");
+      .exec(testing::kEndThisDatabasesLockHolders);
   EXPECT_TRUE(eventually([&] { return c->claimGraph(id) == Claim::kTaken; }));  // once the ended session is gone
   EXPECT_EQ(b->claimGraph(id), Claim::kElsewhere);
   EXPECT_EQ(b->claimGraph(other), Claim::kTaken);  // b lost its connection too: taken again, not "held"
