@@ -70,6 +70,20 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
   return out;
 }
 
+double viewSpanDeg(const std::vector<BevCell>& cells, double cell, double min_range) {
+  constexpr int kSectors = 36;
+  std::array<bool, kSectors> seen{};
+  const double min_sq = min_range * min_range;
+  for (const auto& c : cells) {
+    const double x = (c.ix + 0.5) * cell, y = (c.iy + 0.5) * cell;
+    if (x * x + y * y < min_sq) continue;
+    const double a = std::atan2(y, x) + std::numbers::pi;  // [0, 2 pi]
+    seen[static_cast<std::size_t>(std::min(kSectors - 1, static_cast<int>(a * kSectors / (2.0 * std::numbers::pi))))] =
+        true;
+  }
+  return 360.0 * static_cast<double>(std::count(seen.begin(), seen.end(), true)) / kSectors;
+}
+
 std::vector<BevCell> bevCells(const Points& points, const std::vector<Background>& point_bg, double cell,
                               double max_range, double max_z) {
   // A dense grid over the disc: cheaper than hashing ~100k points, and the scan comes out sorted.

@@ -194,6 +194,8 @@ void addVerification(Table<Config>& t) {
                       "background-only loops: least background agreement"));
   t.add(field<Config>(SGLC_KEY(verify.background_min_overlay), closed(0, 1),
                       "background-only loops: least agreement of an overlay before its plane fit"));
+  t.add(field<Config>(SGLC_KEY(verify.background_min_view_deg), closed(0, 360),
+                      "background-only loops: least share of the horizon each scan saw (deg)"));
   t.rule({"verify.bev_radius_m", "verify.bev_cell_m"}, "at most 2000 cells apart",
          [](const Config& c) { return c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000; });
 }

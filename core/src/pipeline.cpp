@@ -133,8 +133,9 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
     rep.warnings.push_back("no point carries a label the active label map (labels.preset: " + c.labels.preset +
                            ") uses: check the label set, or send the scan without labels");
   else if (fp.nodes.size() < 3)
-    rep.warnings.push_back("only " + std::to_string(fp.nodes.size()) +
-                           " landmarks (vehicle, trunk and pole instances): loops cannot be verified from this scan");
+    rep.warnings.push_back(
+        "only " + std::to_string(fp.nodes.size()) +
+        " landmarks (vehicle, trunk and pole instances): loops from this scan rest on its background alone");
   return fp;
 }
 

@@ -164,6 +164,11 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   const auto& c = config_;
   const auto& v = c.verify;
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
+  // Bearings nearer than two grid cells are too coarse to say where a sensor looked.
+  const double near_m = 2.0 * v.bev_cell_m;
+  if (std::min(viewSpanDeg(query.background, query.background_cell, near_m),
+               viewSpanDeg(candidate.background, candidate.background_cell, near_m)) < v.background_min_view_deg)
+    return nodes;
   // Planes that already refused the landmarks' pose are not overruled on a lower bar: then the background must
   // also pass the plane confirmation's own limits.
   const double min_overlap =

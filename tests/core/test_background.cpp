@@ -336,6 +336,24 @@ TEST(BevAgreement, ClassMismatchCounts) {
   EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 0.5, 10.0), 0.5);
 }
 
+TEST(ViewSpan, CountsTheTenDegreeSectorsHoldingACell) {
+  EXPECT_EQ(viewSpanDeg({}, 0.5, 0.0), 0.0);
+  // Road all around at 10 m: the whole horizon.
+  std::vector<std::pair<double, double>> ring;
+  for (int k = 0; k < 36; ++k) ring.emplace_back(10.0, deg2rad(10.0 * k + 5.0));
+  EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt(ring, Background::kRoad), 0.5, 4.0), 360.0);
+  // A 70 deg wedge ahead (-35..35 deg, road and a wall) touches 8 sectors at most.
+  std::vector<std::pair<double, double>> wedge;
+  for (double a = -35.0; a <= 35.0; a += 1.0)
+    for (double r : {6.0, 15.0, 30.0}) wedge.emplace_back(r, deg2rad(a));
+  const double span = viewSpanDeg(cellsAt(wedge, Background::kBuilding), 0.5, 4.0);
+  EXPECT_GE(span, 70.0);
+  EXPECT_LE(span, 90.0);
+  // Cells nearer than min_range are not counted: their bearing is too coarse.
+  EXPECT_EQ(viewSpanDeg(cellsAt({{1.0, 0.0}, {1.0, 3.0}}, Background::kRoad), 0.5, 4.0), 0.0);
+  EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt({{1.0, 0.0}, {1.0, 3.0}}, Background::kRoad), 0.5, 0.0), 20.0);
+}
+
 TEST(ExtractPlanes, FlatFloorFacesSensor) {
   BgCloud c;
   // Floor 1.7 m below the sensor, offset so no point sits on a voxel face.

@@ -6,10 +6,12 @@
 
 #include <fstream>
 #include <map>
+#include <numbers>
 #include <sstream>
 #include <thread>
 
 #include "dense_registration.hpp"
+#include "sglc/background.hpp"
 #include "sglc/io.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/registration.hpp"
@@ -207,6 +209,35 @@ TEST_F(RealPipeline, LoopWithoutLandmarksIsFoundFromTheBackground) {
     off(config);
     EXPECT_FALSE(Pipeline(config).match(fp("00/000052"), b).is_loop);
   }
+}
+
+// A narrow field of view (a solid-state sensor's 70 deg) is not trusted for a loop from the background alone:
+// walls seen in a wedge overlay on too many other streets (simulated rosette queries: 2 of 11 such loops false).
+// The stripped loop's candidate, cut to a 70 deg wedge, is refused, though the same wedge gives the right pose
+// once verify.background_min_view_deg lets it through.
+TEST_F(RealPipeline, NarrowViewGivesNoBackgroundOnlyLoop) {
+  LabelledScan wedge = scan00("004501");
+  const LabelMap labels(pipeline_->config().labels);
+  LabelledScan cut;
+  for (std::size_t i = 0; i < wedge.points.size(); ++i) {
+    const auto& p = wedge.points[i];
+    const double off_axis = std::remainder(std::atan2(p.y(), p.x()) - std::numbers::pi / 4, 2 * std::numbers::pi);
+    if (labels.nodeClass(wedge.labels[i]) >= 0 || std::abs(off_axis) > 35.0 * std::numbers::pi / 180.0) continue;
+    cut.points.push_back(p);
+    cut.labels.push_back(wedge.labels[i]);
+  }
+  const Fingerprint b = pipeline_->fingerprint(cut);
+  const auto& v = pipeline_->config().verify;
+  EXPECT_LE(viewSpanDeg(b.background, b.background_cell, 2.0 * v.bev_cell_m), 90.0);
+  EXPECT_GE(viewSpanDeg(fp("00/000052").background, b.background_cell, 2.0 * v.bev_cell_m), 300.0);
+  const LoopResult refused = pipeline_->match(fp("00/000052"), b);
+  EXPECT_FALSE(refused.is_loop);
+  Config open = pipeline_->config();
+  open.verify.background_min_view_deg = 0;
+  const LoopResult let = Pipeline(open).match(fp("00/000052"), b);
+  ASSERT_TRUE(let.is_loop) << let.reason;
+  EXPECT_EQ(let.inliers, 0);  // from the background alone
+  expectPoseWithin(let.T, loopRow().T_a_b, 0.10, 0.5, "wedge_background_loop_error");
 }
 
 TEST_F(RealPipeline, LoopPairReverseDirection) {

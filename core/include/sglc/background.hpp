@@ -42,6 +42,12 @@ std::vector<BevCell> bevCells(const Points& points, const std::vector<Background
 std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
                                      const DescriptorConfig& config);
 
+// How much of the horizon a scan saw (ours): of 36 azimuth sectors of 10 deg around the sensor, the share holding
+// a labelled BEV cell (road or structure) beyond `min_range` metres, in degrees (0-360). A spinning LiDAR sees
+// road all around it, so 360 less what a truck beside it hides; a forward-looking solid-state sensor sees its
+// field of view (about 70 deg for a Livox Avia's rosette). Cells nearer than min_range have too coarse a bearing.
+double viewSpanDeg(const std::vector<BevCell>& cells, double cell, double min_range);
+
 // Plane features of road, building and fence points: one per voxel with enough, flat enough points.
 // Normals face the sensor. Sorted by voxel.
 std::vector<Plane> extractPlanes(const Points& points, const std::vector<Background>& point_bg,

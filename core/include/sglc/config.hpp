@@ -151,16 +151,21 @@ struct VerifyConfig {
   // background_max_rmse_m, horizontal constraint at least background_min_constraint, background agreement at
   // least background_min_agreement, and |t| within max_translation. Overlays whose background agreement is
   // below background_min_overlay before the plane fit are dropped (simulated VLP-16 queries against an HDL-64
-  // map: accepted true loops had 0.45 or more, the best overlay of other places a median of 0.26). A search
+  // map: accepted true loops had 0.45 or more, the best overlay of other places a median of 0.26). The agreement
+  // bar equals t_b: VLP-16 queries at their true place, with the pose within 0.5 m, had a median agreement of 0.53,
+  // and 0.55 turned half of them away (docs/METHOD.md, section 8). A search
   // costs a few milliseconds, so a loop finder tries it on the first background_candidates candidates of a
-  // query only (in descriptor order). background_max_nodes 0 disables it.
+  // query only (in descriptor order). background_max_nodes 0 disables it. Both scans must have seen at least
+  // background_min_view_deg of the horizon (viewSpanDeg): the walls in a narrow field of view (a solid-state
+  // sensor's 70 deg) overlay on too many other streets, and the planes seen in it fix a pose along none.
   int background_max_nodes = 24;
   int background_candidates = 3;
   double background_min_overlap = 0.3;
   double background_max_rmse_m = 0.1;
   double background_min_constraint = 0.5;
-  double background_min_agreement = 0.55;
+  double background_min_agreement = 0.45;
   double background_min_overlay = 0.4;
+  double background_min_view_deg = 180.0;
 };
 
 struct FingerprintConfig {
