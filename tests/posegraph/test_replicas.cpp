@@ -125,8 +125,7 @@ TEST_F(Replicas, DeletionsAndLostLocksAreSeenByEveryServer) {
   auto a = std::make_unique<GraphOptimiser>(*store_a, fastPolls());
   ASSERT_TRUE(a->waitForVersion("m", 0, 120s));
   // a's lock connection ends (a network blip); b takes the map over, deletes robot "bad" and solves without it.
-  storage::pg::Conn(db.options().path)
-      .exec(storage::testing::kEndThisDatabasesLockHolders);
+  storage::pg::Conn(db.options().path).exec(storage::testing::kEndThisDatabasesLockHolders);
   auto b = std::make_unique<GraphOptimiser>(*store_b, fastPolls());
   const auto taken = solvedUntil(*b, 0, [](const GraphEvent&) { return true; });
   ASSERT_TRUE(taken && !taken->failed);

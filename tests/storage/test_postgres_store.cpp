@@ -307,8 +307,7 @@ TEST_F(PostgresStore, OneStoreAtATimeHoldsAMapsGraphAndItsCloseFreesIt) {
   // and a lock taken again says so (what the holder knew may be stale).
   auto c = backend_.open();
   EXPECT_EQ(c->claimGraph(id), Claim::kElsewhere);
-  pg::Conn(backend_.options().path)
-      .exec(testing::kEndThisDatabasesLockHolders);
+  pg::Conn(backend_.options().path).exec(testing::kEndThisDatabasesLockHolders);
   EXPECT_TRUE(eventually([&] { return c->claimGraph(id) == Claim::kTaken; }));  // once the ended session is gone
   EXPECT_EQ(b->claimGraph(id), Claim::kElsewhere);
   EXPECT_EQ(b->claimGraph(other), Claim::kTaken);  // b lost its connection too: taken again, not "held"
