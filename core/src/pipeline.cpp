@@ -135,7 +135,9 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
   else if (fp.nodes.size() < 3)
     rep.warnings.push_back(
         "only " + std::to_string(fp.nodes.size()) +
-        " landmarks (vehicle, trunk and pole instances): loops from this scan rest on its background alone");
+        " landmarks (vehicle, trunk and pole instances): a loop can be verified only from the background, and only"
+        " where background-only loops are on (verify.background_max_nodes) and the scan saw"
+        " verify.background_min_view_deg of the horizon");
   return fp;
 }
 

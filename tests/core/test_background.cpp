@@ -342,13 +342,14 @@ TEST(ViewSpan, CountsTheTenDegreeSectorsHoldingACell) {
   std::vector<std::pair<double, double>> ring;
   for (int k = 0; k < 36; ++k) ring.emplace_back(10.0, deg2rad(10.0 * k + 5.0));
   EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt(ring, Background::kRoad), 0.5, 4.0), 360.0);
-  // A 70 deg wedge ahead (-35..35 deg, road and a wall) touches 8 sectors at most.
+  // A 70 deg wedge ahead (-35..35 deg, road and a wall) touches the 8 sectors from -40 to 40 deg.
   std::vector<std::pair<double, double>> wedge;
   for (double a = -35.0; a <= 35.0; a += 1.0)
     for (double r : {6.0, 15.0, 30.0}) wedge.emplace_back(r, deg2rad(a));
-  const double span = viewSpanDeg(cellsAt(wedge, Background::kBuilding), 0.5, 4.0);
-  EXPECT_GE(span, 70.0);
-  EXPECT_LE(span, 90.0);
+  EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt(wedge, Background::kBuilding), 0.5, 4.0), 80.0);
+  // Behind the sensor, on either side of the +-180 deg seam: one sector each.
+  EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt({{20.0, deg2rad(175.0)}, {20.0, deg2rad(-175.0)}}, Background::kRoad), 0.5, 4.0),
+                   20.0);
   // Cells nearer than min_range are not counted: their bearing is too coarse.
   EXPECT_EQ(viewSpanDeg(cellsAt({{1.0, 0.0}, {1.0, 3.0}}, Background::kRoad), 0.5, 4.0), 0.0);
   EXPECT_DOUBLE_EQ(viewSpanDeg(cellsAt({{1.0, 0.0}, {1.0, 3.0}}, Background::kRoad), 0.5, 0.0), 20.0);
