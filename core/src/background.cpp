@@ -15,6 +15,15 @@ namespace sglc {
 
 using detail::ClassVotes;
 
+namespace {
+
+// Azimuth sector (0 .. sectors - 1, from -pi) of the point (x, y) around the sensor; inv_sector = sectors / 2 pi.
+int azimuthSector(double x, double y, double inv_sector, int sectors) {
+  return std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors - 1);
+}
+
+}  // namespace
+
 std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
                                      const DescriptorConfig& config) {
   const int sectors = config.sectors;
@@ -37,7 +46,7 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
     const double at = (rho - rmin) * inv_ring - 0.5;  // ring coordinate: ring k's centre at k
     const int lo = static_cast<int>(std::floor(at));
     const auto w = static_cast<float>(at - lo);  // share of ring lo + 1
-    const int sector = std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors - 1);
+    const int sector = azimuthSector(x, y, inv_sector, sectors);
     const int part = c.cls == static_cast<std::uint8_t>(Background::kVegetation) ? 1 : 0;
     for (const auto& [ring, share] : {std::pair{lo, 1.0f - w}, std::pair{lo + 1, w}}) {
       if (ring < 0 || ring >= rings) continue;  // the innermost and outermost half rings keep their own share only
@@ -73,13 +82,10 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
 double viewSpanDeg(const std::vector<BevCell>& cells, double cell, double min_range) {
   constexpr int kSectors = 36;
   std::array<bool, kSectors> seen{};
-  const double min_sq = min_range * min_range;
+  const double min_sq = min_range * min_range, inv_sector = kSectors / (2.0 * std::numbers::pi);
   for (const auto& c : cells) {
     const double x = (c.ix + 0.5) * cell, y = (c.iy + 0.5) * cell;
-    if (x * x + y * y < min_sq) continue;
-    const double a = std::atan2(y, x) + std::numbers::pi;  // [0, 2 pi]
-    seen[static_cast<std::size_t>(std::min(kSectors - 1, static_cast<int>(a * kSectors / (2.0 * std::numbers::pi))))] =
-        true;
+    if (x * x + y * y >= min_sq) seen[static_cast<std::size_t>(azimuthSector(x, y, inv_sector, kSectors))] = true;
   }
   return 360.0 * static_cast<double>(std::count(seen.begin(), seen.end(), true)) / kSectors;
 }

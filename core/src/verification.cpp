@@ -11,8 +11,6 @@
 namespace sglc {
 namespace {
 
-constexpr double kViewMinRangeM = 4.0;  // viewSpanDeg's near limit for the background-only gate
-
 bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
   return a.layout.num_classes == b.layout.num_classes && a.layout.bins == b.layout.bins &&
          a.layout.k_eigen == b.layout.k_eigen && a.layout.rings == b.layout.rings &&
@@ -166,14 +164,12 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   const auto& c = config_;
   const auto& v = c.verify;
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
-  // A narrow view's walls overlay on too many streets. Bearings of cells nearer than kViewMinRangeM are too
-  // coarse to say where a sensor looked.
-  if (std::min(viewSpanDeg(query.background, query.background_cell, kViewMinRangeM),
-               viewSpanDeg(candidate.background, candidate.background_cell, kViewMinRangeM)) <
-      v.background_min_view_deg) {
+  // A narrow view's walls overlay on too many streets.
+  if (viewSpanDeg(query.background, query.background_cell) < v.background_min_view_deg ||
+      viewSpanDeg(candidate.background, candidate.background_cell) < v.background_min_view_deg) {
     nodes.reason =
-        "too few node matches, and a view below verify.background_min_view_deg has no loop from its "
-        "background alone";
+        "no loop from the landmarks, and a scan that saw less than verify.background_min_view_deg of the horizon "
+        "gets none from its background alone";
     return nodes;
   }
   // Planes that already refused the landmarks' pose are not overruled on a lower bar: then the background must

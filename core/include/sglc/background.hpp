@@ -45,8 +45,10 @@ std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double c
 // How much of the horizon a scan saw (ours): of 36 azimuth sectors of 10 deg around the sensor, the share holding
 // a labelled BEV cell (road or structure) beyond `min_range` metres, in degrees (0-360). A spinning LiDAR sees
 // road all around it, so 360 less what a truck beside it hides; a forward-looking solid-state sensor sees its
-// field of view (about 70 deg for a Livox Avia's rosette). Cells nearer than min_range have too coarse a bearing.
-double viewSpanDeg(const std::vector<BevCell>& cells, double cell, double min_range);
+// field of view (about 70 deg for a Livox Avia's rosette). Cells nearer than min_range have too coarse a bearing;
+// the background-only loop gate (VerifyConfig::background_min_view_deg) counts from kViewSpanMinRangeM.
+inline constexpr double kViewSpanMinRangeM = 4.0;
+double viewSpanDeg(const std::vector<BevCell>& cells, double cell, double min_range = kViewSpanMinRangeM);
 
 // Plane features of road, building and fence points: one per voxel with enough, flat enough points.
 // Normals face the sensor. Sorted by voxel.
