@@ -210,7 +210,7 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 }
 
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
-                    const Mat4d& T_q_c, double grid_cell, double radius) {
+                    const Mat4d& T_q_c, double grid_cell, double radius, StructureClasses classes) {
   const int g = static_cast<int>(std::ceil(2.0 * radius / grid_cell));
   const double inv = 1.0 / grid_cell;
   std::vector<ClassVotes> q(static_cast<std::size_t>(g) * g), c(q.size());
@@ -248,7 +248,7 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
       if (a <= kRoad && b <= kRoad) continue;  // no structure in either: road agrees with any street
       if (!seen(wq, x, y) || !seen(wc, x, y)) continue;
       ++judged;
-      same += a == b;
+      same += a == b || (classes == StructureClasses::kMerged && a > kRoad && b > kRoad);
     }
   return judged == 0 ? 0.0 : static_cast<double>(same) / static_cast<double>(judged);
 }

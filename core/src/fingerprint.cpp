@@ -10,8 +10,9 @@
 namespace sglc {
 namespace {
 
-constexpr std::uint32_t kMagic = 0x50464753;  // "SGFP" little-endian
-constexpr std::size_t kHeaderBytes = 16;      // magic, version, payload length, crc32
+constexpr std::uint32_t kMagic = 0x50464753;    // "SGFP" little-endian
+constexpr std::size_t kHeaderBytes = 16;        // magic, version, payload length, crc32
+constexpr std::uint8_t kLabellerStructure = 1;  // flags byte (format 4 on), bit 0
 
 class Writer {
  public:
@@ -81,6 +82,7 @@ std::vector<std::uint8_t> serialize(const Fingerprint& fp) {
   w.put(fp.background_cell);
   w.put(fp.plane_voxel);
   w.put(fp.background_max_z);
+  w.put<std::uint8_t>(fp.labeller_structure ? kLabellerStructure : 0);
   w.put(fp.num_points);
   w.put(static_cast<std::uint32_t>(fp.nodes.size()));
   for (std::size_t i = 0; i < fp.nodes.size(); ++i) {
@@ -161,6 +163,11 @@ void readGeometry(Reader& r, std::uint32_t version, Fingerprint& fp) {
     if (std::isnan(fp.background_max_z) || fp.background_max_z == -std::numeric_limits<float>::infinity())
       throw InputError("fingerprint: invalid background height band");
   }
+  if (version >= 4) {
+    const auto flags = r.get<std::uint8_t>();
+    if (flags & ~kLabellerStructure) throw InputError("fingerprint: unknown flags");
+    fp.labeller_structure = (flags & kLabellerStructure) != 0;
+  }
   // The same ranges validateConfig enforces, and a layout that agrees with them.
   if (!(fp.d_max > 0 && fp.d_max < 1000 && fp.d_i > 0 && fp.d_max / fp.d_i <= 1000 && fp.background_cell >= 0.05f &&
         fp.plane_voxel > 0.05f && fp.layout.k_eigen <= 1000 && fp.layout.rings <= 1000))
@@ -237,6 +244,11 @@ std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes) {
 }
 
 bool sameScan(const Fingerprint& a, const Fingerprint& b) {
+  if (a.labeller_structure != b.labeller_structure) {
+    Fingerprint x = b;
+    x.labeller_structure = a.labeller_structure;
+    return sameScan(a, x);
+  }
   if (a.background_max_z != b.background_max_z) {
     // Another height band: compare the rest (nodes, instances, planes); its background view must differ.
     Fingerprint x = a, y = b;

@@ -112,6 +112,7 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
   fp.background_cell = static_cast<float>(c.fingerprint.background_cell_m);
   fp.plane_voxel = static_cast<float>(c.fingerprint.plane_voxel_m);
   fp.num_points = static_cast<std::uint32_t>(n);
+  fp.labeller_structure = rep.label_source == ScanReport::LabelSource::kComputed;
 
   const auto clusters = clusterInstances(node_points, node_class, c.cluster);
   std::vector<int> kept;

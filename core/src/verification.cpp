@@ -18,6 +18,11 @@ bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
          a.background_cell == b.background_cell && a.plane_voxel == b.plane_voxel;
 }
 
+// Building against vegetation is evidence only where neither scan's classes came from the built-in labeller.
+StructureClasses structureClasses(const Fingerprint& a, const Fingerprint& b) {
+  return a.labeller_structure || b.labeller_structure ? StructureClasses::kMerged : StructureClasses::kCompared;
+}
+
 // RANSAC over the matched node centres (not found with fewer than 3 matches).
 RansacResult coarsePose(const Fingerprint& query, const Fingerprint& candidate, const std::vector<Match>& matches,
                         const RansacConfig& config) {
@@ -109,7 +114,8 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   r.inliers = static_cast<int>(ransac.inliers.size());
   r.graph_similarity = std::exp(-ransac.mean_residual);
   auto agreement = [&](const Mat4d& T) {
-    return bevAgreement(query.background, candidate.background, query.background_cell, T, v.bev_cell_m, v.bev_radius_m);
+    return bevAgreement(query.background, candidate.background, query.background_cell, T, v.bev_cell_m, v.bev_radius_m,
+                        structureClasses(query, candidate));
   };
   r.background_similarity = agreement(r.T);
   // The coarse pose aligned on the background planes (section 8): the background and the plane confirmation
@@ -178,6 +184,7 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
       refuted ? std::max(v.background_min_overlap, v.confirm_min_fitness) : v.background_min_overlap;
   const double min_constraint =
       refuted ? std::max(v.background_min_constraint, v.confirm_min_constraint) : v.background_min_constraint;
+  const auto classes = structureClasses(query, candidate);
   const auto headings = wallHeadings(query.planes, candidate.planes, 2);
   if (headings.empty()) return nodes;
   LoopResult best;
@@ -186,8 +193,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   for (const auto& h :
        searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search, headings, false)) {
     // Most overlays of another place disagree already: spare them the plane fit.
-    if (bevAgreement(query.background, candidate.background, query.background_cell, h.T, v.bev_cell_m, v.bev_radius_m) <
-        v.background_min_overlay)
+    if (bevAgreement(query.background, candidate.background, query.background_cell, h.T, v.bev_cell_m, v.bev_radius_m,
+                     classes) < v.background_min_overlay)
       continue;
     auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
     if (planes.iterations == 0 || planes.correspondences < c.bev_search.min_correspondences) continue;
@@ -199,8 +206,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   }
   if (best_overlap < 0) return nodes;
   const double translation = best.T.topRightCorner<3, 1>().norm();
-  best.background_similarity =
-      bevAgreement(query.background, candidate.background, query.background_cell, best.T, v.bev_cell_m, v.bev_radius_m);
+  best.background_similarity = bevAgreement(query.background, candidate.background, query.background_cell, best.T,
+                                            v.bev_cell_m, v.bev_radius_m, classes);
   if (best_overlap < min_overlap || best_planes.rmse > v.background_max_rmse_m ||
       best_planes.horizontal_constraint < min_constraint || best.background_similarity < v.background_min_agreement ||
       (v.max_translation > 0 && translation > v.max_translation))

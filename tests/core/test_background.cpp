@@ -12,11 +12,6 @@ namespace {
 
 using test::deg2rad;
 
-Vec3f polar(double r, double angle_rad, double z = -1.0) {
-  return Vec3f(static_cast<float>(r * std::cos(angle_rad)), static_cast<float>(r * std::sin(angle_rad)),
-               static_cast<float>(z));
-}
-
 // Angle of the centre of one-degree sector k (sectors start at -pi).
 double sectorCentre(int k) { return -std::numbers::pi + deg2rad(k + 0.5); }
 
@@ -235,6 +230,22 @@ TEST(BevAgreement, GridCellsTakeTheMajorityOfTheirStoredCells) {
   const std::vector<BevCell> road{{0, 0, 1}, {1, 0, 1}, {0, 1, 1}, {1, 1, 2}}, veg{{2, 2, 2}};
   EXPECT_DOUBLE_EQ(bevAgreement(road, veg, 0.5, Mat4d::Identity(), 2.0, 10.0), 1.0);
   EXPECT_DOUBLE_EQ(bevAgreement(a, veg, 0.5, Mat4d::Identity(), 2.0, 10.0), 0.0);
+}
+
+// With the structure classes merged (views labelled by the built-in labeller), building against vegetation
+// agrees; structure against road, and structure where the other view saw nothing, are judged as before.
+TEST(BevAgreement, MergedClassesCompareStructureAgainstRoadOnly) {
+  constexpr auto kMerged = StructureClasses::kMerged;
+  // Grid cells of 2 m: (0, 0) building in a, vegetation in b; (1, 0) fence in a, road in b.
+  const std::vector<BevCell> a{{0, 0, 3}, {4, 0, 4}}, b{{0, 0, 2}, {4, 0, 1}};
+  EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 2.0, 10.0), 0.0);
+  EXPECT_DOUBLE_EQ(bevAgreement(a, b, 0.5, Mat4d::Identity(), 2.0, 10.0, kMerged), 0.5);
+  const std::vector<BevCell> road{{0, 0, 1}, {4, 0, 1}};
+  EXPECT_DOUBLE_EQ(bevAgreement(a, road, 0.5, Mat4d::Identity(), 2.0, 10.0, kMerged), 0.0);
+  // Vegetation 20 m away from anything the other view holds: not judged, in either mode.
+  const std::vector<BevCell> far{{0, 0, 2}, {40, 0, 2}}, near{{0, 0, 3}};
+  EXPECT_DOUBLE_EQ(bevAgreement(far, near, 0.5, Mat4d::Identity(), 2.0, 30.0), 0.0);
+  EXPECT_DOUBLE_EQ(bevAgreement(far, near, 0.5, Mat4d::Identity(), 2.0, 30.0, kMerged), 1.0);
 }
 
 // An asymmetric place: a road, facades along both sides with a cross wall each, a hedge of vegetation and a

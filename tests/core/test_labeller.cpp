@@ -259,6 +259,9 @@ TEST(PipelineLabels, UnlabelledScansAreLabelledAndReported) {
   const auto fp = pipeline.fingerprint(scan, &report);
   EXPECT_EQ(report.label_source, ScanReport::LabelSource::kComputed);
   EXPECT_FALSE(fp.background.empty());
+  EXPECT_TRUE(fp.labeller_structure);  // its building / vegetation split is the labeller's
+  EXPECT_TRUE(deserialize(serialize(fp)).labeller_structure);
+  EXPECT_FALSE(pipeline.fingerprint(viewFrom(makeStreetWorld(), Mat4d::Identity())).labeller_structure);
   Config off;
   off.labeller.mode = "off";
   EXPECT_THROW(Pipeline(off).fingerprint(scan), InputError);
@@ -283,6 +286,7 @@ TEST(PipelineLabels, AutoModeFillsTheRolesALabelSetLacks) {
   int poles = 0;
   for (const auto& n : fp.nodes) poles += n.cls != 0;  // 0 = vehicle
   EXPECT_GE(poles, 3) << "the labeller found no pole-like landmark to fill in";
+  EXPECT_FALSE(fp.labeller_structure);  // building and vegetation are the given labels' own
   nu.labeller.mode = "off";
   ScanReport given;
   const auto plain = Pipeline(nu).fingerprint(scan, &given);

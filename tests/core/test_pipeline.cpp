@@ -434,6 +434,39 @@ TEST(SyntheticPipeline, TwoViewsOfTheSameStreet) {
     EXPECT_LT((test::apply(T_a_b, b.nodes[j].center) - a.nodes[i].center).norm(), 0.3) << i << "," << j;
 }
 
+// Building against vegetation is evidence only between views whose classes were given: once either view's
+// classes are the built-in labeller's (labeller_structure), verification compares structure against road. Here
+// the candidate's structure classes are swapped (building <-> vegetation), as an unrepeatable labeller may.
+TEST(SyntheticPipeline, LabellerClassesAreComparedAsStructure) {
+  const LabelledScan world = test::makeStreetWorld();
+  const Pipeline p;
+  const Fingerprint a = p.fingerprint(test::viewFrom(world, test::makeT(0.0, 0.0, 0.0, 0.0)));
+  const Fingerprint b = p.fingerprint(test::viewFrom(world, test::makeT(25.0, 4.0, 1.5, 0.0)));
+  const LoopResult given = p.verify(a, b);
+  ASSERT_TRUE(given.is_loop) << given.reason;
+  Fingerprint swapped = b;
+  int changed = 0;
+  for (auto& c : swapped.background) {
+    const auto building = static_cast<std::uint8_t>(Background::kBuilding),
+               vegetation = static_cast<std::uint8_t>(Background::kVegetation);
+    if (c.cls == building || c.cls == vegetation) {
+      c.cls = c.cls == building ? vegetation : building;
+      ++changed;
+    }
+  }
+  ASSERT_GT(changed, 50);
+  const LoopResult compared = p.verify(a, swapped);
+  EXPECT_LT(compared.background_similarity, given.background_similarity - 0.3);
+  EXPECT_FALSE(compared.is_loop);
+  for (const bool query_side : {false, true}) {
+    Fingerprint q = a, c = swapped;
+    (query_side ? q : c).labeller_structure = true;
+    const LoopResult merged = p.verify(q, c);
+    EXPECT_TRUE(merged.is_loop) << merged.reason;
+    EXPECT_GE(merged.background_similarity, given.background_similarity);
+  }
+}
+
 // The guards of the fine and plane stages are parameters: a stage whose move exceeds its limit is dropped and
 // the coarse pose stays; with the default limits each stage moves it. (Verification's own plane alignment is
 // off here, so that the pose it hands on is RANSAC's.)

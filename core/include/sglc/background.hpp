@@ -62,8 +62,12 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 // them holding the same class in both (0 when none is judged). Road against road says little (any two streets
 // agree), and structure that one view has no return near was hidden from it or outside its field of view: a
 // sparser or differently aimed sensor is not counted against (ours; the paper compares background descriptors,
-// the reference scores a polar grid by priority class).
+// the reference scores a polar grid by priority class). kMerged compares structure against road only
+// (building, fence and vegetation count as one class): for views whose classes the built-in labeller computed,
+// whose split of structure into building and vegetation is not repeatable from visit to visit.
+enum class StructureClasses { kCompared, kMerged };
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
-                    const Mat4d& T_q_c, double grid_cell, double radius);
+                    const Mat4d& T_q_c, double grid_cell, double radius,
+                    StructureClasses classes = StructureClasses::kCompared);
 
 }  // namespace sglc

@@ -26,6 +26,10 @@ struct Fingerprint {
   // Structure points above this height (sensor frame) were left out of `background` (format 3 on); +inf for
   // fingerprints of formats 1 and 2, whose background view holds every height.
   float background_max_z = std::numeric_limits<float>::infinity();
+  // The structure classes of `background` and `planes` were computed by the built-in labeller (the scan came
+  // without labels; format 4 on, false for older formats). Background agreement with such a scan compares
+  // structure against road, not building against vegetation (StructureClasses::kMerged).
+  bool labeller_structure = false;
 
   std::vector<Node> nodes;
   std::vector<std::uint32_t> instance_offsets;  // node i owns instance_points[offsets[i] .. offsets[i+1])
@@ -49,10 +53,12 @@ struct Fingerprint {
 
 // 2: the scan descriptor's edge histogram is soft-binned. 3: the background view holds only structure within
 // background_max_z of the sensor, and the descriptor's background part is the structure spectrum of that view
-// (the ring key of building and road points before). Blobs of versions 1 and 2 are read with their descriptor
+// (the ring key of building and road points before). 4: a flags byte after the height band (bit 0:
+// labeller_structure; other bits must be 0). Blobs of versions 1 and 2 are read with their descriptor
 // recomputed from their stored nodes and background view, so a loaded fingerprint's descriptor is always of the
-// current definition (serialize writes version 3).
-inline constexpr std::uint32_t kFingerprintVersion = 3;
+// current definition (serialize writes version 4; a version-3 blob reads as it was, with labeller_structure
+// false).
+inline constexpr std::uint32_t kFingerprintVersion = 4;
 
 std::vector<std::uint8_t> serialize(const Fingerprint& fp);
 // Throws InputError on a truncated, corrupted (checksum), foreign or newer-version blob. A blob of version 1 or
@@ -69,6 +75,7 @@ std::uint32_t fingerprintFormat(std::span<const std::uint8_t> bytes);
 // within float rounding (one read from an older format had its descriptor recomputed, which can differ from a
 // fresh computation in the last bits). When their background height bands differ (a scan stored by a build
 // before format 3, sent again), the background view and the descriptor built from it are left out.
+// labeller_structure is left out too: a scan stored before format 4 has it false whatever labelled it.
 bool sameScan(const Fingerprint& a, const Fingerprint& b);
 
 }  // namespace sglc
