@@ -196,6 +196,8 @@ void addVerification(Table<Config>& t) {
                       "background-only loops: least agreement of an overlay before its plane fit"));
   t.add(field<Config>(SGLC_KEY(verify.background_min_view_deg), closed(0, 360),
                       "background-only loops: least share of the horizon each scan saw (deg)"));
+  t.add(field<Config>(SGLC_KEY(verify.background_pin_margin), closed(0, 1),
+                      "background-only loops: least agreement lost 2 and 4 m along a corridor (0: off)"));
   t.rule({"verify.bev_radius_m", "verify.bev_cell_m"}, "at most 2000 cells apart",
          [](const Config& c) { return c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000; });
 }

@@ -454,7 +454,12 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     // At the final pose and association: the planes alone (yaw, x, y are indices 2-4), then with the anchor.
     planeEquations(result.T, H, g);
     const Mat3d Hg = (scale.asDiagonal() * H * scale.asDiagonal()).block<3, 3>(2, 2);
-    result.horizontal_constraint = Eigen::SelfAdjointEigenSolver<Mat3d>(Hg, Eigen::EigenvaluesOnly).eigenvalues()[0];
+    const Eigen::SelfAdjointEigenSolver<Mat3d> weakest(Hg);
+    result.horizontal_constraint = weakest.eigenvalues()[0];
+    result.next_constraint = weakest.eigenvalues()[1];
+    // (heading x lever, x, y) of a left perturbation: the shift is in the query frame.
+    const Vec2d shift = weakest.eigenvectors().col(0).tail<2>();
+    if (shift.norm() >= std::sqrt(0.5)) result.weak_shift = shift.normalized();
     addAnchor(result.T, H, g);
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);

@@ -208,8 +208,21 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   const double translation = best.T.topRightCorner<3, 1>().norm();
   best.background_similarity = bevAgreement(query.background, candidate.background, query.background_cell, best.T,
                                             v.bev_cell_m, v.bev_radius_m, classes);
+  auto pinned = [&] {
+    if (best_planes.horizontal_constraint >= min_constraint) return true;
+    if (v.background_pin_margin <= 0 || best_planes.next_constraint < min_constraint || best_planes.weak_shift.isZero())
+      return false;
+    for (const double s : {-4.0, -2.0, 2.0, 4.0}) {
+      Mat4d T = best.T;
+      T.topRightCorner<2, 1>() += s * best_planes.weak_shift;
+      if (bevAgreement(query.background, candidate.background, query.background_cell, T, v.bev_cell_m, v.bev_radius_m,
+                       classes) > best.background_similarity - v.background_pin_margin)
+        return false;
+    }
+    return true;
+  };
   if (best_overlap < min_overlap || best_planes.rmse > v.background_max_rmse_m ||
-      best_planes.horizontal_constraint < min_constraint || best.background_similarity < v.background_min_agreement ||
+      best.background_similarity < v.background_min_agreement || !pinned() ||
       (v.max_translation > 0 && translation > v.max_translation))
     return nodes;  // the landmarks' verdict stands
   best.is_loop = true;

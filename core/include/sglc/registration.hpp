@@ -64,6 +64,12 @@ struct RefineResult {
   // Schur complement), and it grows with the number of planes, so thresholds on it assume the default
   // fingerprint.plane_voxel_m.
   double horizontal_constraint = 0.0;
+  // The next smallest eigenvalue of that Hessian: at least as large; both small when the planes leave two
+  // directions free.
+  double next_constraint = 0.0;
+  // The horizontal shift (unit, query frame) of the weakest direction: along the corridor. Zero when the
+  // constraint was not computed, or when the weakest direction is mostly a turn.
+  Vec2d weak_shift = Vec2d::Zero();
 };
 
 // Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.

@@ -10,6 +10,7 @@
 
 namespace sglc {
 
+using Vec2d = Eigen::Vector2d;
 using Vec3f = Eigen::Vector3f;
 using Vec3d = Eigen::Vector3d;
 using Mat3d = Eigen::Matrix3d;
