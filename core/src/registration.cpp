@@ -457,9 +457,13 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
     const Eigen::SelfAdjointEigenSolver<Mat3d> weakest(Hg);
     result.horizontal_constraint = weakest.eigenvalues()[0];
     result.next_constraint = weakest.eigenvalues()[1];
-    // (heading x lever, x, y) of a left perturbation: the shift is in the query frame.
-    const Vec2d shift = weakest.eigenvectors().col(0).tail<2>();
-    if (shift.norm() >= std::sqrt(0.5)) result.weak_shift = shift.normalized();
+    // (heading / scale, x, y) of a left perturbation: the shift is in the query frame, the turn about its origin.
+    const Vec3d weak = weakest.eigenvectors().col(0);
+    const Vec2d shift = weak.tail<2>();
+    if (shift.norm() >= std::sqrt(0.5)) {
+      result.weak_shift = shift.normalized();
+      result.weak_turn = scale[2] * weak[0] / shift.norm();
+    }
     addAnchor(result.T, H, g);
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);

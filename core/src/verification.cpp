@@ -213,8 +213,12 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
     if (v.background_pin_margin <= 0 || best_planes.next_constraint < min_constraint || best_planes.weak_shift.isZero())
       return false;
     for (const double s : {-4.0, -2.0, 2.0, 4.0}) {
-      Mat4d T = best.T;
-      T.topRightCorner<2, 1>() += s * best_planes.weak_shift;
+      // The pose moved s metres along the free direction (a left motion: turned about the query's origin, then
+      // shifted).
+      Mat4d T = Mat4d::Identity();
+      T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(s * best_planes.weak_turn, Vec3d::UnitZ()).toRotationMatrix();
+      T.topRightCorner<2, 1>() = s * best_planes.weak_shift;
+      T = T * best.T;
       if (bevAgreement(query.background, candidate.background, query.background_cell, T, v.bev_cell_m, v.bev_radius_m,
                        classes) > best.background_similarity - v.background_pin_margin)
         return false;

@@ -67,9 +67,12 @@ struct RefineResult {
   // The next smallest eigenvalue of that Hessian: at least as large; both small when the planes leave two
   // directions free.
   double next_constraint = 0.0;
-  // The horizontal shift (unit, query frame) of the weakest direction: along the corridor. Zero when the
-  // constraint was not computed, or when the weakest direction is mostly a turn.
+  // The weakest direction as a motion of the candidate in the query frame: a shift (unit, horizontal) along the
+  // corridor, with weak_turn radians of heading about the query's origin per metre of it (a curved street's
+  // free motion turns as it shifts). Zero when the constraint was not computed, or when the weakest direction is
+  // mostly a turn.
   Vec2d weak_shift = Vec2d::Zero();
+  double weak_turn = 0.0;
 };
 
 // Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.
