@@ -132,6 +132,30 @@ Mat4d fitRigid(const std::vector<Vec3d>& src, const std::vector<Vec3d>& dst) {
       [](std::size_t) { return 1.0; });
 }
 
+namespace {
+
+// Pairs whose candidate point lands within thr of its query point under T (their indices appended to `inliers`
+// and their residuals summed into `residual_sum` where given).
+int countPairInliers(const std::vector<Vec3d>& query, const std::vector<Vec3d>& candidate, const Mat4d& T, double thr,
+                     std::vector<int>* inliers, double* residual_sum) {
+  const Mat3d R = T.topLeftCorner<3, 3>();
+  const Vec3d t = T.topRightCorner<3, 1>();
+  int count = 0;
+  double sum = 0;
+  for (std::size_t k = 0; k < query.size(); ++k) {
+    const double r = (R * candidate[k] + t - query[k]).norm();
+    if (r < thr) {
+      ++count;
+      sum += r;
+      if (inliers) inliers->push_back(static_cast<int>(k));
+    }
+  }
+  if (residual_sum) *residual_sum = sum;
+  return count;
+}
+
+}  // namespace
+
 RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3d>& candidate,
                          const RansacConfig& config) {
   RansacResult best;
@@ -140,20 +164,7 @@ RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3
   const double thr = config.inlier_threshold;
 
   auto countInliers = [&](const Mat4d& T, std::vector<int>* inliers, double* residual_sum) {
-    const Mat3d R = T.topLeftCorner<3, 3>();
-    const Vec3d t = T.topRightCorner<3, 1>();
-    int count = 0;
-    double sum = 0;
-    for (int k = 0; k < n; ++k) {
-      const double r = (R * candidate[k] + t - query[k]).norm();
-      if (r < thr) {
-        ++count;
-        sum += r;
-        if (inliers) inliers->push_back(k);
-      }
-    }
-    if (residual_sum) *residual_sum = sum;
-    return count;
+    return countPairInliers(query, candidate, T, thr, inliers, residual_sum);
   };
 
   int best_count = 0;
@@ -222,6 +233,38 @@ RansacResult ransacRigid(const std::vector<Vec3d>& query, const std::vector<Vec3
   return best;
 }
 
+namespace {
+
+// Nearest of `sorted` (points sorted by x) to x closer than sqrt(best), or nullptr; best becomes its squared
+// distance. Scans outwards from x.x() in both directions, stopping once |dx| alone exceeds the best distance.
+const Vec3f* nearestByX(const std::vector<Vec3f>& sorted, const Vec3f& x, float& best) {
+  const Vec3f* arg = nullptr;
+  const auto mid =
+      std::lower_bound(sorted.begin(), sorted.end(), x.x(), [](const Vec3f& u, float v) { return u.x() < v; });
+  for (auto it = mid; it != sorted.end(); ++it) {
+    const float dx = it->x() - x.x();
+    if (dx * dx >= best) break;
+    const float d2 = (*it - x).squaredNorm();
+    if (d2 < best) {
+      best = d2;
+      arg = &*it;
+    }
+  }
+  for (auto it = mid; it != sorted.begin();) {
+    --it;
+    const float dx = x.x() - it->x();
+    if (dx * dx >= best) break;
+    const float d2 = (*it - x).squaredNorm();
+    if (d2 < best) {
+      best = d2;
+      arg = &*it;
+    }
+  }
+  return arg;
+}
+
+}  // namespace
+
 IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>& instances, const Mat4d& T0,
                        const FineConfig& config) {
   IcpResult result;
@@ -253,29 +296,7 @@ IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>&
       for (int i = 0; i < cv.size; ++i) {
         const Vec3f x = R * cv.points[i] + t;
         float best = gate2;
-        const Vec3f* arg = nullptr;
-        // Scan outwards from x.x() in both directions, stopping once |dx| alone exceeds the best distance.
-        const auto mid =
-            std::lower_bound(qs.begin(), qs.end(), x.x(), [](const Vec3f& u, float v) { return u.x() < v; });
-        for (auto it = mid; it != qs.end(); ++it) {
-          const float dx = it->x() - x.x();
-          if (dx * dx >= best) break;
-          const float d2 = (*it - x).squaredNorm();
-          if (d2 < best) {
-            best = d2;
-            arg = &*it;
-          }
-        }
-        for (auto it = mid; it != qs.begin();) {
-          --it;
-          const float dx = x.x() - it->x();
-          if (dx * dx >= best) break;
-          const float d2 = (*it - x).squaredNorm();
-          if (d2 < best) {
-            best = d2;
-            arg = &*it;
-          }
-        }
+        const Vec3f* arg = nearestByX(qs, x, best);
         if (!arg) continue;
         const double r = std::sqrt(best);
         const double w = r <= config.huber_m ? 1.0 : config.huber_m / r;
@@ -352,13 +373,59 @@ int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const 
   return arg;
 }
 
+namespace {
+
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+
+// The instance pairs' normal equations added to the planes' (H, g at T; left perturbation, rotation first), acting
+// only along horizontal directions (yaw, x, y) the planes leave (nearly) free: elsewhere the planes decide. Roll,
+// pitch and height stay with the planes even where they are weak: the ground fixes them, while instance pairs (a
+// car's points sampled differently from two viewpoints) tilt them. `scale` makes rotations and shifts compare.
+void addWeakAnchor(const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs, const Mat4d& T, const Vec6& scale,
+                   const RefineConfig& config, Mat6& H, Vec6& g) {
+  const double wa = config.instance_weight;
+  if (wa <= 0 || anchor_pairs.empty()) return;
+  const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Mat3d> eig(Hs.block<3, 3>(2, 2));
+  Mat6 P = Mat6::Zero();  // projector onto the weak horizontal subspace (scaled coordinates)
+  for (int k = 0; k < 3; ++k)
+    if (eig.eigenvalues()[k] < config.min_information)
+      P.block<3, 3>(2, 2) += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
+  if (P.isZero()) return;  // fully constrained: the pairs are not needed
+  Mat6 Ha = Mat6::Zero();
+  Vec6 ga = Vec6::Zero();
+  addPointPairs(anchor_pairs, T, wa, Ha, ga);
+  const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
+  const Vec6 gas = scale.asDiagonal() * ga;
+  // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
+  const Vec6 inv = scale.cwiseInverse();
+  H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
+  g += inv.asDiagonal() * (P * gas);
+}
+
+// RefineResult's horizontal constraint, the next eigenvalue and the weakest direction, from the planes' Hessian
+// over (heading, x, y) with the heading scaled by turn_scale (radians per scaled unit).
+void setHorizontalConstraint(const Mat3d& Hg, double turn_scale, RefineResult& result) {
+  const Eigen::SelfAdjointEigenSolver<Mat3d> weakest(Hg);
+  result.horizontal_constraint = weakest.eigenvalues()[0];
+  result.next_constraint = weakest.eigenvalues()[1];
+  // (heading / scale, x, y) of a left perturbation: the shift is in the query frame, the turn about its origin.
+  const Vec3d weak = weakest.eigenvectors().col(0);
+  const Vec2d shift = weak.tail<2>();
+  if (shift.norm() >= std::sqrt(0.5)) {
+    result.weak_shift = shift.normalized();
+    result.weak_turn = turn_scale * weak[0] / shift.norm();
+  }
+}
+
+}  // namespace
+
 RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& query_index,
                           const std::vector<Plane>& candidate, const std::vector<std::pair<Vec3f, Vec3f>>& anchor_pairs,
                           const Mat4d& T0, const RefineConfig& config) {
   RefineResult result;
   result.T = T0;
-  using Vec6 = Eigen::Matrix<double, 6, 1>;
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
   std::vector<int> assoc(candidate.size(), -1);
   auto associate = [&](const Mat4d& T) {
     const Eigen::Matrix3f R = T.topLeftCorner<3, 3>().cast<float>();
@@ -397,30 +464,7 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
       g += w * J * r;
     }
   };
-  auto addAnchor = [&](const Mat4d& T, Mat6& H, Vec6& g) {
-    const double wa = config.instance_weight;
-    if (wa > 0 && !anchor_pairs.empty()) {
-      // The anchor acts only along horizontal directions (yaw, x, y) the planes leave (nearly) free: elsewhere
-      // the planes decide. Roll, pitch and height stay with the planes even where they are weak: the ground
-      // fixes them, while instance pairs (a car's points sampled differently from two viewpoints) tilt them.
-      const Mat6 Hs = scale.asDiagonal() * H * scale.asDiagonal();
-      const Eigen::SelfAdjointEigenSolver<Mat3d> eig(Hs.block<3, 3>(2, 2));
-      Mat6 P = Mat6::Zero();  // projector onto the weak horizontal subspace (scaled coordinates)
-      for (int k = 0; k < 3; ++k)
-        if (eig.eigenvalues()[k] < config.min_information)
-          P.block<3, 3>(2, 2) += eig.eigenvectors().col(k) * eig.eigenvectors().col(k).transpose();
-      if (P.isZero()) return;  // fully constrained: the pairs are not needed
-      Mat6 Ha = Mat6::Zero();
-      Vec6 ga = Vec6::Zero();
-      addPointPairs(anchor_pairs, T, wa, Ha, ga);
-      const Mat6 Has = scale.asDiagonal() * Ha * scale.asDiagonal();
-      const Vec6 gas = scale.asDiagonal() * ga;
-      // Back to unscaled coordinates: H += S^-1 P Has P S^-1, g += S^-1 P gas.
-      const Vec6 inv = scale.cwiseInverse();
-      H += inv.asDiagonal() * (P * Has * P) * inv.asDiagonal();
-      g += inv.asDiagonal() * (P * gas);
-    }
-  };
+  auto addAnchor = [&](const Mat4d& T, Mat6& H, Vec6& g) { addWeakAnchor(anchor_pairs, T, scale, config, H, g); };
   auto normalEquations = [&](const Mat4d& T, Mat6& H, Vec6& g) {
     planeEquations(T, H, g);
     addAnchor(T, H, g);
@@ -453,17 +497,7 @@ RefineResult refinePlanes(const std::vector<Plane>& query, const PlaneIndex& que
   if (result.iterations > 0 && result.correspondences >= 6) {
     // At the final pose and association: the planes alone (yaw, x, y are indices 2-4), then with the anchor.
     planeEquations(result.T, H, g);
-    const Mat3d Hg = (scale.asDiagonal() * H * scale.asDiagonal()).block<3, 3>(2, 2);
-    const Eigen::SelfAdjointEigenSolver<Mat3d> weakest(Hg);
-    result.horizontal_constraint = weakest.eigenvalues()[0];
-    result.next_constraint = weakest.eigenvalues()[1];
-    // (heading / scale, x, y) of a left perturbation: the shift is in the query frame, the turn about its origin.
-    const Vec3d weak = weakest.eigenvectors().col(0);
-    const Vec2d shift = weak.tail<2>();
-    if (shift.norm() >= std::sqrt(0.5)) {
-      result.weak_shift = shift.normalized();
-      result.weak_turn = scale[2] * weak[0] / shift.norm();
-    }
+    setHorizontalConstraint((scale.asDiagonal() * H * scale.asDiagonal()).block<3, 3>(2, 2), scale[2], result);
     addAnchor(result.T, H, g);
     const double sigma = std::max(result.rmse, kMinResidualSigma);
     result.information = rightInformation(H / (sigma * sigma), result.T);
