@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "agreement.hpp"
 #include "fast_math.hpp"
 #include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
@@ -148,12 +149,22 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
   const bool planes_kept = r.inliers >= 3 && refinePose(query, candidate, r);
   // A known loop whose pose the landmarks may have got wrong (no coarse pose, a pose verification rejected, or
   // one the plane stage would have moved beyond its guard): overlay the background views as well, refine the
-  // best overlays on the planes, and keep whichever pose explains most of the candidate's planes.
+  // best overlays on the planes, and keep the pose with the most evidence for it: the share of the candidate's
+  // planes it explains, how tightly (the Cauchy weight of their RMS residual), and how well the background views
+  // agree there. No one of them alone: along a street of repeated facades a pose a few metres off explains as
+  // many planes, loosely, and where the structure repeats its bird's-eye view can agree as well.
   if (!known_loop || (r.is_loop && planes_kept) || !c.bev_search.enabled || !c.refine.enabled) return;
+  auto evidence = [&](const Mat4d& T, double fitness, double rmse) {
+    const double u = rmse / c.refine.cauchy_m;
+    return fitness * detail::agreementAt(query, candidate, T, c.verify) / (1.0 + u * u);
+  };
+  double best = r.refined ? evidence(r.T, r.fitness, r.rmse) : -1.0;
   for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search)) {
     const auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
     if (ref.iterations == 0 || ref.correspondences < c.bev_search.min_correspondences) continue;
-    if (r.refined && (ref.fitness < r.fitness || (ref.fitness == r.fitness && ref.rmse >= r.rmse))) continue;
+    const double e = evidence(ref.T, ref.fitness, ref.rmse);
+    if (e <= best) continue;
+    best = e;
     r.T = ref.T;
     r.fitness = ref.fitness;
     r.rmse = ref.rmse;

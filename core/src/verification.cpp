@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "agreement.hpp"
 #include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
 #include "sglc/consensus.hpp"
@@ -16,15 +17,6 @@ bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
          a.layout.k_eigen == b.layout.k_eigen && a.layout.rings == b.layout.rings &&
          a.layout.orders == b.layout.orders && a.d_max == b.d_max && a.d_i == b.d_i &&
          a.background_cell == b.background_cell && a.plane_voxel == b.plane_voxel;
-}
-
-// Background agreement of the two scans with the candidate moved by T, on verification's grid. Building against
-// vegetation is evidence only where neither scan's classes came from the built-in labeller.
-double agreementAt(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T, const VerifyConfig& v) {
-  const auto classes = query.labeller_structure || candidate.labeller_structure ? StructureClasses::kMerged
-                                                                                : StructureClasses::kCompared;
-  return bevAgreement(query.background, candidate.background, query.background_cell, T, v.bev_cell_m, v.bev_radius_m,
-                      classes);
 }
 
 // RANSAC over the matched node centres (not found with fewer than 3 matches).
@@ -117,7 +109,7 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   r.T = ransac.T;
   r.inliers = static_cast<int>(ransac.inliers.size());
   r.graph_similarity = std::exp(-ransac.mean_residual);
-  auto agreement = [&](const Mat4d& T) { return agreementAt(query, candidate, T, v); };
+  auto agreement = [&](const Mat4d& T) { return detail::agreementAt(query, candidate, T, v); };
   r.background_similarity = agreement(r.T);
   // The coarse pose aligned on the background planes (section 8): the background and the plane confirmation
   // are judged there.
@@ -193,7 +185,7 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   for (const auto& h :
        searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search, headings, false)) {
     // Most overlays of another place disagree already: spare them the plane fit.
-    if (agreementAt(query, candidate, h.T, v) < v.background_min_overlay) continue;
+    if (detail::agreementAt(query, candidate, h.T, v) < v.background_min_overlay) continue;
     auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
     if (planes.iterations == 0 || planes.correspondences < c.bev_search.min_correspondences) continue;
     const double overlap = bandOverlap(query, candidate, planes.T, c.fingerprint.background_max_z_m, c.refine);
@@ -204,7 +196,7 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   }
   if (best_overlap < 0) return nodes;
   const double translation = best.T.topRightCorner<3, 1>().norm();
-  best.background_similarity = agreementAt(query, candidate, best.T, v);
+  best.background_similarity = detail::agreementAt(query, candidate, best.T, v);
   auto pinned = [&] {
     if (best_planes.horizontal_constraint >= min_constraint) return true;
     if (v.background_pin_margin <= 0 || best_planes.next_constraint < min_constraint || best_planes.weak_shift.isZero())
@@ -216,7 +208,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
       T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(s * best_planes.weak_turn, Vec3d::UnitZ()).toRotationMatrix();
       T.topRightCorner<2, 1>() = s * best_planes.weak_shift;
       T = T * best.T;
-      if (agreementAt(query, candidate, T, v) > best.background_similarity - v.background_pin_margin) return false;
+      if (detail::agreementAt(query, candidate, T, v) > best.background_similarity - v.background_pin_margin)
+        return false;
     }
     return true;
   };

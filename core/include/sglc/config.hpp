@@ -227,7 +227,7 @@ struct RefineConfig {
 // Ours (not in the paper): the pose of a pair the caller knows to be a loop when the landmarks give none or
 // verification rejects the one they give (Pipeline::refine with known_loop): a search over heading and shift
 // overlaying the two labelled bird's-eye views, then the plane refinement from the best `keep` overlays; the
-// result whose planes fit best stands.
+// result with the most evidence stands (plane fitness x background agreement x Cauchy weight of the plane RMSE).
 struct BevSearchConfig {
   bool enabled = true;
   double cell_m = 1.0;          // coarse grid of the search

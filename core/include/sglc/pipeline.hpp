@@ -60,8 +60,9 @@ class Pipeline {
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
   // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result: from
   // its coarse pose and, when there is none, verification rejected it or the plane stage would leave its
-  // guard, also from a search over the two background views (config.bev_search), keeping the pose whose
-  // planes fit best. `refined` says whether a pose was found; is_loop and reason keep verification's decision.
+  // guard, also from a search over the two background views (config.bev_search), keeping the pose with the
+  // most evidence (plane fitness x background agreement x the Cauchy weight of the plane RMSE). `refined` says
+  // whether a pose was found; is_loop and reason keep verification's decision.
   void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result,
               bool known_loop = false) const;
   // verify + refine.
