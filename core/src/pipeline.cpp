@@ -195,6 +195,18 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     kept = ref.iterations > 0 && detail::movedWithin(T, ref.T, c.refine.max_shift_m, c.refine.max_turn_deg);
+    // Guard: the fine stage led the planes astray (beyond their guard, or to a fit looser than verification
+    // trusts, verify.confirm_max_rmse_m) where the planes alone, from the pose before it, fit within that bar:
+    // then the instance points locked onto something else, and the fine stage's pose is dropped.
+    if (!anchor.empty() && (!kept || ref.rmse > c.verify.confirm_max_rmse_m)) {
+      auto alone = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
+      if (alone.iterations > 0 && alone.rmse <= c.verify.confirm_max_rmse_m &&
+          detail::movedWithin(r.T, alone.T, c.refine.max_shift_m, c.refine.max_turn_deg)) {
+        ref = std::move(alone);
+        T = r.T;
+        kept = true;
+      }
+    }
     if (kept) {
       T = ref.T;
       r.information = ref.information;

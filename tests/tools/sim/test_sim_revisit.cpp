@@ -128,5 +128,30 @@ TEST(Revisit, KnownLoopsOnARepeatedStreetArePosedAtThePlace) {
   }
 }
 
+// A loop verified on 4 landmarks (KITTI 00 frames 717 / 3660, seed 7, 32 beams, labels removed) whose instance
+// ICP slid 1.1 m and 7 deg off the coarse pose; the planes, anchored on its point pairs, stayed there with an RMSE
+// of 0.29 m. The fine stage is now dropped when it leads the planes to a fit looser than verification trusts.
+TEST(Revisit, AFineStageThatLeadsThePlanesAstrayIsDropped) {
+  SGLC_REQUIRE_KITTI("00");
+  SimConfig cfg;
+  cfg.seed = 7;
+  cfg.sensor = SensorConfig::preset(32);
+  const Simulator sim(kittiSequence("00"), cfg);
+  const Pipeline pipeline;
+  auto unlabelled = [&](int f) {
+    LabelledScan scan = sim.render(f).scan;
+    scan.labels.clear();
+    return pipeline.fingerprint(scan);
+  };
+  const Fingerprint q = unlabelled(717), c = unlabelled(3660);
+  const Mat4d gt = sim.trajectory().poses[717].inverse() * sim.trajectory().poses[3660];
+  const LoopResult r = pipeline.match(q, c);
+  ASSERT_TRUE(r.is_loop) << r.reason;
+  ASSERT_TRUE(r.refined);
+  EXPECT_LT(translationError(r.T, gt), 0.1) << r.T;
+  EXPECT_LT(rotationErrorDeg(r.T, gt), 0.5) << r.T;
+  EXPECT_LE(r.rmse, pipeline.config().verify.confirm_max_rmse_m);
+}
+
 }  // namespace
 }  // namespace sglc::sim::test
