@@ -247,6 +247,8 @@ void addRefinement(Table<Config>& t) {
                       "planes moving the pose farther are not trusted, nor do they confirm a loop (m)"));
   t.add(field<Config>(SGLC_KEY(refine.max_turn_deg), openClosed(0, 180),
                       "planes turning the pose more are not trusted, nor do they confirm a loop (deg)"));
+  t.add(field<Config>(SGLC_KEY(refine.max_rmse_m), above(0),
+                      "a plane fit anchored on the fine stage looser than this is tried without it (m)"));
   t.add(
       field<Config>(SGLC_KEY(bev_search.enabled), {}, "known loops: search a pose by overlaying the bird's-eye views"));
   t.add(field<Config>(SGLC_KEY(bev_search.cell_m), closed(0.25, 5), "BEV search: grid cell (m)"));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 #include "agreement.hpp"
 #include "fast_math.hpp"
@@ -158,12 +159,15 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
     const double u = rmse / c.refine.cauchy_m;
     return fitness * detail::agreementAt(query, candidate, T, c.verify) / (1.0 + u * u);
   };
-  double best = r.refined ? evidence(r.T, r.fitness, r.rmse) : -1.0;
+  // Compared as (evidence, fitness, -rmse): ties (disjoint views agree 0) go to more planes, then the tighter
+  // fit, then the earlier contender.
+  std::tuple<double, double, double> best{-1.0, 0.0, 0.0};
+  if (r.refined) best = {evidence(r.T, r.fitness, r.rmse), r.fitness, -r.rmse};
   for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search)) {
     const auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
     if (ref.iterations == 0 || ref.correspondences < c.bev_search.min_correspondences) continue;
-    const double e = evidence(ref.T, ref.fitness, ref.rmse);
-    if (e <= best) continue;
+    const std::tuple<double, double, double> e{evidence(ref.T, ref.fitness, ref.rmse), ref.fitness, -ref.rmse};
+    if (!(e > best)) continue;
     best = e;
     r.T = ref.T;
     r.fitness = ref.fitness;
@@ -195,17 +199,14 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   if (c.refine.enabled) {
     auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
     kept = ref.iterations > 0 && detail::movedWithin(T, ref.T, c.refine.max_shift_m, c.refine.max_turn_deg);
-    // Guard: the fine stage led the planes astray (beyond their guard, or to a fit looser than verification
-    // trusts, verify.confirm_max_rmse_m) where the planes alone, from the pose before it, fit within that bar:
-    // then the instance points locked onto something else, and the fine stage's pose is dropped.
-    if (!anchor.empty() && (!kept || ref.rmse > c.verify.confirm_max_rmse_m)) {
+    // Guard: the fine stage led the planes to a loose fit (refine.max_rmse_m) where the planes alone, from the
+    // pose before it, fit within that bar and explain at least as many planes: then the instance points locked
+    // onto something else, and the fine stage's pose is dropped.
+    if (kept && !anchor.empty() && ref.rmse > c.refine.max_rmse_m) {
       auto alone = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
-      if (alone.iterations > 0 && alone.rmse <= c.verify.confirm_max_rmse_m &&
-          detail::movedWithin(r.T, alone.T, c.refine.max_shift_m, c.refine.max_turn_deg)) {
+      if (alone.iterations > 0 && alone.rmse <= c.refine.max_rmse_m && alone.fitness >= ref.fitness &&
+          detail::movedWithin(r.T, alone.T, c.refine.max_shift_m, c.refine.max_turn_deg))
         ref = std::move(alone);
-        T = r.T;
-        kept = true;
-      }
     }
     if (kept) {
       T = ref.T;

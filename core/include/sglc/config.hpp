@@ -200,7 +200,7 @@ struct FineConfig {
   double converged_m = 1e-4;  // stop when the update moves less than this
   // Guard (ours): the fine stage only polishes the coarse pose. Its result is dropped when it rests on fewer
   // than min_correspondences point pairs or moves the pose by more than max_shift_m / max_turn_deg: then it
-  // locked onto something else.
+  // locked onto something else. The refine stage may still drop it (RefineConfig::max_rmse_m).
   int min_correspondences = 3;
   double max_shift_m = 2.0;
   double max_turn_deg = 10.0;
@@ -219,9 +219,15 @@ struct RefineConfig {
   double min_information = 5.0;
   double converged_m = 1e-5;
   // Guard (ours): the planes may move the pose they start from by at most this much. Beyond it the refinement
-  // is not trusted (the pose before it stays) and a loop with few node inliers is not confirmed.
+  // is not trusted (the pose before it stays; see max_rmse_m for the fine stage's pose) and a loop with few node
+  // inliers is not confirmed.
   double max_shift_m = 1.0;
   double max_turn_deg = 5.0;
+  // Guard (ours): when the planes, anchored on the fine stage's point pairs, end with an RMSE above this, they
+  // run again from the coarse pose without the pairs; that fit stands (the fine stage's pose is dropped: its
+  // instance points locked onto something else) when it is within the shift / turn guard and this RMSE and
+  // explains at least as many of the candidate's planes.
+  double max_rmse_m = 0.1;
 };
 
 // Ours (not in the paper): the pose of a pair the caller knows to be a loop when the landmarks give none or
