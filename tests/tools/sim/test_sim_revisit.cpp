@@ -100,6 +100,21 @@ TEST(Revisit, EngineClosesReverseLoopWithExactPose) {
   expectLoopClosed(sim, i, j);
 }
 
+// The world of seed 7 with a default sensor of `beams`, noise and all (as `sglc-eval --sim` renders it).
+SimConfig seven(int beams) {
+  SimConfig cfg;
+  cfg.seed = 7;
+  cfg.sensor = SensorConfig::preset(beams);
+  return cfg;
+}
+
+// A frame's fingerprint with its labels removed: the built-in labeller computes them.
+Fingerprint unlabelledFingerprint(const Simulator& sim, const Pipeline& pipeline, int frame) {
+  LabelledScan scan = sim.render(frame).scan;
+  scan.labels.clear();
+  return pipeline.fingerprint(scan);
+}
+
 // Known loops on a straight street of KITTI 00 whose facades repeat every few metres (seed 7, labels removed, as
 // `sglc-eval --protocol pose --no-labels` registers them). Verification rejects each pair, so the pose comes from
 // the background overlays; the one explaining most planes lay 3.5-5.7 m along the street in the first three, and
@@ -107,15 +122,9 @@ TEST(Revisit, EngineClosesReverseLoopWithExactPose) {
 // planes fit.
 TEST(Revisit, KnownLoopsOnARepeatedStreetArePosedAtThePlace) {
   SGLC_REQUIRE_KITTI("00");
-  SimConfig cfg;
-  cfg.seed = 7;
-  const Simulator sim(kittiSequence("00"), cfg);
+  const Simulator sim(kittiSequence("00"), seven(64));
   const Pipeline pipeline;
-  auto unlabelled = [&](int f) {
-    LabelledScan scan = sim.render(f).scan;
-    scan.labels.clear();
-    return pipeline.fingerprint(scan);
-  };
+  auto unlabelled = [&](int f) { return unlabelledFingerprint(sim, pipeline, f); };
   for (const auto& [query, candidate] : {std::pair{643, 3594}, {645, 3595}, {652, 3607}, {645, 3596}}) {
     SCOPED_TRACE("pair " + std::to_string(query) + " / " + std::to_string(candidate));
     const Fingerprint q = unlabelled(query), c = unlabelled(candidate);
@@ -134,17 +143,9 @@ TEST(Revisit, KnownLoopsOnARepeatedStreetArePosedAtThePlace) {
 // of 0.29 m. The fine stage is now dropped when it leads the planes to a fit looser than refine.max_rmse_m.
 TEST(Revisit, AFineStageThatLeadsThePlanesAstrayIsDropped) {
   SGLC_REQUIRE_KITTI("00");
-  SimConfig cfg;
-  cfg.seed = 7;
-  cfg.sensor = SensorConfig::preset(32);
-  const Simulator sim(kittiSequence("00"), cfg);
+  const Simulator sim(kittiSequence("00"), seven(32));
   const Pipeline pipeline;
-  auto unlabelled = [&](int f) {
-    LabelledScan scan = sim.render(f).scan;
-    scan.labels.clear();
-    return pipeline.fingerprint(scan);
-  };
-  const Fingerprint q = unlabelled(717), c = unlabelled(3660);
+  const Fingerprint q = unlabelledFingerprint(sim, pipeline, 717), c = unlabelledFingerprint(sim, pipeline, 3660);
   const Mat4d gt = sim.trajectory().poses[717].inverse() * sim.trajectory().poses[3660];
   const LoopResult r = pipeline.match(q, c);
   ASSERT_TRUE(r.is_loop) << r.reason;
