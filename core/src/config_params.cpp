@@ -258,6 +258,12 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(bev_search.keep), closed(1, 20), "BEV search: distinct overlays refined"));
   t.add(
       field<Config>(SGLC_KEY(bev_search.min_correspondences), atLeast(3), "BEV search: plane pairs an overlay needs"));
+  t.add(field<Config>(SGLC_KEY(view_search.enabled), {},
+                      "narrow views: candidates ranked by the view context, background loops at its heading"));
+  t.add(field<Config>(SGLC_KEY(view_search.rings), closed(1, 200), "view context: rings"));
+  t.add(field<Config>(SGLC_KEY(view_search.max_range_m), openClosed(2, 100), "view context: structure used (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
+                      "view context: scans a narrow query is compared with (nearest by descriptor)"));
 }
 
 #undef SGLC_KEY

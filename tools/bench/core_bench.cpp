@@ -7,12 +7,15 @@
 #include <cstdlib>
 #include <filesystem>
 #include <iostream>
+#include <cmath>
 #include <map>
+#include <numbers>
 
 #include "benchmark_main.hpp"
 #include "sglc/io.hpp"
 #include "sglc/labeller.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/view_context.hpp"
 
 namespace {
 
@@ -139,6 +142,29 @@ void BM_Deserialize(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(sglc::deserialize(blob));
 }
 
+// The view context of a real HDL-64 scan's stored background: what a narrow query's ranking builds for every
+// stored scan it compares (LoopFinder::viewRanked).
+void BM_ViewContext(benchmark::State& state) {
+  if (!ready(state)) return;
+  const auto& fp = fixture().fps.at("004501");
+  const auto& config = fixture().pipeline.config().view_search;
+  for (auto _ : state) benchmark::DoNotOptimize(sglc::viewContext(fp.background, fp.background_cell, config));
+  state.counters["cells"] = static_cast<double>(fp.background.size());
+}
+
+// One comparison of a narrow query (a 70 deg wedge of 000052) with a stored scan's context, at all 128 headings.
+void BM_ViewMatch(benchmark::State& state) {
+  if (!ready(state)) return;
+  auto& f = fixture();
+  const auto& config = f.pipeline.config().view_search;
+  std::vector<sglc::BevCell> wedge;
+  for (const auto& c : f.fps.at("000052").background)
+    if (std::abs(std::atan2(c.iy + 0.5, c.ix + 0.5)) <= 35.0 * std::numbers::pi / 180.0) wedge.push_back(c);
+  const sglc::ViewMatcher matcher(sglc::viewContext(wedge, f.fps.at("000052").background_cell, config));
+  const auto other = sglc::viewContext(f.fps.at("004501").background, f.fps.at("004501").background_cell, config);
+  for (auto _ : state) benchmark::DoNotOptimize(matcher.match(other));
+}
+
 }  // namespace
 
 BENCHMARK(BM_Fingerprint)->Unit(benchmark::kMillisecond);
@@ -150,5 +176,7 @@ BENCHMARK(BM_Refine)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_RefineKnownLoopFromBackground)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Serialize)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_Deserialize)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ViewContext)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ViewMatch)->Unit(benchmark::kMicrosecond);
 
 int main(int argc, char** argv) { return sglc::bench::runBenchmarks("sglc-bench-core", argc, argv); }

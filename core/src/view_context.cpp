@@ -1,0 +1,129 @@
+#include "sglc/view_context.hpp"
+
+#include <bit>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+#include "sglc/labels.hpp"
+
+namespace sglc {
+namespace {
+
+using Row = ViewContext::Row;
+constexpr int kSectors = ViewContext::kSectors;
+constexpr double kMinRangeM = 2.0;  // nearer cells have too coarse a bearing
+
+void setBit(Row& r, int s) { (s < 64 ? r.lo : r.hi) |= std::uint64_t{1} << (s & 63); }
+int count(const Row& r) { return std::popcount(r.lo) + std::popcount(r.hi); }
+Row operator&(const Row& a, const Row& b) { return {a.lo & b.lo, a.hi & b.hi}; }
+Row operator|(const Row& a, const Row& b) { return {a.lo | b.lo, a.hi | b.hi}; }
+
+// atan2(y, x) within 2e-6 rad (a polynomial for atan on [0, 1] after folding into the first octant): a third of
+// std::atan2's cost, which was most of a context's. A cell centre that close to a sector edge may fall either
+// side of it, always the same side.
+double quickAtan2(double y, double x) {
+  const double ax = std::abs(x), ay = std::abs(y);
+  const bool steep = ay > ax;
+  const double big = steep ? ay : ax;
+  if (big == 0) return 0;
+  const double t = (steep ? ax : ay) / big, t2 = t * t;
+  double a = t * (0.99997726 +
+                  t2 * (-0.33262347 + t2 * (0.19354346 + t2 * (-0.11643287 + t2 * (0.05265332 + t2 * -0.01172120)))));
+  if (steep) a = std::numbers::pi / 2 - a;
+  if (x < 0) a = std::numbers::pi - a;
+  return y < 0 ? -a : a;
+}
+
+// Sector s moves to sector (s + shift) % 128.
+Row rotated(const Row& r, int shift) {
+  if (shift >= 64) return rotated({r.hi, r.lo}, shift - 64);
+  if (shift == 0) return r;
+  return {(r.lo << shift) | (r.hi >> (64 - shift)), (r.hi << shift) | (r.lo >> (64 - shift))};
+}
+
+}  // namespace
+
+ViewContext viewContext(const std::vector<BevCell>& cells, double cell, const ViewSearchConfig& config, bool merged) {
+  ViewContext v;
+  v.merged = merged;
+  const int rings = config.rings;
+  v.building.resize(static_cast<std::size_t>(rings));
+  v.vegetation.resize(static_cast<std::size_t>(rings));
+  std::vector<Row> any(static_cast<std::size_t>(rings));
+  const double inv_ring = rings / config.max_range_m, inv_sector = kSectors / (2.0 * std::numbers::pi);
+  for (const auto& c : cells) {
+    const double x = (c.ix + 0.5) * cell, y = (c.iy + 0.5) * cell, r = std::sqrt(x * x + y * y);
+    if (r < kMinRangeM || r >= config.max_range_m || c.cls == 0) continue;
+    const auto ring = static_cast<std::size_t>(std::min(rings - 1, static_cast<int>(r * inv_ring)));
+    const int sector = static_cast<int>((quickAtan2(y, x) + std::numbers::pi) * inv_sector) % kSectors;
+    setBit(any[ring], sector);
+    const auto cls = static_cast<Background>(c.cls);
+    if (cls == Background::kBuilding || cls == Background::kFence) setBit(v.building[ring], sector);
+    if (cls == Background::kVegetation) setBit(v.vegetation[ring], sector);
+  }
+  // A sector is seen where two rings or more hold something: one stray cell does not open a direction.
+  Row once, twice;
+  for (const auto& a : any) {
+    twice = twice | (once & a);
+    once = once | a;
+  }
+  v.seen = twice;
+  return v;
+}
+
+ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), merged_(narrow.merged) {
+  const auto rings = static_cast<std::size_t>(rings_);
+  building_.resize(kSectors * rings);
+  vegetation_.resize(kSectors * rings);
+  seen_.resize(kSectors);
+  for (int shift = 0; shift < kSectors; ++shift) {
+    const Row seen = rotated(narrow.seen, shift);
+    seen_[static_cast<std::size_t>(shift)] = seen;
+    for (std::size_t i = 0; i < rings; ++i) {
+      building_[shift * rings + i] = rotated(narrow.building[i], shift) & seen;
+      vegetation_[shift * rings + i] = rotated(narrow.vegetation[i], shift) & seen;
+    }
+  }
+}
+
+// Most of a comparison is population counts: where the CPU has the instruction (x86-64 from 2008 on; Debian's
+// baseline does not assume it), a second copy of this function uses it, chosen once at load time.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("popcnt", "default")))
+#endif
+ViewMatch ViewMatcher::match(const ViewContext& other) const {
+  if (other.rings() != rings_)
+    throw InputError("view contexts with " + std::to_string(rings_) + " and " + std::to_string(other.rings()) +
+                     " rings cannot be compared");
+  const bool merged = merged_ || other.merged;
+  const auto rings = static_cast<std::size_t>(rings_);
+  std::vector<Row> structure(rings);
+  for (std::size_t i = 0; i < rings; ++i) structure[i] = other.building[i] | other.vegetation[i];
+  ViewMatch best;
+  int best_shift = 0;
+  for (int shift = 0; shift < kSectors; ++shift) {
+    // The narrow view turned by `shift` sectors, compared where it saw.
+    const Row seen = seen_[static_cast<std::size_t>(shift)];
+    const Row* b = &building_[shift * rings];
+    const Row* v = &vegetation_[shift * rings];
+    int same = 0, judged = 0;
+    for (std::size_t i = 0; i < rings; ++i) {
+      const Row mine = b[i] | v[i];
+      same += merged ? count(mine & structure[i]) : count((b[i] & other.building[i]) | (v[i] & other.vegetation[i]));
+      judged += count(mine | (structure[i] & seen));
+    }
+    const double similarity = judged ? static_cast<double>(same) / static_cast<double>(judged) : 0.0;
+    if (similarity > best.similarity) {
+      best.similarity = similarity;
+      best_shift = shift;
+    }
+  }
+  // Narrow's sector s lies at other's s + shift: other's frame turns by -shift sectors into narrow's.
+  best.heading = static_cast<double>((kSectors - best_shift) % kSectors) * 2.0 * std::numbers::pi / kSectors;
+  return best;
+}
+
+ViewMatch matchViews(const ViewContext& narrow, const ViewContext& other) { return ViewMatcher(narrow).match(other); }
+
+}  // namespace sglc

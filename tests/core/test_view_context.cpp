@@ -1,0 +1,159 @@
+// The view context: a narrow view matched against a full turn of the same place, at the right heading.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <random>
+
+#include "sglc/view_context.hpp"
+#include "test_util.hpp"
+
+namespace sglc {
+namespace {
+
+using test::deg2rad;
+using test::rad2deg;
+
+constexpr double kCell = 0.5;
+
+struct WorldCell {
+  double x, y;
+  Background cls;
+};
+
+// A random place: road everywhere within 45 m, building fronts along two sides of a street with gaps, and
+// tree crowns scattered, all in the world frame.
+std::vector<WorldCell> makePlace(std::uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<WorldCell> w;
+  for (double x = -45; x <= 45; x += kCell)
+    for (double y = -45; y <= 45; y += kCell)
+      if (std::hypot(x, y) < 45) w.push_back({x, y, Background::kRoad});
+  for (const double side : {-1.0, 1.0})
+    for (double x = -45; x < 45;) {
+      const double length = 4 + 16 * u(rng), depth = 6 + 8 * u(rng) * side;
+      for (double s = 0; s < length; s += kCell)
+        w.push_back({x + s, side * depth, u(rng) < 0.5 ? Background::kBuilding : Background::kFence});
+      x += length + 2 + 8 * u(rng);
+    }
+  for (int k = 0; k < 40; ++k) {
+    const double cx = -40 + 80 * u(rng), cy = -40 + 80 * u(rng), r = 1 + 2 * u(rng);
+    for (double dx = -r; dx <= r; dx += kCell)
+      for (double dy = -r; dy <= r; dy += kCell)
+        if (std::hypot(dx, dy) <= r) w.push_back({cx + dx, cy + dy, Background::kVegetation});
+  }
+  return w;
+}
+
+// The place as BEV cells seen from a sensor at the world's origin whose x axis points at `heading` (rad),
+// keeping only cells within `half_fov` of it (pi: all). Later cells of a grid cell win, as structure does.
+std::vector<BevCell> viewOf(const std::vector<WorldCell>& world, double heading, double half_fov = std::numbers::pi) {
+  std::map<std::pair<int, int>, std::uint8_t> grid;
+  const double c = std::cos(heading), s = std::sin(heading);
+  for (const auto& w : world) {
+    const double x = c * w.x + s * w.y, y = -s * w.x + c * w.y;  // into the sensor frame
+    if (std::abs(std::atan2(y, x)) > half_fov) continue;
+    auto& cls = grid[{static_cast<int>(std::floor(x / kCell)), static_cast<int>(std::floor(y / kCell))}];
+    cls = std::max(cls, static_cast<std::uint8_t>(w.cls));
+  }
+  std::vector<BevCell> out;
+  for (const auto& [ij, cls] : grid)
+    out.push_back({static_cast<std::int16_t>(ij.first), static_cast<std::int16_t>(ij.second), cls});
+  return out;
+}
+
+// Difference of two angles (rad), in degrees within [-180, 180).
+double turnDeg(double a, double b) { return rad2deg(std::remainder(a - b, 2 * std::numbers::pi)); }
+
+TEST(ViewContext, NarrowViewFindsItsPlaceAndHeadingInAFullTurn) {
+  const ViewSearchConfig cfg;
+  const auto place = makePlace(1);
+  const auto full = viewContext(viewOf(place, 0.0), kCell, cfg);
+  const double half_fov = deg2rad(35.0);
+  for (const double heading_deg : {0.0, 37.0, 150.0, -100.0}) {
+    const double heading = deg2rad(heading_deg);
+    const auto narrow = viewContext(viewOf(place, heading, half_fov), kCell, cfg);
+    const ViewMatch m = matchViews(narrow, full);
+    EXPECT_GT(m.similarity, 0.6) << heading_deg;  // sector edges fall elsewhere once turned
+    // T_narrow_full turns the full view's frame by -heading into the narrow one's.
+    EXPECT_LE(std::abs(turnDeg(m.heading, -heading)), 3.0) << heading_deg << " got " << rad2deg(m.heading);
+  }
+}
+
+TEST(ViewContext, OtherPlacesScoreLower) {
+  const ViewSearchConfig cfg;
+  const auto place = makePlace(1);
+  const auto narrow = viewContext(viewOf(place, deg2rad(60.0), deg2rad(35.0)), kCell, cfg);
+  const double same = matchViews(narrow, viewContext(viewOf(place, 0.0), kCell, cfg)).similarity;
+  for (std::uint32_t seed = 2; seed < 8; ++seed) {
+    const double other = matchViews(narrow, viewContext(viewOf(makePlace(seed), 0.0), kCell, cfg)).similarity;
+    EXPECT_LT(other, same - 0.2) << "seed " << seed;
+  }
+}
+
+TEST(ViewContext, OnlyTheNarrowViewsSectorsAreJudged) {
+  // A full turn holds structure all round; a narrow view of it sees a wedge. Structure outside the wedge is not
+  // counted against the pair, so the match is as good as the wedge's own.
+  const ViewSearchConfig cfg;
+  const auto place = makePlace(3);
+  const auto narrow = viewContext(viewOf(place, 0.0, deg2rad(35.0)), kCell, cfg);
+  EXPECT_GT(matchViews(narrow, viewContext(viewOf(place, 0.0), kCell, cfg)).similarity, 0.9);
+  // The other way round (the full turn as the narrow side), most of it is not in the wedge.
+  EXPECT_LT(matchViews(viewContext(viewOf(place, 0.0), kCell, cfg), narrow).similarity, 0.5);
+  const int seen = std::popcount(narrow.seen.lo) + std::popcount(narrow.seen.hi);
+  EXPECT_GE(seen, 22);  // 70 deg of 128 sectors of 2.8 deg: about 25
+  EXPECT_LE(seen, 28);
+}
+
+TEST(ViewContext, MergedClassesCompareStructureOnly) {
+  ViewSearchConfig cfg;
+  std::vector<BevCell> building, vegetation;
+  for (int r = 10; r < 30; ++r)
+    for (int a = 0; a < 30; ++a) {
+      const double x = r * std::cos(deg2rad(a)), y = r * std::sin(deg2rad(a));
+      const auto ix = static_cast<std::int16_t>(std::floor(x / kCell)),
+                 iy = static_cast<std::int16_t>(std::floor(y / kCell));
+      building.push_back({ix, iy, static_cast<std::uint8_t>(Background::kBuilding)});
+      vegetation.push_back({ix, iy, static_cast<std::uint8_t>(Background::kVegetation)});
+    }
+  EXPECT_EQ(matchViews(viewContext(building, kCell, cfg), viewContext(vegetation, kCell, cfg)).similarity, 0.0);
+  EXPECT_DOUBLE_EQ(matchViews(viewContext(building, kCell, cfg, true), viewContext(vegetation, kCell, cfg)).similarity,
+                   1.0);
+  EXPECT_DOUBLE_EQ(matchViews(viewContext(building, kCell, cfg), viewContext(vegetation, kCell, cfg, true)).similarity,
+                   1.0);
+}
+
+TEST(ViewContext, EmptyAndMismatchedContexts) {
+  ViewSearchConfig cfg;
+  const auto empty = viewContext({}, kCell, cfg);
+  EXPECT_EQ(empty.rings(), cfg.rings);
+  EXPECT_EQ(matchViews(empty, empty).similarity, 0.0);
+  const auto full = viewContext(viewOf(makePlace(1), 0.0), kCell, cfg);
+  EXPECT_EQ(matchViews(empty, full).similarity, 0.0);  // nothing seen, nothing judged
+  // Cells beyond max_range_m, nearer than 2 m or of no class are left out.
+  const std::vector<BevCell> outside = {{200, 0, 3}, {0, 0, 3}, {40, 0, 0}};
+  const auto none = viewContext(outside, kCell, cfg);
+  for (int i = 0; i < none.rings(); ++i) {
+    EXPECT_EQ(none.building[i].lo | none.building[i].hi, 0u);
+    EXPECT_EQ(none.vegetation[i].lo | none.vegetation[i].hi, 0u);
+  }
+  cfg.rings = 12;
+  EXPECT_THROW(matchViews(viewContext({}, kCell, cfg), full), InputError);
+}
+
+TEST(ViewContext, Deterministic) {
+  const ViewSearchConfig cfg;
+  const auto place = makePlace(4);
+  const auto a =
+      matchViews(viewContext(viewOf(place, 1.0, 0.6), kCell, cfg), viewContext(viewOf(place, 0.0), kCell, cfg));
+  const auto b =
+      matchViews(viewContext(viewOf(place, 1.0, 0.6), kCell, cfg), viewContext(viewOf(place, 0.0), kCell, cfg));
+  EXPECT_EQ(a.similarity, b.similarity);
+  EXPECT_EQ(a.heading, b.heading);
+}
+
+}  // namespace
+}  // namespace sglc
