@@ -139,8 +139,8 @@ Fingerprint Pipeline::fingerprint(const LabelledScan& input, ScanReport* report)
     rep.warnings.push_back(
         "only " + std::to_string(fp.nodes.size()) +
         " landmarks (vehicle, trunk and pole instances): a loop can be verified only from the background, and only"
-        " where background-only loops are on (verify.background_max_nodes) and the scan saw"
-        " verify.background_min_view_deg of the horizon");
+        " where background-only loops are on (verify.background_max_nodes) and, for a scan that saw less than"
+        " verify.background_min_view_deg of the horizon, view_search is on");
   return fp;
 }
 

@@ -2,12 +2,14 @@
 // decision (docs/METHOD.md, sections 7 and 8).
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 
 #include "agreement.hpp"
 #include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
 #include "sglc/consensus.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/view_context.hpp"
 
 namespace sglc {
 namespace {
@@ -82,6 +84,21 @@ double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const
   const auto distinct = static_cast<std::size_t>(std::count(reached.begin(), reached.end(), true));
   const std::size_t fewer = std::min(in_query, in_candidate);
   return fewer ? static_cast<double>(std::min(explained, distinct)) / static_cast<double>(fewer) : 0.0;
+}
+
+// Headings (T_q_c's yaw, radians) for a background-only loop where one scan is a narrow view: the best shift of
+// the narrow view's context over the other's, and a sector either side. Empty when the contexts share nothing.
+std::vector<double> viewHeadings(const Fingerprint& query, const Fingerprint& candidate, bool query_narrow,
+                                 const ViewSearchConfig& config) {
+  const auto q = viewContext(query.background, query.background_cell, config, query.labeller_structure);
+  const auto c = viewContext(candidate.background, candidate.background_cell, config, candidate.labeller_structure);
+  const ViewMatch m = query_narrow ? matchViews(q, c) : matchViews(c, q);
+  if (m.similarity <= 0) return {};
+  constexpr double kTurn = 2.0 * std::numbers::pi, kSector = kTurn / ViewContext::kSectors;
+  const double h = query_narrow ? m.heading : kTurn - m.heading;  // T_c_q's yaw turned round
+  std::vector<double> headings;
+  for (const double d : {-kSector, 0.0, kSector}) headings.push_back(std::fmod(h + d + 2.0 * kTurn, kTurn));
+  return headings;
 }
 
 }  // namespace
@@ -163,12 +180,15 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   const auto& c = config_;
   const auto& v = c.verify;
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
-  // A narrow view's walls overlay on too many streets.
-  if (viewSpanDeg(query.background, query.background_cell) < v.background_min_view_deg ||
-      viewSpanDeg(candidate.background, candidate.background_cell) < v.background_min_view_deg) {
+  // A narrow view's walls overlay on too many streets at some heading: its overlay is searched only near the
+  // heading its view context gives (section 8), or not at all without view_search.
+  const bool query_narrow = viewSpanDeg(query.background, query.background_cell) < v.background_min_view_deg;
+  const bool narrow =
+      query_narrow || viewSpanDeg(candidate.background, candidate.background_cell) < v.background_min_view_deg;
+  if (narrow && !c.view_search.enabled) {
     nodes.reason =
         "no loop from the landmarks, and a scan that saw less than verify.background_min_view_deg of the horizon "
-        "gets none from its background alone";
+        "gets none from its background alone without view_search";
     return nodes;
   }
   // Planes that already refused the landmarks' pose are not overruled on a lower bar: then the background must
@@ -177,7 +197,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
       refuted ? std::max(v.background_min_overlap, v.confirm_min_fitness) : v.background_min_overlap;
   const double min_constraint =
       refuted ? std::max(v.background_min_constraint, v.confirm_min_constraint) : v.background_min_constraint;
-  const auto headings = wallHeadings(query.planes, candidate.planes, 2);
+  const auto headings = narrow ? viewHeadings(query, candidate, query_narrow, c.view_search)
+                               : wallHeadings(query.planes, candidate.planes, 2);
   if (headings.empty()) return nodes;
   LoopResult best;
   double best_overlap = -1.0;

@@ -215,36 +215,55 @@ TEST_F(RealPipeline, LoopWithoutLandmarksIsFoundFromTheBackground) {
   }
 }
 
-// A narrow field of view (a solid-state sensor's 70 deg) is not trusted for a loop from the background alone:
-// walls seen in a wedge overlay on too many other streets (simulated rosette queries, seed 3: 2 of their 9
-// background-only loops false). The stripped loop's candidate, cut to a 70 deg wedge, is refused either way,
-// though the same wedge gives the right pose once verify.background_min_view_deg lets it through. The wedge looks
-// 45 deg left of ahead: straight ahead, it holds too few of the walls this pair shares for a loop even without
-// the gate (a wedge the gate is not needed to refuse would test nothing).
-TEST_F(RealPipeline, NarrowViewGivesNoBackgroundOnlyLoop) {
-  LabelledScan wedge = scan00("004501");
+// A narrow field of view (a solid-state sensor's 70 deg) is not trusted for a loop from the background alone at
+// the walls' headings: walls seen in a wedge overlay on too many other streets (simulated rosette queries, seed 3:
+// 2 of their 9 background-only loops false). Its overlay is searched only at the heading its view context gives
+// (view_search), and without view_search it gets none. The stripped loop's candidate, cut to a 70 deg wedge 45 deg
+// right of ahead, verifies at the right pose that way; the wedge 45 deg left, whose context's best shift is about
+// 65 deg off on these real labels, gets no loop rather than a wrong one, though the walls' headings would give it
+// the right pose once verify.background_min_view_deg lets them. (Straight ahead, the wedge holds too few of the
+// walls this pair shares for a loop either way: it would test nothing.)
+TEST_F(RealPipeline, NarrowViewGetsBackgroundOnlyLoopsAtItsViewHeadingOnly) {
+  const LabelledScan scan = scan00("004501");
   const LabelMap labels(pipeline_->config().labels);
-  LabelledScan cut;
-  for (std::size_t i = 0; i < wedge.points.size(); ++i) {
-    const auto& p = wedge.points[i];
-    const double off_axis = std::remainder(std::atan2(p.y(), p.x()) - std::numbers::pi / 4, 2 * std::numbers::pi);
-    if (labels.nodeClass(wedge.labels[i]) >= 0 || std::abs(off_axis) > 35.0 * std::numbers::pi / 180.0) continue;
-    cut.points.push_back(p);
-    cut.labels.push_back(wedge.labels[i]);
-  }
-  const Fingerprint b = pipeline_->fingerprint(cut);
-  EXPECT_LE(viewSpanDeg(b.background, b.background_cell), 90.0);
-  EXPECT_GE(viewSpanDeg(fp("00/000052").background, fp("00/000052").background_cell), 300.0);
-  const LoopResult refused = pipeline_->match(fp("00/000052"), b);
+  auto wedge = [&](double towards_deg) {
+    LabelledScan cut;
+    for (std::size_t i = 0; i < scan.points.size(); ++i) {
+      const auto& p = scan.points[i];
+      const double off_axis =
+          std::remainder(std::atan2(p.y(), p.x()) - test::deg2rad(towards_deg), 2 * std::numbers::pi);
+      if (labels.nodeClass(scan.labels[i]) >= 0 || std::abs(off_axis) > test::deg2rad(35.0)) continue;
+      cut.points.push_back(p);
+      cut.labels.push_back(scan.labels[i]);
+    }
+    return pipeline_->fingerprint(cut);
+  };
+  const Fingerprint& full = fp("00/000052");
+  const Fingerprint right = wedge(-45.0), left = wedge(45.0);
+  EXPECT_LE(viewSpanDeg(right.background, right.background_cell), 90.0);
+  EXPECT_LE(viewSpanDeg(left.background, left.background_cell), 90.0);
+  EXPECT_GE(viewSpanDeg(full.background, full.background_cell), 300.0);
+
+  const LoopResult at_view = pipeline_->match(full, right);
+  ASSERT_TRUE(at_view.is_loop) << at_view.reason;
+  EXPECT_EQ(at_view.inliers, 0);  // from the background alone
+  // A wedge's planes hold the heading less tightly than a full turn's: 0.52 and 0.55 deg off here.
+  expectPoseWithin(at_view.T, loopRow().T_a_b, 0.10, 1.0, "narrow_view_background_loop_error");
+  const LoopResult reverse = pipeline_->match(right, full);  // the narrow scan as the query
+  ASSERT_TRUE(reverse.is_loop) << reverse.reason;
+  expectPoseWithin(reverse.T, loopRow().T_a_b.inverse(), 0.10, 1.0, "narrow_view_reverse_error");
+  EXPECT_FALSE(pipeline_->match(full, left).is_loop);
+
+  Config off = pipeline_->config();
+  off.view_search.enabled = false;
+  const LoopResult refused = Pipeline(off).match(full, right);
   EXPECT_FALSE(refused.is_loop);
   EXPECT_NE(std::string(refused.reason).find("background_min_view_deg"), std::string::npos) << refused.reason;
-  EXPECT_FALSE(pipeline_->match(b, fp("00/000052")).is_loop);
   Config open = pipeline_->config();
   open.verify.background_min_view_deg = 0;
-  const LoopResult let = Pipeline(open).match(fp("00/000052"), b);
-  ASSERT_TRUE(let.is_loop) << let.reason;
-  EXPECT_EQ(let.inliers, 0);  // from the background alone
-  expectPoseWithin(let.T, loopRow().T_a_b, 0.10, 0.5, "wedge_background_loop_error");
+  const LoopResult walls = Pipeline(open).match(full, left);
+  ASSERT_TRUE(walls.is_loop) << walls.reason;
+  expectPoseWithin(walls.T, loopRow().T_a_b, 0.10, 0.5, "wedge_background_loop_error");
 }
 
 TEST_F(RealPipeline, LoopPairReverseDirection) {
