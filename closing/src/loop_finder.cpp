@@ -1,6 +1,7 @@
 #include "sglc/closing/loop_finder.hpp"
 
 #include "sglc/elapsed.hpp"
+#include "sglc/view_context.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -101,7 +102,8 @@ std::vector<storage::SearchHit> LoopFinder::listed(const Fingerprint& query, con
 }
 
 std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query, const QueryOrigin& who,
-                                                       const QueryOptions& opt, std::uint32_t k) const {
+                                                       const QueryOptions& opt, std::uint32_t k,
+                                                       const Execution& exec) const {
   storage::SearchRequest req;
   req.map = who.map;
   req.descriptor = query.descriptor;
@@ -115,7 +117,37 @@ std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query,
   if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
   applyScope(opt, who, &req);  // checked even when the candidates are listed
   if (!opt.verify_scan_ids.empty()) return listed(query, who.map, opt.verify_scan_ids);
+  const auto& c = pipeline_.config();
+  if (c.view_search.enabled && viewSpanDeg(query.background, query.background_cell) < c.verify.background_min_view_deg)
+    return viewRanked(query, std::move(req), exec);
   return store_.search(req);
+}
+
+std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query, storage::SearchRequest req,
+                                                       const Execution& exec) const {
+  const auto& config = pipeline_.config().view_search;
+  const auto k = static_cast<std::size_t>(req.k);
+  req.k = config.max_scans;
+  auto hits = store_.search(req);
+  const ViewMatcher mine(viewContext(query.background, query.background_cell, config, query.labeller_structure));
+  std::vector<double> similarity(hits.size(), -1.0);  // -1: deleted meanwhile
+  exec.forEach(hits.size(), [&](std::size_t i) {
+    if (i % 64 == 0) exec.checkAlive();
+    const auto fp = store_.fingerprint(hits[i].scan_id);
+    if (!fp) return;
+    similarity[i] =
+        mine.match(viewContext(fp->background, fp->background_cell, config, fp->labeller_structure)).similarity;
+  });
+  std::vector<std::size_t> order(hits.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::erase_if(order, [&](std::size_t i) { return similarity[i] < 0; });
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+    if (similarity[a] != similarity[b]) return similarity[a] > similarity[b];
+    return hits[a].scan_id < hits[b].scan_id;
+  });
+  std::vector<storage::SearchHit> out;
+  for (std::size_t i = 0; i < order.size() && out.size() < k; ++i) out.push_back(hits[order[i]]);
+  return out;
 }
 
 std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOrigin& origin,
@@ -125,7 +157,7 @@ std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOri
   // A NaN stamp would quietly turn exclude_seconds off.
   if (origin.stamp && !std::isfinite(*origin.stamp)) throw InputError("stamp is not finite");
   const auto t0 = Clock::now();
-  const auto hits = candidates(query, origin, options, n_candidates);
+  const auto hits = candidates(query, origin, options, n_candidates, exec);
   timing->search_ms = msSince(t0);
   auto found = verify(query, hits, ranking, exec, timing);
   for (auto& f : found)

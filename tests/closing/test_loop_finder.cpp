@@ -104,6 +104,50 @@ TEST_F(LoopFinderTest, ScopeAndExclusionsLimitTheCandidates) {
   for (const auto& f : found) EXPECT_NE(f.scan_id, same_place_id);
 }
 
+// A narrow view (a solid-state sensor's 70 deg) is ranked by its view context, not by its scan descriptor: the
+// two views of its street come before the square's, with their descriptor distances, and the scope still
+// applies.
+TEST_F(LoopFinderTest, NarrowViewCandidatesComeFromTheViewContext) {
+  const LabelledScan full = test::viewFrom(test::makeStreetWorld(7), test::kQueryPose);
+  LabelledScan cut;
+  for (std::size_t i = 0; i < full.points.size(); ++i)
+    if (std::abs(std::atan2(full.points[i].y(), full.points[i].x())) <= test::deg2rad(35.0)) {
+      cut.points.push_back(full.points[i]);
+      cut.labels.push_back(full.labels[i]);
+    }
+  const Fingerprint narrow = pipeline.fingerprint(cut);
+  ASSERT_LT(viewSpanDeg(narrow.background, narrow.background_cell), pipeline.config().verify.background_min_view_deg);
+  const LoopFinder finder(pipeline, *store);
+  QueryTiming t;
+  QueryOptions o;
+  o.include_rejected = true;
+  o.candidates = 2;
+  o.top_k = 2;
+  auto found = finder.find(narrow, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 2u);
+  for (const auto& f : found) {
+    EXPECT_TRUE(scans.at(f.scan_id).same_place) << f.scan_id;
+    EXPECT_GT(f.descriptor_distance, 0.0f);
+  }
+  o.scope = Scope::kOtherRobots;
+  o.candidates = 1;
+  o.top_k = 1;
+  found = finder.find(narrow, origin("r1"), o, {}, &t);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(scans.at(found[0].scan_id).robot, "r2");
+  EXPECT_TRUE(scans.at(found[0].scan_id).same_place);
+  // A full view of the same street keeps the descriptor's candidates: asked for one, it gets the nearer
+  // descriptor, whichever place that is.
+  o.scope = Scope::kWholeMap;
+  storage::SearchRequest req;
+  req.map = "m";
+  req.descriptor = query.descriptor;
+  req.k = 1;
+  found = finder.find(query, origin("r3"), o, {}, &t);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_EQ(found[0].scan_id, store->search(req).at(0).scan_id);
+}
+
 TEST_F(LoopFinderTest, ListedScansAreVerifiedWithoutASearch) {
   const LoopFinder finder(pipeline, *store);
   QueryTiming t;

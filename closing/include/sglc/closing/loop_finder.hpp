@@ -52,8 +52,15 @@ class LoopFinder {
                                          const std::vector<std::int64_t>& ids, std::size_t max = 200) const;
 
  private:
+  // The search's candidates, or the listed scans. A narrow view (less than verify.background_min_view_deg of
+  // the horizon, viewSpanDeg) with view_search on gets viewRanked's instead of the descriptor's.
   std::vector<storage::SearchHit> candidates(const Fingerprint& query, const QueryOrigin& origin,
-                                             const QueryOptions& options, std::uint32_t k) const;
+                                             const QueryOptions& options, std::uint32_t k, const Execution& exec) const;
+  // The request's k scans whose view context is most like the query's (sglc/view_context.hpp), ties by scan
+  // id, from the view_search.max_scans nearest by descriptor that the request's filters allow. Each hit keeps
+  // its descriptor distance.
+  std::vector<storage::SearchHit> viewRanked(const Fingerprint& query, storage::SearchRequest request,
+                                             const Execution& exec) const;
 
   const Pipeline& pipeline_;
   const storage::MapStore& store_;
