@@ -126,10 +126,12 @@ std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query,
 std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query, storage::SearchRequest req,
                                                        const Execution& exec) const {
   const auto& config = pipeline_.config().view_search;
+  const auto mine_context = viewContext(query.background, query.background_cell, config, query.labeller_structure);
+  if (!(mine_context.seen.lo | mine_context.seen.hi)) return store_.search(req);  // nothing to compare
+  const ViewMatcher mine(mine_context);
   const auto k = static_cast<std::size_t>(req.k);
-  req.k = config.max_scans;
+  req.k = std::max(req.k, config.max_scans);
   auto hits = store_.search(req);
-  const ViewMatcher mine(viewContext(query.background, query.background_cell, config, query.labeller_structure));
   std::vector<double> similarity(hits.size(), -1.0);  // -1: deleted meanwhile
   exec.forEach(hits.size(), [&](std::size_t i) {
     if (i % 64 == 0) exec.checkAlive();
@@ -143,6 +145,7 @@ std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query,
   std::erase_if(order, [&](std::size_t i) { return similarity[i] < 0; });
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
     if (similarity[a] != similarity[b]) return similarity[a] > similarity[b];
+    if (hits[a].distance != hits[b].distance) return hits[a].distance < hits[b].distance;
     return hits[a].scan_id < hits[b].scan_id;
   });
   std::vector<storage::SearchHit> out;
@@ -177,7 +180,7 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   };
   auto t0 = Clock::now();
   // Candidates are verified independently (at once where exec allows) and kept in search order. Loops from the
-  // background alone cost more to find: only the nearest candidates in descriptor space may give one.
+  // background alone cost more to find: only the first candidates of the search may give one.
   const auto background = static_cast<std::size_t>(pipeline_.config().verify.background_candidates);
   std::vector<std::optional<Verified>> verified(hits.size());
   exec.forEach(hits.size(), [&](std::size_t i) {

@@ -195,7 +195,7 @@ void addVerification(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(verify.background_min_overlay), closed(0, 1),
                       "background-only loops: least agreement of an overlay before its plane fit"));
   t.add(field<Config>(SGLC_KEY(verify.background_min_view_deg), closed(0, 360),
-                      "background-only loops: least share of the horizon each scan saw (deg)"));
+                      "a scan that saw less of the horizon is a narrow view (view_search) (deg)"));
   t.add(field<Config>(SGLC_KEY(verify.background_pin_margin), closed(0, 1),
                       "background-only loops: least agreement lost 2 and 4 m along a corridor (0: off)"));
   t.rule({"verify.bev_radius_m", "verify.bev_cell_m"}, "at most 2000 cells apart",
@@ -260,8 +260,8 @@ void addRefinement(Table<Config>& t) {
       field<Config>(SGLC_KEY(bev_search.min_correspondences), atLeast(3), "BEV search: plane pairs an overlay needs"));
   t.add(field<Config>(SGLC_KEY(view_search.enabled), {},
                       "narrow views: candidates ranked by the view context, background loops at its heading"));
-  t.add(field<Config>(SGLC_KEY(view_search.rings), closed(1, 200), "view context: rings"));
-  t.add(field<Config>(SGLC_KEY(view_search.max_range_m), openClosed(2, 100), "view context: structure used (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.rings), closed(2, 200), "view context: rings"));
+  t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100), "view context: structure used (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
                       "view context: scans a narrow query is compared with (nearest by descriptor)"));
 }

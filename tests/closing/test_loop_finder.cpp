@@ -129,6 +129,15 @@ TEST_F(LoopFinderTest, NarrowViewCandidatesComeFromTheViewContext) {
     EXPECT_TRUE(scans.at(f.scan_id).same_place) << f.scan_id;
     EXPECT_GT(f.descriptor_distance, 0.0f);
   }
+  // By descriptor alone, the square's views are among the wedge's first two: the view context chose the street.
+  Config plain_config = pipeline.config();
+  plain_config.view_search.enabled = false;
+  const Pipeline plain_pipeline(plain_config);
+  const LoopFinder plain(plain_pipeline, *store);
+  const auto by_descriptor = plain.find(narrow, origin("r3"), o, {}, &t);
+  ASSERT_EQ(by_descriptor.size(), 2u);
+  EXPECT_TRUE(std::any_of(by_descriptor.begin(), by_descriptor.end(),
+                          [&](const FoundLoop& f) { return !scans.at(f.scan_id).same_place; }));
   o.scope = Scope::kOtherRobots;
   o.candidates = 1;
   o.top_k = 1;

@@ -3,6 +3,7 @@
 
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numbers>
 #include <random>
@@ -34,7 +35,7 @@ std::vector<WorldCell> makePlace(std::uint32_t seed) {
       if (std::hypot(x, y) < 45) w.push_back({x, y, Background::kRoad});
   for (const double side : {-1.0, 1.0})
     for (double x = -45; x < 45;) {
-      const double length = 4 + 16 * u(rng), depth = 6 + 8 * u(rng) * side;
+      const double length = 4 + 16 * u(rng), depth = 6 + 8 * u(rng);
       for (double s = 0; s < length; s += kCell)
         w.push_back({x + s, side * depth, u(rng) < 0.5 ? Background::kBuilding : Background::kFence});
       x += length + 2 + 8 * u(rng);
@@ -142,6 +143,13 @@ TEST(ViewContext, EmptyAndMismatchedContexts) {
   }
   cfg.rings = 12;
   EXPECT_THROW(matchViews(viewContext({}, kCell, cfg), full), InputError);
+  // Settings no configuration file can give (validateConfig refuses them) are refused here too.
+  cfg.rings = 0;
+  EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
+  cfg.rings = 30;
+  EXPECT_THROW(viewContext({}, std::numeric_limits<double>::quiet_NaN(), cfg), InputError);
+  cfg.max_range_m = 1.0;
+  EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
 }
 
 TEST(ViewContext, Deterministic) {

@@ -56,9 +56,10 @@ class LoopFinder {
   // the horizon, viewSpanDeg) with view_search on gets viewRanked's instead of the descriptor's.
   std::vector<storage::SearchHit> candidates(const Fingerprint& query, const QueryOrigin& origin,
                                              const QueryOptions& options, std::uint32_t k, const Execution& exec) const;
-  // The request's k scans whose view context is most like the query's (sglc/view_context.hpp), ties by scan
-  // id, from the view_search.max_scans nearest by descriptor that the request's filters allow. Each hit keeps
-  // its descriptor distance.
+  // The request's k scans whose view context is most like the query's (sglc/view_context.hpp), ties by
+  // descriptor distance then scan id, from the view_search.max_scans (at least k) nearest by descriptor that the
+  // request's filters allow. Each hit keeps its descriptor distance. A query whose context saw nothing gets the
+  // descriptor search's k.
   std::vector<storage::SearchHit> viewRanked(const Fingerprint& query, storage::SearchRequest request,
                                              const Execution& exec) const;
 
