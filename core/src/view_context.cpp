@@ -5,6 +5,7 @@
 #include <cmath>
 #include <numbers>
 #include <string>
+#include <utility>
 
 #include "fast_math.hpp"
 #include "sglc/labels.hpp"
@@ -80,40 +81,59 @@ ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), me
 
 // Most of a comparison is population counts: where the CPU has the instruction (x86-64 from 2008 on; Debian's
 // baseline does not assume it), a second copy of this function uses it, chosen once at load time (GCC's
-// function multi-versioning, an ifunc of glibc). 13 us instead of 55 us per comparison (BM_ViewMatch).
+// function multi-versioning, an ifunc of glibc). 13 us instead of 55 us per comparison (BM_ViewMatch). The copies
+// neither throw nor allocate: GCC 12 gives callers of such a function no cleanup for an exception from it (a
+// sanitizer build found a temporary's vectors leaked when match() threw from inside it).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define SGLC_POPCNT_CLONES __attribute__((target_clones("popcnt", "default")))
 #else
 #define SGLC_POPCNT_CLONES
 #endif
 
-SGLC_POPCNT_CLONES ViewMatch ViewMatcher::match(const ViewContext& other) const {
-  if (other.rings() != rings_)
-    throw InputError("view contexts with " + std::to_string(rings_) + " and " + std::to_string(other.rings()) +
-                     " rings cannot be compared");
-  const bool merged = merged_ || other.merged;
-  const auto rings = static_cast<std::size_t>(rings_);
-  std::vector<Row> structure(rings);
-  for (std::size_t i = 0; i < rings; ++i) structure[i] = other.building[i] | other.vegetation[i];
-  ViewMatch best;
+namespace {
+
+// The narrow view's rows turned by each shift ([shift * rings + ring], seen [shift]) against the other's rows
+// and structure (building | vegetation): the best shift and its similarity.
+SGLC_POPCNT_CLONES std::pair<int, double> bestShift(const Row* building, const Row* vegetation, const Row* seen,
+                                                    const Row* other_building, const Row* other_vegetation,
+                                                    const Row* other_structure, std::size_t rings,
+                                                    bool merged) noexcept {
   int best_shift = 0;
+  double best = 0.0;
   for (int shift = 0; shift < kSectors; ++shift) {
     // The narrow view turned by `shift` sectors, compared where it saw.
-    const Row seen = seen_[static_cast<std::size_t>(shift)];
-    const Row* b = &building_[shift * rings];
-    const Row* v = &vegetation_[shift * rings];
+    const Row* b = building + shift * rings;
+    const Row* v = vegetation + shift * rings;
     int same = 0, judged = 0;
     for (std::size_t i = 0; i < rings; ++i) {
       const Row mine = b[i] | v[i];
-      same += merged ? count(mine & structure[i]) : count((b[i] & other.building[i]) | (v[i] & other.vegetation[i]));
-      judged += count(mine | (structure[i] & seen));
+      same +=
+          merged ? count(mine & other_structure[i]) : count((b[i] & other_building[i]) | (v[i] & other_vegetation[i]));
+      judged += count(mine | (other_structure[i] & seen[shift]));
     }
     const double similarity = judged ? static_cast<double>(same) / static_cast<double>(judged) : 0.0;
-    if (similarity > best.similarity) {
-      best.similarity = similarity;
+    if (similarity > best) {
+      best = similarity;
       best_shift = shift;
     }
   }
+  return {best_shift, best};
+}
+
+}  // namespace
+
+ViewMatch ViewMatcher::match(const ViewContext& other) const {
+  if (other.rings() != rings_)
+    throw InputError("view contexts with " + std::to_string(rings_) + " and " + std::to_string(other.rings()) +
+                     " rings cannot be compared");
+  const auto rings = static_cast<std::size_t>(rings_);
+  std::vector<Row> structure(rings);
+  for (std::size_t i = 0; i < rings; ++i) structure[i] = other.building[i] | other.vegetation[i];
+  const auto [best_shift, similarity] =
+      bestShift(building_.data(), vegetation_.data(), seen_.data(), other.building.data(), other.vegetation.data(),
+                structure.data(), rings, merged_ || other.merged);
+  ViewMatch best;
+  best.similarity = similarity;
   // Narrow's sector s lies at other's s + shift: other's frame turns by -shift sectors into narrow's.
   best.heading = static_cast<double>((kSectors - best_shift) % kSectors) * 2.0 * std::numbers::pi / kSectors;
   return best;
