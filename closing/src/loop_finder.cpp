@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <unordered_set>
 
 namespace sglc::closing {
@@ -118,7 +119,7 @@ std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query,
   applyScope(opt, who, &req);  // checked even when the candidates are listed
   if (!opt.verify_scan_ids.empty()) return listed(query, who.map, opt.verify_scan_ids);
   const auto& c = pipeline_.config();
-  if (c.view_search.enabled && viewSpanDeg(query.background, query.background_cell) < c.verify.background_min_view_deg)
+  if (c.view_search.enabled && isNarrowView(query, c.verify.background_min_view_deg))
     return viewRanked(query, std::move(req), exec);
   return store_.search(req);
 }
@@ -127,7 +128,8 @@ std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query,
                                                        const Execution& exec) const {
   const auto& config = pipeline_.config().view_search;
   const auto mine_context = viewContext(query.background, query.background_cell, config, query.labeller_structure);
-  if (!(mine_context.seen.lo | mine_context.seen.hi)) return store_.search(req);  // nothing to compare
+  // Without structure in view every similarity is 0, and the order would be the descriptor's: spare the reads.
+  if (!mine_context.seesStructure()) return store_.search(req);
   const ViewMatcher mine(mine_context);
   const auto k = static_cast<std::size_t>(req.k);
   req.k = std::max(req.k, config.max_scans);
@@ -141,7 +143,7 @@ std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query,
         mine.match(viewContext(fp->background, fp->background_cell, config, fp->labeller_structure)).similarity;
   });
   std::vector<std::size_t> order(hits.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::iota(order.begin(), order.end(), std::size_t{0});
   std::erase_if(order, [&](std::size_t i) { return similarity[i] < 0; });
   std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
     if (similarity[a] != similarity[b]) return similarity[a] > similarity[b];

@@ -182,9 +182,8 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
   // A narrow view's walls overlay on too many streets at some heading: its overlay is searched only near the
   // heading its view context gives (section 8), or not at all without view_search.
-  const bool query_narrow = viewSpanDeg(query.background, query.background_cell) < v.background_min_view_deg;
-  const bool narrow =
-      query_narrow || viewSpanDeg(candidate.background, candidate.background_cell) < v.background_min_view_deg;
+  const bool query_narrow = isNarrowView(query, v.background_min_view_deg);
+  const bool narrow = query_narrow || isNarrowView(candidate, v.background_min_view_deg);
   if (narrow && !c.view_search.enabled) {
     nodes.reason =
         "no loop from the landmarks, and a scan that saw less than verify.background_min_view_deg of the horizon "

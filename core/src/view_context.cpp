@@ -64,6 +64,16 @@ ViewContext viewContext(const std::vector<BevCell>& cells, double cell, const Vi
   return v;
 }
 
+bool ViewContext::seesStructure() const {
+  for (std::size_t i = 0; i < building.size(); ++i)
+    if (count((building[i] | vegetation[i]) & seen)) return true;
+  return false;
+}
+
+bool isNarrowView(const Fingerprint& fp, double min_view_deg) {
+  return viewSpanDeg(fp.background, fp.background_cell) < min_view_deg;
+}
+
 ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), merged_(narrow.merged) {
   const auto rings = static_cast<std::size_t>(rings_);
   building_.resize(kSectors * rings);

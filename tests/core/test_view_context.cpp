@@ -152,15 +152,40 @@ TEST(ViewContext, EmptyAndMismatchedContexts) {
   EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
 }
 
-TEST(ViewContext, Deterministic) {
+// Equal similarities at several shifts give the first of them: a structure pattern repeated every 90 deg
+// matches itself at four headings, and the answer is always the unturned one.
+TEST(ViewContext, TiesGoToTheFirstShift) {
   const ViewSearchConfig cfg;
-  const auto place = makePlace(4);
-  const auto a =
-      matchViews(viewContext(viewOf(place, 1.0, 0.6), kCell, cfg), viewContext(viewOf(place, 0.0), kCell, cfg));
-  const auto b =
-      matchViews(viewContext(viewOf(place, 1.0, 0.6), kCell, cfg), viewContext(viewOf(place, 0.0), kCell, cfg));
-  EXPECT_EQ(a.similarity, b.similarity);
-  EXPECT_EQ(a.heading, b.heading);
+  std::vector<BevCell> cross;
+  for (int arm = 0; arm < 4; ++arm)
+    for (double r = 5; r < 40; r += kCell) {
+      const double a = arm * std::numbers::pi / 2 + 0.3;
+      cross.push_back({static_cast<std::int16_t>(std::floor(r * std::cos(a) / kCell)),
+                       static_cast<std::int16_t>(std::floor(r * std::sin(a) / kCell)),
+                       static_cast<std::uint8_t>(Background::kBuilding)});
+    }
+  const auto c = viewContext(cross, kCell, cfg);
+  const ViewMatch m = matchViews(c, c);
+  EXPECT_DOUBLE_EQ(m.similarity, 1.0);
+  EXPECT_EQ(m.heading, 0.0);
+}
+
+// Hostile cells (the ends of the int16 grid, class values no labeller writes) are left out or only open a
+// sector: nothing is written out of bounds and nothing counts as structure.
+TEST(ViewContext, OddCellsAreHarmless) {
+  const ViewSearchConfig cfg;
+  std::vector<BevCell> odd;
+  for (const std::int16_t i : {std::int16_t{-32768}, std::int16_t{32767}, std::int16_t{0}, std::int16_t{40}})
+    for (const std::int16_t j : {std::int16_t{-32768}, std::int16_t{32767}, std::int16_t{0}, std::int16_t{-40}})
+      for (const std::uint8_t cls : {1, 5, 200, 255}) odd.push_back({i, j, cls});
+  const auto v = viewContext(odd, kCell, cfg);
+  EXPECT_FALSE(v.seesStructure());
+  for (int i = 0; i < v.rings(); ++i) {
+    EXPECT_EQ(v.building[i].lo | v.building[i].hi, 0u);
+    EXPECT_EQ(v.vegetation[i].lo | v.vegetation[i].hi, 0u);
+  }
+  EXPECT_EQ(matchViews(v, viewContext(viewOf(makePlace(1), 0.0), kCell, cfg)).similarity, 0.0);
+  EXPECT_TRUE(viewContext(viewOf(makePlace(1), 0.0, 0.6), kCell, cfg).seesStructure());
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 
 #include "sglc/background.hpp"
 #include "sglc/config.hpp"
+#include "sglc/fingerprint.hpp"
 
 namespace sglc {
 
@@ -26,7 +27,13 @@ struct ViewContext {
   // vegetation are compared as one class, as background agreement does for such scans.
   bool merged = false;
   int rings() const { return static_cast<int>(building.size()); }
+  // Whether any building or vegetation lies in a sector it saw: without, every comparison with it gives 0.
+  bool seesStructure() const;
 };
+
+// Whether a scan is a narrow view: it saw less than min_view_deg (VerifyConfig::background_min_view_deg) of the
+// horizon (viewSpanDeg of its stored background).
+bool isNarrowView(const Fingerprint& fp, double min_view_deg);
 
 // The context of a labelled BEV (`cell` metres, BevCell positions) between 2 m and config.max_range_m, in
 // config.rings rings.

@@ -58,8 +58,8 @@ class LoopFinder {
                                              const QueryOptions& options, std::uint32_t k, const Execution& exec) const;
   // The request's k scans whose view context is most like the query's (sglc/view_context.hpp), ties by
   // descriptor distance then scan id, from the view_search.max_scans (at least k) nearest by descriptor that the
-  // request's filters allow. Each hit keeps its descriptor distance. A query whose context saw nothing gets the
-  // descriptor search's k.
+  // request's filters allow. Each hit keeps its descriptor distance. A query whose context sees no structure gets
+  // the descriptor search's k (the same order, without reading the scans).
   std::vector<storage::SearchHit> viewRanked(const Fingerprint& query, storage::SearchRequest request,
                                              const Execution& exec) const;
 
