@@ -210,7 +210,8 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 }
 
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
-                    const Mat4d& T_q_c, double grid_cell, double radius, StructureClasses classes) {
+                    const Mat4d& T_q_c, double grid_cell, double radius, StructureClasses classes,
+                    const std::vector<bool>* field) {
   const int g = static_cast<int>(std::ceil(2.0 * radius / grid_cell));
   const double inv = 1.0 / grid_cell;
   std::vector<ClassVotes> q(static_cast<std::size_t>(g) * g), c(q.size());
@@ -247,6 +248,11 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
       const std::uint8_t a = wq[i], b = wc[i];
       if (a <= kRoad && b <= kRoad) continue;  // no structure in either: road agrees with any street
       if (!seen(wq, x, y) || !seen(wc, x, y)) continue;
+      if (field && !field->empty() &&
+          !(*field)[static_cast<std::size_t>(azimuthSector(
+              (x + 0.5) * grid_cell - radius, (y + 0.5) * grid_cell - radius,
+              static_cast<double>(field->size()) / (2.0 * std::numbers::pi), static_cast<int>(field->size())))])
+        continue;
       ++judged;
       same += a == b || (classes == StructureClasses::kMerged && a > kRoad && b > kRoad);
     }

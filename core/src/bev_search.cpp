@@ -121,6 +121,21 @@ bool wanted(int s, int steps, const std::vector<double>& headings) {
   });
 }
 
+// The best `count` cells of a w x w score grid (cleared as it goes), each more than two cells from the ones
+// before: a corridor scores alike along itself. Calls take(score, x, y), best first; the first maximum wins ties.
+template <class Take>
+void bestShifts(std::vector<std::uint32_t>& acc, int w, int count, const Take& take) {
+  for (int k = 0; k < count; ++k) {
+    const auto best = std::max_element(acc.begin(), acc.end()) - acc.begin();
+    const auto score = acc[static_cast<std::size_t>(best)];
+    if (k > 0 && score == 0) return;
+    const int bx = static_cast<int>(best % w), by = static_cast<int>(best / w);
+    take(score, bx, by);
+    for (int y = std::max(0, by - 2); y <= std::min(w - 1, by + 2); ++y)
+      for (int x = std::max(0, bx - 2); x <= std::min(w - 1, bx + 2); ++x) acc[static_cast<std::size_t>(y) * w + x] = 0;
+  }
+}
+
 }  // namespace
 
 std::vector<double> wallHeadings(const std::vector<Plane>& query, const std::vector<Plane>& candidate, int peaks) {
@@ -155,7 +170,7 @@ std::vector<double> wallHeadings(const std::vector<Plane>& query, const std::vec
 
 std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate,
                                    double stored_cell, const BevSearchConfig& config,
-                                   const std::vector<double>& headings, bool fine) {
+                                   const std::vector<double>& headings, bool fine, int shifts_per_heading) {
   const double cell = config.cell_m;
   const double range = config.max_range_m;
   const double half = range + config.max_shift_m + 2.0 * cell;
@@ -186,9 +201,9 @@ std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std:
         for (int dx = 0; dx < w; ++dx) out[dx] += row[dx];
       }
     }
-    const auto best = std::max_element(acc.begin(), acc.end()) - acc.begin();  // first maximum: deterministic
-    per_yaw.push_back({static_cast<double>(acc[static_cast<std::size_t>(best)]), yaw,
-                       (static_cast<int>(best % w) - S) * cell, (static_cast<int>(best / w) - S) * cell});
+    bestShifts(acc, w, shifts_per_heading, [&](std::uint32_t score, int bx, int by) {
+      per_yaw.push_back({static_cast<double>(score), yaw, (bx - S) * cell, (by - S) * cell});
+    });
   }
   std::stable_sort(per_yaw.begin(), per_yaw.end(), [](const auto& a, const auto& b) { return a.score > b.score; });
   std::vector<Hypothesis> picked;

@@ -248,6 +248,25 @@ TEST(BevAgreement, MergedClassesCompareStructureAgainstRoadOnly) {
   EXPECT_DOUBLE_EQ(bevAgreement(far, near, 0.5, Mat4d::Identity(), 2.0, 30.0, kMerged), 1.0);
 }
 
+// A field (a narrow view's sectors) limits the judged cells to the directions the query looked in: the
+// candidate's fence behind the query, which the query never saw, does not count against it.
+TEST(BevAgreement, FieldLimitsTheJudgedCellsToTheQuerysDirections) {
+  // 2 m grid cells: ahead (+x) both hold building; behind (-x) the query holds road, the candidate fence.
+  const std::vector<BevCell> query{{10, 0, 3}, {-10, 0, 1}}, candidate{{10, 0, 3}, {-10, 0, 4}};
+  EXPECT_DOUBLE_EQ(bevAgreement(query, candidate, 0.5, Mat4d::Identity(), 2.0, 10.0), 0.5);
+  // Four sectors from -pi: the second and third (-90 .. 90 deg) are ahead.
+  const std::vector<bool> ahead{false, true, true, false}, behind{true, false, false, true};
+  EXPECT_DOUBLE_EQ(
+      bevAgreement(query, candidate, 0.5, Mat4d::Identity(), 2.0, 10.0, StructureClasses::kCompared, &ahead), 1.0);
+  EXPECT_DOUBLE_EQ(
+      bevAgreement(query, candidate, 0.5, Mat4d::Identity(), 2.0, 10.0, StructureClasses::kCompared, &behind), 0.0);
+  const std::vector<bool> nowhere(4, false), all;
+  EXPECT_DOUBLE_EQ(
+      bevAgreement(query, candidate, 0.5, Mat4d::Identity(), 2.0, 10.0, StructureClasses::kCompared, &nowhere), 0.0);
+  EXPECT_DOUBLE_EQ(bevAgreement(query, candidate, 0.5, Mat4d::Identity(), 2.0, 10.0, StructureClasses::kCompared, &all),
+                   0.5);
+}
+
 // An asymmetric place: a road, facades along both sides with a cross wall each, a hedge of vegetation and a
 // fence, as the BEV sees a street (structure in strips, not blocks: a block shifted by a few metres would still
 // cover most of itself).

@@ -145,5 +145,35 @@ TEST(BevSearch, RestrictedHeadingsFindThePoseOnlyWhereItIs) {
   for (const auto& h : wrong) EXPECT_GT(rotationErrorDeg(h.T, T), 40.0) << h.T;
 }
 
+// Several shifts at each heading (a narrow view's search: along a street, shifts score alike): the best one is
+// the single-shift search's, the others lie more than two cells from it, and each heading step gives at most as
+// many as asked.
+TEST(BevSearch, SeveralShiftsPerHeadingLieApart) {
+  const Pipeline p;
+  const LabelledScan world = test::makeStreetWorld();
+  const Mat4d T = test::makeT(130.0, 3.0, -2.0, 0.0);
+  const Fingerprint q = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
+  const Fingerprint c = p.fingerprint(test::viewFrom(world, T));
+  const double true_yaw = 130.0 * std::numbers::pi / 180.0;
+  BevSearchConfig all = p.config().bev_search;
+  all.keep = 1000;
+  const auto one = searchBevPose(q.background, c.background, q.background_cell, all, {true_yaw}, false);
+  const auto three = searchBevPose(q.background, c.background, q.background_cell, all, {true_yaw}, false, 3);
+  ASSERT_FALSE(one.empty());
+  EXPECT_GT(three.size(), one.size());
+  EXPECT_LE(three.size(), 3 * one.size());
+  EXPECT_EQ(three[0].T, one[0].T);
+  EXPECT_EQ(three[0].score, one[0].score);
+  for (std::size_t a = 0; a < three.size(); ++a) {
+    if (a > 0) EXPECT_GE(three[a - 1].score, three[a].score);
+    for (std::size_t b = a + 1; b < three.size(); ++b)
+      if (rotationErrorDeg(three[a].T, three[b].T) < 0.5)
+        EXPECT_GT(translationError(three[a].T, three[b].T), 2.0 * all.cell_m) << a << " " << b;
+  }
+  const auto again = searchBevPose(q.background, c.background, q.background_cell, all, {true_yaw}, false, 3);
+  ASSERT_EQ(again.size(), three.size());
+  for (std::size_t k = 0; k < again.size(); ++k) EXPECT_EQ(again[k].T, three[k].T);
+}
+
 }  // namespace
 }  // namespace sglc

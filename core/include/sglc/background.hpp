@@ -64,10 +64,12 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 // sparser or differently aimed sensor is not counted against (ours; the paper compares background descriptors,
 // the reference scores a polar grid by priority class). kMerged compares structure against road only
 // (building, fence and vegetation count as one class): for views whose classes the built-in labeller computed,
-// whose split of structure into building and vegetation is not repeatable from visit to visit.
+// whose split of structure into building and vegetation is not repeatable from visit to visit. `field`, when
+// given, limits the judged cells to the directions the query looked in: field->size() equal azimuth sectors
+// around the query's origin, counted from -pi as viewSpanDeg's (a narrow view's own field, sglc/view_context.hpp).
 enum class StructureClasses { kCompared, kMerged };
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
                     const Mat4d& T_q_c, double grid_cell, double radius,
-                    StructureClasses classes = StructureClasses::kCompared);
+                    StructureClasses classes = StructureClasses::kCompared, const std::vector<bool>* field = nullptr);
 
 }  // namespace sglc

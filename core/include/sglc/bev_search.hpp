@@ -20,13 +20,16 @@ struct BevPose {
 // The best `config.keep` distinct planar poses (best first) overlaying the candidate's structure cells
 // (fence, building, vegetation; road says little about a shift) on the query's, with shifts up to
 // config.max_shift_m on each axis and any heading, or, when `headings` (radians) is not empty, only the coarse
-// heading steps within one step of one of them. Without `fine`, the coarse overlays are returned as they are
+// heading steps within one step of one of them; at each heading step the best shifts_per_heading shifts, each
+// more than two cells from the ones before (along a corridor, shifts score alike). Without `fine`, the coarse
+// overlays are returned as they are
 // (within a cell and a heading step; the plane refinement converges from there) instead of being searched
 // again around on the stored cells, which costs most of the time. Deterministic. Empty when either view has no
 // structure.
 std::vector<BevPose> searchBevPose(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate,
                                    double stored_cell, const BevSearchConfig& config,
-                                   const std::vector<double>& headings = {}, bool fine = true);
+                                   const std::vector<double>& headings = {}, bool fine = true,
+                                   int shifts_per_heading = 1);
 
 // Headings (radians, in [0, 2 pi)) that turn the candidate's walls parallel to the query's: the vertical planes'
 // horizontal normal directions, folded to [0, 180) deg, are histogrammed per degree in each scan, and the best
