@@ -182,8 +182,12 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   };
   auto t0 = Clock::now();
   // Candidates are verified independently (at once where exec allows) and kept in search order. Loops from the
-  // background alone cost more to find: only the first candidates of the search may give one.
-  const auto background = static_cast<std::size_t>(pipeline_.config().verify.background_candidates);
+  // background alone cost more to find: only the first candidates of the search may give one; more of a narrow
+  // view's, which its view context ranks and whose search is narrower.
+  const auto& c = pipeline_.config();
+  const bool narrow = c.view_search.enabled && isNarrowView(query, c.verify.background_min_view_deg);
+  const auto background =
+      static_cast<std::size_t>(narrow ? c.view_search.background_candidates : c.verify.background_candidates);
   std::vector<std::optional<Verified>> verified(hits.size());
   exec.forEach(hits.size(), [&](std::size_t i) {
     exec.checkAlive();

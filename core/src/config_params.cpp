@@ -264,6 +264,20 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100), "view context: structure used (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
                       "view context: scans a narrow query is compared with (nearest by descriptor)"));
+  t.add(field<Config>(SGLC_KEY(view_search.background_candidates), closed(0, 200),
+                      "a narrow query's candidates tried for a background-only loop"));
+  t.add(field<Config>(SGLC_KEY(view_search.shifts_per_heading), closed(1, 10),
+                      "narrow view's overlay search: best shifts kept at each heading step"));
+  t.add(field<Config>(SGLC_KEY(view_search.min_overlap), closed(0, 1),
+                      "narrow view's background-only loop: plane overlap at least"));
+  t.add(field<Config>(SGLC_KEY(view_search.max_rmse_m), closed(0.001, 1),
+                      "narrow view's background-only loop: plane RMSE at most (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.min_evidence), closed(0, 1),
+                      "narrow view's background-only loop: view agreement x overlap x context similarity at least"));
+  t.add(field<Config>(SGLC_KEY(view_search.agreement_cell_m), closed(0.25, 5), "view agreement grid cell (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.pin_landmarks), closed(1, 100),
+                      "landmarks that pin a narrow view's background-only loop along the street"));
+  t.add(field<Config>(SGLC_KEY(view_search.landmark_gate_m), closed(0.05, 10), "landmark pinning gate (m)"));
 }
 
 #undef SGLC_KEY

@@ -2,9 +2,10 @@
 // decision (docs/METHOD.md, sections 7 and 8).
 #include <algorithm>
 #include <cmath>
-#include <numbers>
+#include <limits>
 
 #include "agreement.hpp"
+#include "narrow_view.hpp"
 #include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
 #include "sglc/consensus.hpp"
@@ -86,21 +87,6 @@ double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const
   return fewer ? static_cast<double>(std::min(explained, distinct)) / static_cast<double>(fewer) : 0.0;
 }
 
-// Headings (T_q_c's yaw, radians) for a background-only loop where one scan is a narrow view: the best shift of
-// the narrow view's context over the other's, and a sector either side. Empty when the contexts share nothing.
-std::vector<double> viewHeadings(const Fingerprint& query, const Fingerprint& candidate, bool query_narrow,
-                                 const ViewSearchConfig& config) {
-  const auto q = viewContext(query.background, query.background_cell, config, query.labeller_structure);
-  const auto c = viewContext(candidate.background, candidate.background_cell, config, candidate.labeller_structure);
-  const ViewMatch m = query_narrow ? matchViews(q, c) : matchViews(c, q);
-  if (m.similarity <= 0) return {};
-  constexpr double kTurn = 2.0 * std::numbers::pi, kSector = kTurn / ViewContext::kSectors;
-  const double h = query_narrow ? m.heading : kTurn - m.heading;  // T_c_q's yaw turned round
-  std::vector<double> headings;
-  for (const double d : {-kSector, 0.0, kSector}) headings.push_back(std::fmod(h + d + 2.0 * kTurn, kTurn));
-  return headings;
-}
-
 }  // namespace
 
 LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candidate, bool background) const {
@@ -175,16 +161,68 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
   return !r.is_loop && background && few_nodes ? backgroundLoop(query, candidate, std::move(r), refuted) : r;
 }
 
+namespace {
+
+// The pose a background-only loop is judged at: the plane fit from the best overlay.
+struct Fitted {
+  RefineResult planes;    // planes.T is the pose
+  double overlap = -1.0;  // band-plane overlap there; negative when no overlay got a fit
+};
+
+// The plane fit from each overlay at `headings`; the one whose planes explain most stands. A narrow pair's
+// overlays (`narrow` not null) all get the fit, several shifts at each heading, and the one whose planes and view
+// agree most stands: its walls along a street overlay alike all along it, and its near agreement is too weak a
+// clue to drop any before the fit.
+Fitted fitOverlays(const Fingerprint& query, const Fingerprint& candidate, const Config& c,
+                   const std::vector<double>& headings, const detail::NarrowPair* narrow) {
+  BevSearchConfig search = c.bev_search;
+  if (narrow) search.keep = std::numeric_limits<int>::max();
+  Fitted best;
+  double best_key = -1.0;
+  for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, search, headings,
+                                     false, narrow ? c.view_search.shifts_per_heading : 1)) {
+    // Most overlays of another place disagree already: spare them the plane fit.
+    if (!narrow && detail::agreementAt(query, candidate, h.T, c.verify) < c.verify.background_min_overlay) continue;
+    auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
+    if (planes.iterations == 0 || planes.correspondences < c.bev_search.min_correspondences) continue;
+    const double overlap = bandOverlap(query, candidate, planes.T, c.fingerprint.background_max_z_m, c.refine);
+    const double key =
+        narrow ? overlap * detail::viewAgreement(*narrow, query, candidate, planes.T, c.view_search) : overlap;
+    if (key <= best_key) continue;
+    best_key = key;
+    best.overlap = overlap;
+    best.planes = std::move(planes);
+  }
+  return best;
+}
+
+// Whether `agreement` exceeds `level` anywhere the pose moves 2 or 4 m either way along the planes' free
+// direction (a left motion: turned about the query's origin, then shifted). False when there is none.
+template <class Agreement>
+bool higherAlongStreet(const RefineResult& planes, const Agreement& agreement, double level) {
+  if (planes.weak_shift.isZero()) return false;
+  for (const double s : {-4.0, -2.0, 2.0, 4.0}) {
+    Mat4d T = Mat4d::Identity();
+    T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(s * planes.weak_turn, Vec3d::UnitZ()).toRotationMatrix();
+    T.topRightCorner<2, 1>() = s * planes.weak_shift;
+    if (agreement(Mat4d(T * planes.T)) > level) return true;
+  }
+  return false;
+}
+
+}  // namespace
+
 LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes,
                                     bool refuted) const {
   const auto& c = config_;
   const auto& v = c.verify;
+  const auto& vs = c.view_search;
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
   // A narrow view's walls overlay on too many streets at some heading: its overlay is searched only near the
-  // heading its view context gives (section 8), or not at all without view_search.
+  // heading its view context gives, and judged on its own field (section 8), or not at all without view_search.
   const bool query_narrow = isNarrowView(query, v.background_min_view_deg);
   const bool narrow = query_narrow || isNarrowView(candidate, v.background_min_view_deg);
-  if (narrow && !c.view_search.enabled) {
+  if (narrow && !vs.enabled) {
     nodes.reason =
         "no loop from the landmarks, and a scan that saw less than verify.background_min_view_deg of the horizon "
         "gets none from its background alone without view_search";
@@ -193,59 +231,52 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   // Planes that already refused the landmarks' pose are not overruled on a lower bar: then the background must
   // also pass the plane confirmation's own limits.
   const double min_overlap =
-      refuted ? std::max(v.background_min_overlap, v.confirm_min_fitness) : v.background_min_overlap;
+      std::max(narrow ? vs.min_overlap : v.background_min_overlap, refuted ? v.confirm_min_fitness : 0.0);
   const double min_constraint =
       refuted ? std::max(v.background_min_constraint, v.confirm_min_constraint) : v.background_min_constraint;
-  const auto headings = narrow ? viewHeadings(query, candidate, query_narrow, c.view_search)
-                               : wallHeadings(query.planes, candidate.planes, 2);
+  detail::NarrowPair pair;
+  if (narrow) pair = detail::compareNarrow(query, candidate, query_narrow, vs);
+  const auto headings = narrow ? detail::viewHeadings(pair) : wallHeadings(query.planes, candidate.planes, 2);
   if (headings.empty()) return nodes;
-  LoopResult best;
-  double best_overlap = -1.0;
-  RefineResult best_planes;
-  for (const auto& h :
-       searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search, headings, false)) {
-    // Most overlays of another place disagree already: spare them the plane fit.
-    if (detail::agreementAt(query, candidate, h.T, v) < v.background_min_overlay) continue;
-    auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
-    if (planes.iterations == 0 || planes.correspondences < c.bev_search.min_correspondences) continue;
-    const double overlap = bandOverlap(query, candidate, planes.T, c.fingerprint.background_max_z_m, c.refine);
-    if (overlap <= best_overlap) continue;  // the overlay whose planes explain most
-    best_overlap = overlap;
-    best.T = planes.T;
-    best_planes = std::move(planes);
-  }
-  if (best_overlap < 0) return nodes;
-  const double translation = best.T.topRightCorner<3, 1>().norm();
-  best.background_similarity = detail::agreementAt(query, candidate, best.T, v);
+  const Fitted fit = fitOverlays(query, candidate, c, headings, narrow ? &pair : nullptr);
+  const RefineResult& planes = fit.planes;
+  const double translation = planes.T.topRightCorner<3, 1>().norm();
+  if (fit.overlap < min_overlap || (v.max_translation > 0 && translation > v.max_translation))
+    return nodes;  // the landmarks' verdict stands (also when no overlay got a fit)
+  auto near = [&](const Mat4d& T) { return detail::agreementAt(query, candidate, T, v); };
+  const double near_here = near(planes.T);
+  // Pinned along the street by the planes, or by the near bird's-eye view (section 8's corridor rule).
   auto pinned = [&] {
-    if (best_planes.horizontal_constraint >= min_constraint) return true;
-    if (v.background_pin_margin <= 0 || best_planes.next_constraint < min_constraint || best_planes.weak_shift.isZero())
-      return false;
-    for (const double s : {-4.0, -2.0, 2.0, 4.0}) {
-      // The pose moved s metres along the free direction (a left motion: turned about the query's origin, then
-      // shifted).
-      Mat4d T = Mat4d::Identity();
-      T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(s * best_planes.weak_turn, Vec3d::UnitZ()).toRotationMatrix();
-      T.topRightCorner<2, 1>() = s * best_planes.weak_shift;
-      T = T * best.T;
-      if (detail::agreementAt(query, candidate, T, v) > best.background_similarity - v.background_pin_margin)
-        return false;
-    }
-    return true;
+    if (planes.horizontal_constraint >= min_constraint) return true;
+    return v.background_pin_margin > 0 && planes.next_constraint >= min_constraint && !planes.weak_shift.isZero() &&
+           !higherAlongStreet(planes, near, near_here - v.background_pin_margin);
   };
-  if (best_overlap < min_overlap || best_planes.rmse > v.background_max_rmse_m ||
-      best.background_similarity < v.background_min_agreement || !pinned() ||
-      (v.max_translation > 0 && translation > v.max_translation))
-    return nodes;  // the landmarks' verdict stands
+  LoopResult best;
+  best.T = planes.T;
+  if (narrow) {
+    auto view = [&](const Mat4d& T) { return detail::viewAgreement(pair, query, candidate, T, vs); };
+    const double agreement = view(planes.T);
+    const double evidence = agreement * fit.overlap * pair.match.similarity;
+    // Pinned by the planes, the near view or landmarks, and in any case not better along the street in its own.
+    const bool view_pinned =
+        (pinned() || detail::landmarksAt(query, candidate, planes.T, vs.landmark_gate_m) >= vs.pin_landmarks) &&
+        !higherAlongStreet(planes, view, agreement);
+    if (planes.rmse > vs.max_rmse_m || evidence < vs.min_evidence || !view_pinned) return nodes;
+    best.background_similarity = agreement;
+    best.score = evidence;
+  } else {
+    if (planes.rmse > v.background_max_rmse_m || near_here < v.background_min_agreement || !pinned()) return nodes;
+    best.background_similarity = near_here;
+    best.score = near_here * fit.overlap;
+  }
   best.is_loop = true;
   best.matches = nodes.matches;
-  best.score = best.background_similarity * best_overlap;
   if (v.score_distance_m > 0) best.score *= std::exp(-translation / v.score_distance_m);
   // The pose is the planes' own: refined already (the fine stage has no matched instances to work on).
   best.refined = true;
-  best.fitness = best_planes.fitness;
-  best.rmse = best_planes.rmse;
-  best.information = best_planes.information;
+  best.fitness = planes.fitness;
+  best.rmse = planes.rmse;
+  best.information = planes.information;
   return best;
 }
 

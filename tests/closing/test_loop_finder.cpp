@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 #include "closing_test_util.hpp"
@@ -102,6 +103,45 @@ TEST_F(LoopFinderTest, ScopeAndExclusionsLimitTheCandidates) {
   found = finder.find(query, who, o, {}, &t);
   ASSERT_EQ(found.size(), 3u);
   for (const auto& f : found) EXPECT_NE(f.scan_id, same_place_id);
+}
+
+// A narrow view's loops from the background alone are tried on its first view_search.background_candidates
+// candidates (verify.background_candidates is for full views): a wedge of the street facing the facades on its
+// right, without its landmarks, gets its loop from the background at the view's pose, and none when that count
+// is 0. (Ahead, the wedge sees a straight corridor that pins nothing along it: no loop either way.)
+TEST_F(LoopFinderTest, NarrowViewBackgroundLoopsFollowTheirOwnCandidateCount) {
+  const LabelledScan full = test::viewFrom(test::makeStreetWorld(7), test::kQueryPose);
+  LabelledScan cut;
+  for (std::size_t i = 0; i < full.points.size(); ++i) {
+    const auto l = full.labels[i];
+    if (l == test::kCar || l == test::kTrunk || l == test::kPole) continue;
+    const double off_axis =
+        std::remainder(std::atan2(full.points[i].y(), full.points[i].x()) + std::numbers::pi / 2, 2 * std::numbers::pi);
+    if (std::abs(off_axis) <= test::deg2rad(35.0)) {
+      cut.points.push_back(full.points[i]);
+      cut.labels.push_back(l);
+    }
+  }
+  const Fingerprint narrow = pipeline.fingerprint(cut);
+  ASSERT_TRUE(narrow.nodes.empty());
+  auto loops = [&](auto change) {
+    Config c = pipeline.config();
+    change(c);
+    const Pipeline p(c);
+    const LoopFinder finder(p, *store);
+    QueryTiming t;
+    return finder.find(narrow, origin("r3"), {}, {}, &t);
+  };
+  const auto found = loops([](Config& c) { c.verify.background_candidates = 0; });
+  ASSERT_FALSE(found.empty());
+  for (const auto& f : found) {
+    EXPECT_TRUE(scans.at(f.scan_id).same_place) << f.scan_id;
+    EXPECT_EQ(f.result.inliers, 0);
+    const Mat4d truth = test::kQueryPose.inverse() * scans.at(f.scan_id).pose;
+    EXPECT_LT(translationError(f.result.T, truth), 0.3) << f.result.T;
+    EXPECT_LT(rotationErrorDeg(f.result.T, truth), 1.0) << f.result.T;
+  }
+  EXPECT_TRUE(loops([](Config& c) { c.view_search.background_candidates = 0; }).empty());
 }
 
 // A narrow view (a solid-state sensor's 70 deg) is ranked by its view context, not by its scan descriptor: the

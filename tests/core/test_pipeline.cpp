@@ -266,6 +266,62 @@ TEST_F(RealPipeline, NarrowViewGetsBackgroundOnlyLoopsAtItsViewHeadingOnly) {
   expectPoseWithin(walls.T, loopRow().T_a_b, 0.10, 0.5, "wedge_background_loop_error");
 }
 
+// A narrow view's background-only loop stands on its own bars (view_search): the evidence (view agreement x
+// plane overlap x context similarity, the score before the distance factor) must reach min_evidence, the plane
+// overlap min_overlap, the plane RMSE stay within max_rmse_m; each refuses the wedge's true loop once set past
+// it. Wedges of the real non-loop scans, in eight directions, landmarks kept as a solid-state sensor sees them,
+// get no loop against the other scan, either way round.
+TEST_F(RealPipeline, NarrowViewBackgroundLoopsMeetTheirOwnBars) {
+  const LabelMap labels(pipeline_->config().labels);
+  auto wedge = [&](const LabelledScan& scan, double towards_deg, bool landmarks) {
+    LabelledScan cut;
+    for (std::size_t i = 0; i < scan.points.size(); ++i) {
+      const auto& p = scan.points[i];
+      const double off_axis =
+          std::remainder(std::atan2(p.y(), p.x()) - test::deg2rad(towards_deg), 2 * std::numbers::pi);
+      if ((!landmarks && labels.nodeClass(scan.labels[i]) >= 0) || std::abs(off_axis) > test::deg2rad(35.0)) continue;
+      cut.points.push_back(p);
+      cut.labels.push_back(scan.labels[i]);
+    }
+    return pipeline_->fingerprint(cut);
+  };
+  const Fingerprint& full = fp("00/000052");
+  const Fingerprint right = wedge(scan00("004501"), -45.0, false);
+  const LoopResult loop = pipeline_->match(full, right);
+  ASSERT_TRUE(loop.is_loop) << loop.reason;
+  const auto& vs = pipeline_->config().view_search;
+  const double evidence =
+      loop.score / std::exp(-loop.T.topRightCorner<3, 1>().norm() / pipeline_->config().verify.score_distance_m);
+  EXPECT_GE(evidence, vs.min_evidence);
+  EXPECT_LE(evidence, loop.background_similarity);  // overlap and context similarity are at most 1
+  EXPECT_LE(loop.rmse, vs.max_rmse_m);
+  auto with = [&](auto change) {
+    Config c = pipeline_->config();
+    change(c.view_search);
+    return Pipeline(c).match(full, right);
+  };
+  EXPECT_TRUE(with([&](ViewSearchConfig& v) { v.min_evidence = evidence * 0.99; }).is_loop);
+  EXPECT_FALSE(with([&](ViewSearchConfig& v) { v.min_evidence = evidence * 1.01; }).is_loop);
+  EXPECT_FALSE(with([](ViewSearchConfig& v) { v.min_overlap = 1.0; }).is_loop);
+  EXPECT_FALSE(with([&](ViewSearchConfig& v) { v.max_rmse_m = loop.rmse * 0.5; }).is_loop);
+
+  int wedges = 0;
+  for (const auto& row : *pairs_) {
+    if (row.is_loop || row.seq != "00") continue;
+    const LabelledScan b = scan00(row.b);
+    for (int k = 0; k < 8; ++k) {
+      const Fingerprint w = wedge(b, 45.0 * k, true);
+      ASSERT_LT(viewSpanDeg(w.background, w.background_cell), pipeline_->config().verify.background_min_view_deg);
+      const Fingerprint& a = fp(row.seq + "/" + row.a);
+      const LoopResult ab = pipeline_->match(a, w), ba = pipeline_->match(w, a);
+      EXPECT_FALSE(ab.is_loop) << row.a << " vs " << row.b << " at " << 45 * k << " deg, score " << ab.score;
+      EXPECT_FALSE(ba.is_loop) << row.b << " at " << 45 * k << " deg vs " << row.a << ", score " << ba.score;
+      ++wedges;
+    }
+  }
+  EXPECT_GE(wedges, 8);
+}
+
 TEST_F(RealPipeline, LoopPairReverseDirection) {
   const PairRow& row = loopRow();
   const LoopResult r = pipeline_->match(fp("00/004501"), fp("00/000052"));

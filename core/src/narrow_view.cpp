@@ -1,0 +1,70 @@
+#include "narrow_view.hpp"
+
+#include <cmath>
+#include <numbers>
+
+#include "sglc/background.hpp"
+
+namespace sglc::detail {
+
+NarrowPair compareNarrow(const Fingerprint& query, const Fingerprint& candidate, bool query_narrow,
+                         const ViewSearchConfig& config) {
+  const Fingerprint& narrow = query_narrow ? query : candidate;
+  const Fingerprint& other = query_narrow ? candidate : query;
+  const auto n = viewContext(narrow.background, narrow.background_cell, config, narrow.labeller_structure);
+  const auto o = viewContext(other.background, other.background_cell, config, other.labeller_structure);
+  NarrowPair pair;
+  pair.query_narrow = query_narrow;
+  pair.match = matchViews(n, o);
+  constexpr int kSectors = ViewContext::kSectors;
+  auto seen = [&](int s) {
+    s = (s + kSectors) % kSectors;
+    return ((s < 64 ? n.seen.lo : n.seen.hi) >> (s & 63)) & 1U;
+  };
+  pair.field.resize(kSectors);
+  for (int s = 0; s < kSectors; ++s) pair.field[static_cast<std::size_t>(s)] = seen(s - 1) && seen(s) && seen(s + 1);
+  return pair;
+}
+
+std::vector<double> viewHeadings(const NarrowPair& pair) {
+  if (pair.match.similarity <= 0) return {};
+  constexpr double kTurn = 2.0 * std::numbers::pi, kSector = kTurn / ViewContext::kSectors;
+  const double h = pair.query_narrow ? pair.match.heading : kTurn - pair.match.heading;  // T_c_q's yaw turned round
+  std::vector<double> headings;
+  for (const double d : {-kSector, 0.0, kSector}) headings.push_back(std::fmod(h + d + 2.0 * kTurn, kTurn));
+  return headings;
+}
+
+double viewAgreement(const NarrowPair& pair, const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c,
+                     const ViewSearchConfig& config) {
+  const auto classes = query.labeller_structure || candidate.labeller_structure ? StructureClasses::kMerged
+                                                                                : StructureClasses::kCompared;
+  // Judged in the narrow scan's frame, where its field is.
+  if (pair.query_narrow)
+    return bevAgreement(query.background, candidate.background, query.background_cell, T_q_c, config.agreement_cell_m,
+                        config.max_range_m, classes, &pair.field);
+  Mat4d T_c_q = Mat4d::Identity();
+  T_c_q.topLeftCorner<3, 3>() = T_q_c.topLeftCorner<3, 3>().transpose();
+  T_c_q.topRightCorner<3, 1>() = -T_c_q.topLeftCorner<3, 3>() * T_q_c.topRightCorner<3, 1>();
+  return bevAgreement(candidate.background, query.background, candidate.background_cell, T_c_q, config.agreement_cell_m,
+                      config.max_range_m, classes, &pair.field);
+}
+
+int landmarksAt(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c, double gate) {
+  const Eigen::Matrix3f R = T_q_c.topLeftCorner<3, 3>().cast<float>();
+  const Vec3f t = T_q_c.topRightCorner<3, 1>().cast<float>();
+  std::vector<Vec3f> moved;
+  moved.reserve(candidate.nodes.size());
+  for (const auto& c : candidate.nodes) moved.push_back(R * c.center + t);
+  const float gate_sq = static_cast<float>(gate * gate);
+  int n = 0;
+  for (const auto& q : query.nodes)
+    for (std::size_t j = 0; j < moved.size(); ++j)
+      if (candidate.nodes[j].cls == q.cls && (moved[j] - q.center).head<2>().squaredNorm() <= gate_sq) {
+        ++n;
+        break;
+      }
+  return n;
+}
+
+}  // namespace sglc::detail
