@@ -22,6 +22,14 @@ int azimuthSector(double x, double y, double inv_sector, int sectors) {
   return std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors - 1);
 }
 
+// Whether (x, y) lies in a sector of `field` (field.size() sectors from -pi; +pi wraps to the first, as the view
+// context counts them).
+bool inField(const std::vector<bool>& field, double x, double y) {
+  const auto n = static_cast<int>(field.size());
+  const int s = static_cast<int>((std::atan2(y, x) + std::numbers::pi) * n / (2.0 * std::numbers::pi)) % n;
+  return field[static_cast<std::size_t>(std::max(0, s))];
+}
+
 }  // namespace
 
 std::vector<float> structureSpectrum(const std::vector<BevCell>& cells, double cell, int rings, int orders,
@@ -248,10 +256,7 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
       const std::uint8_t a = wq[i], b = wc[i];
       if (a <= kRoad && b <= kRoad) continue;  // no structure in either: road agrees with any street
       if (!seen(wq, x, y) || !seen(wc, x, y)) continue;
-      if (field && !field->empty() &&
-          !(*field)[static_cast<std::size_t>(azimuthSector(
-              (x + 0.5) * grid_cell - radius, (y + 0.5) * grid_cell - radius,
-              static_cast<double>(field->size()) / (2.0 * std::numbers::pi), static_cast<int>(field->size())))])
+      if (field && !field->empty() && !inField(*field, (x + 0.5) * grid_cell - radius, (y + 0.5) * grid_cell - radius))
         continue;
       ++judged;
       same += a == b || (classes == StructureClasses::kMerged && a > kRoad && b > kRoad);

@@ -261,7 +261,8 @@ void addRefinement(Table<Config>& t) {
   t.add(field<Config>(SGLC_KEY(view_search.enabled), {},
                       "narrow views: candidates ranked by the view context, background loops at its heading"));
   t.add(field<Config>(SGLC_KEY(view_search.rings), closed(2, 200), "view context: rings"));
-  t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100), "view context: structure used (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100),
+                      "view context and view agreement: structure used (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
                       "view context: scans a narrow query is compared with (nearest by descriptor)"));
   t.add(field<Config>(SGLC_KEY(view_search.background_candidates), closed(0, 200),
@@ -274,7 +275,7 @@ void addRefinement(Table<Config>& t) {
                       "narrow view's background-only loop: plane RMSE at most (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.min_evidence), closed(0, 1),
                       "narrow view's background-only loop: view agreement x overlap x context similarity at least"));
-  t.add(field<Config>(SGLC_KEY(view_search.agreement_cell_m), closed(0.25, 5), "view agreement grid cell (m)"));
+  t.add(field<Config>(SGLC_KEY(view_search.agreement_cell_m), closed(0.5, 5), "view agreement grid cell (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.pin_landmarks), closed(1, 100),
                       "landmarks that pin a narrow view's background-only loop along the street"));
   t.add(field<Config>(SGLC_KEY(view_search.landmark_gate_m), closed(0.05, 10), "landmark pinning gate (m)"));

@@ -56,14 +56,25 @@ int landmarksAt(const Fingerprint& query, const Fingerprint& candidate, const Ma
   std::vector<Vec3f> moved;
   moved.reserve(candidate.nodes.size());
   for (const auto& c : candidate.nodes) moved.push_back(R * c.center + t);
+  // One to one: each query node takes the nearest free candidate node of its class within the gate, so one
+  // pole cannot vouch twice.
   const float gate_sq = static_cast<float>(gate * gate);
+  std::vector<bool> used(moved.size(), false);
   int n = 0;
-  for (const auto& q : query.nodes)
-    for (std::size_t j = 0; j < moved.size(); ++j)
-      if (candidate.nodes[j].cls == q.cls && (moved[j] - q.center).head<2>().squaredNorm() <= gate_sq) {
-        ++n;
-        break;
+  for (const auto& q : query.nodes) {
+    int best = -1;
+    float best_sq = gate_sq;
+    for (std::size_t j = 0; j < moved.size(); ++j) {
+      const float d = (moved[j] - q.center).head<2>().squaredNorm();
+      if (!used[j] && candidate.nodes[j].cls == q.cls && d <= best_sq) {
+        best = static_cast<int>(j);
+        best_sq = d;
       }
+    }
+    if (best < 0) continue;
+    used[static_cast<std::size_t>(best)] = true;
+    ++n;
+  }
   return n;
 }
 

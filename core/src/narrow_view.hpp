@@ -32,7 +32,8 @@ std::vector<double> viewHeadings(const NarrowPair& pair);
 double viewAgreement(const NarrowPair& pair, const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c,
                      const ViewSearchConfig& config);
 
-// Query landmarks (nodes) with a candidate node of their class within `gate` metres on the ground under T_q_c.
+// Query landmarks (nodes) paired one to one with a candidate node of their class within `gate` metres on the
+// ground under T_q_c.
 int landmarksAt(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c, double gate);
 
 }  // namespace sglc::detail

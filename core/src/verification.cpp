@@ -2,7 +2,6 @@
 // decision (docs/METHOD.md, sections 7 and 8).
 #include <algorithm>
 #include <cmath>
-#include <limits>
 
 #include "agreement.hpp"
 #include "narrow_view.hpp"
@@ -176,7 +175,8 @@ struct Fitted {
 Fitted fitOverlays(const Fingerprint& query, const Fingerprint& candidate, const Config& c,
                    const std::vector<double>& headings, const detail::NarrowPair* narrow) {
   BevSearchConfig search = c.bev_search;
-  if (narrow) search.keep = std::numeric_limits<int>::max();
+  // The context's three headings span 8.4 deg, about 5 steps of the default 2 deg: at most 8 steps' shifts.
+  if (narrow) search.keep = 8 * c.view_search.shifts_per_heading;
   Fitted best;
   double best_key = -1.0;
   for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, search, headings,
@@ -186,6 +186,8 @@ Fitted fitOverlays(const Fingerprint& query, const Fingerprint& candidate, const
     auto planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
     if (planes.iterations == 0 || planes.correspondences < c.bev_search.min_correspondences) continue;
     const double overlap = bandOverlap(query, candidate, planes.T, c.fingerprint.background_max_z_m, c.refine);
+    // A narrow pair's fits that cannot pass its plane bars do not compete (the key would prefer them).
+    if (narrow && (overlap < c.view_search.min_overlap || planes.rmse > c.view_search.max_rmse_m)) continue;
     const double key =
         narrow ? overlap * detail::viewAgreement(*narrow, query, candidate, planes.T, c.view_search) : overlap;
     if (key <= best_key) continue;
@@ -220,8 +222,10 @@ LoopResult Pipeline::backgroundLoop(const Fingerprint& query, const Fingerprint&
   if (!c.bev_search.enabled || !c.refine.enabled) return nodes;
   // A narrow view's walls overlay on too many streets at some heading: its overlay is searched only near the
   // heading its view context gives, and judged on its own field (section 8), or not at all without view_search.
-  const bool query_narrow = isNarrowView(query, v.background_min_view_deg);
-  const bool narrow = query_narrow || isNarrowView(candidate, v.background_min_view_deg);
+  const double query_span = viewSpanDeg(query.background, query.background_cell);
+  const double candidate_span = viewSpanDeg(candidate.background, candidate.background_cell);
+  const bool narrow = std::min(query_span, candidate_span) < v.background_min_view_deg;  // isNarrowView
+  const bool query_narrow = query_span <= candidate_span;  // of two narrow scans, the one that saw less
   if (narrow && !vs.enabled) {
     nodes.reason =
         "no loop from the landmarks, and a scan that saw less than verify.background_min_view_deg of the horizon "

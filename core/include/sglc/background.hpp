@@ -66,7 +66,8 @@ std::vector<Plane> extractPlanes(const Points& points, const std::vector<Backgro
 // (building, fence and vegetation count as one class): for views whose classes the built-in labeller computed,
 // whose split of structure into building and vegetation is not repeatable from visit to visit. `field`, when
 // given, limits the judged cells to the directions the query looked in: field->size() equal azimuth sectors
-// around the query's origin, counted from -pi as viewSpanDeg's (a narrow view's own field, sglc/view_context.hpp).
+// around the query's origin, counted from -pi as the view context's (a narrow view's own field,
+// sglc/view_context.hpp); null or empty: no limit.
 enum class StructureClasses { kCompared, kMerged };
 double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell>& candidate, double stored_cell,
                     const Mat4d& T_q_c, double grid_cell, double radius,

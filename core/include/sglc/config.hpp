@@ -271,9 +271,9 @@ struct ViewSearchConfig {
   // - the plane overlap (as verify.background_min_overlap) is at least min_overlap, and the plane RMSE at most
   //   max_rmse_m;
   // - the evidence, view agreement x plane overlap x context similarity, is at least min_evidence. The view
-  //   agreement is the background agreement (bevAgreement) on an agreement_cell_m grid out to max_range_m, judged
-  //   only in the sectors the narrow view saw: the whole view, not a 25 m disc that a 70 deg wedge fills a
-  //   fifth of;
+  //   agreement is the background agreement (bevAgreement) on an agreement_cell_m grid of +-max_range_m, judged
+  //   only in the sectors the narrow view saw: the whole view, not the +-25 m square that a 70 deg wedge fills a
+  //   sixth of;
   // - the pose is pinned along the street: by the planes or the near background as verify.background_* asks, or
   //   by pin_landmarks landmarks (nodes of one class within landmark_gate_m of each other), and in any case the
   //   view agreement is not higher 2 or 4 m along the planes' free direction.
@@ -283,8 +283,9 @@ struct ViewSearchConfig {
   // had no pose near the truth among their first 10 candidates, with 3 a tenth.
   // The score is the evidence x exp(-|t| / verify.score_distance_m). A loop finder tries this on the first
   // background_candidates of a narrow query's candidates (verify.background_candidates for others): the context
-  // ranks the true place within the first 10 for 0.98 of rosette queries, and a narrow search tries 3 headings,
-  // not all. Measured in docs/RESULTS.md.
+  // ranks the true place within the first 10 for 0.98 of rosette queries, and a narrow search tries about 5
+  // heading steps (3 headings a sector apart), not all. Its scores run lower than a full view's (the context
+  // similarity is a factor): a min_score set for full views drops some of them. Measured in docs/RESULTS.md.
   int background_candidates = 10;
   int shifts_per_heading = 3;
   double min_overlap = 0.6;
