@@ -17,17 +17,10 @@ using detail::ClassVotes;
 
 namespace {
 
-// Azimuth sector (0 .. sectors - 1, from -pi) of the point (x, y) around the sensor; inv_sector = sectors / 2 pi.
+// Azimuth sector (0 .. sectors - 1, from -pi; +pi is sector 0, as the view context counts) of the point (x, y)
+// around the sensor; inv_sector = sectors / 2 pi.
 int azimuthSector(double x, double y, double inv_sector, int sectors) {
-  return std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors - 1);
-}
-
-// Whether (x, y) lies in a sector of `field` (field.size() sectors from -pi; +pi wraps to the first, as the view
-// context counts them).
-bool inField(const std::vector<bool>& field, double x, double y) {
-  const auto n = static_cast<int>(field.size());
-  const int s = static_cast<int>((std::atan2(y, x) + std::numbers::pi) * n / (2.0 * std::numbers::pi)) % n;
-  return field[static_cast<std::size_t>(std::max(0, s))];
+  return std::clamp(static_cast<int>((std::atan2(y, x) + std::numbers::pi) * inv_sector), 0, sectors) % sectors;
 }
 
 }  // namespace
@@ -256,7 +249,10 @@ double bevAgreement(const std::vector<BevCell>& query, const std::vector<BevCell
       const std::uint8_t a = wq[i], b = wc[i];
       if (a <= kRoad && b <= kRoad) continue;  // no structure in either: road agrees with any street
       if (!seen(wq, x, y) || !seen(wc, x, y)) continue;
-      if (field && !field->empty() && !inField(*field, (x + 0.5) * grid_cell - radius, (y + 0.5) * grid_cell - radius))
+      if (field && !field->empty() &&
+          !(*field)[static_cast<std::size_t>(azimuthSector(
+              (x + 0.5) * grid_cell - radius, (y + 0.5) * grid_cell - radius,
+              static_cast<double>(field->size()) / (2.0 * std::numbers::pi), static_cast<int>(field->size())))])
         continue;
       ++judged;
       same += a == b || (classes == StructureClasses::kMerged && a > kRoad && b > kRoad);

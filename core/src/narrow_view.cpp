@@ -16,13 +16,7 @@ NarrowPair compareNarrow(const Fingerprint& query, const Fingerprint& candidate,
   NarrowPair pair;
   pair.query_narrow = query_narrow;
   pair.match = matchViews(n, o);
-  constexpr int kSectors = ViewContext::kSectors;
-  auto seen = [&](int s) {
-    s = (s + kSectors) % kSectors;
-    return ((s < 64 ? n.seen.lo : n.seen.hi) >> (s & 63)) & 1U;
-  };
-  pair.field.resize(kSectors);
-  for (int s = 0; s < kSectors; ++s) pair.field[static_cast<std::size_t>(s)] = seen(s - 1) && seen(s) && seen(s + 1);
+  pair.field = n.field();
   return pair;
 }
 
@@ -43,11 +37,8 @@ double viewAgreement(const NarrowPair& pair, const Fingerprint& query, const Fin
   if (pair.query_narrow)
     return bevAgreement(query.background, candidate.background, query.background_cell, T_q_c, config.agreement_cell_m,
                         config.max_range_m, classes, &pair.field);
-  Mat4d T_c_q = Mat4d::Identity();
-  T_c_q.topLeftCorner<3, 3>() = T_q_c.topLeftCorner<3, 3>().transpose();
-  T_c_q.topRightCorner<3, 1>() = -T_c_q.topLeftCorner<3, 3>() * T_q_c.topRightCorner<3, 1>();
-  return bevAgreement(candidate.background, query.background, candidate.background_cell, T_c_q, config.agreement_cell_m,
-                      config.max_range_m, classes, &pair.field);
+  return bevAgreement(candidate.background, query.background, candidate.background_cell, T_q_c.inverse(),
+                      config.agreement_cell_m, config.max_range_m, classes, &pair.field);
 }
 
 int landmarksAt(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c, double gate) {

@@ -14,9 +14,7 @@ namespace sglc::detail {
 struct NarrowPair {
   bool query_narrow = true;  // else the candidate is the narrow one
   ViewMatch match;           // of the narrow scan's context over the other's
-  // The azimuth sectors (ViewContext::kSectors around the narrow scan) it saw, with both neighbours: the field
-  // its agreement is judged in, a sector inside its edges.
-  std::vector<bool> field;
+  std::vector<bool> field;   // the narrow scan's context's field (ViewContext::field)
 };
 
 // Compares the narrow scan's context with the other's.

@@ -70,6 +70,14 @@ bool ViewContext::seesStructure() const {
   return false;
 }
 
+std::vector<bool> ViewContext::field() const {
+  const Row inner = seen & rotated(seen, 1) & rotated(seen, kSectors - 1);
+  std::vector<bool> out(kSectors);
+  for (int s = 0; s < kSectors; ++s)
+    out[static_cast<std::size_t>(s)] = (((s < 64 ? inner.lo : inner.hi) >> (s & 63)) & 1U) != 0;
+  return out;
+}
+
 bool isNarrowView(const Fingerprint& fp, double min_view_deg) {
   return viewSpanDeg(fp.background, fp.background_cell) < min_view_deg;
 }

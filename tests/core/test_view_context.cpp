@@ -1,6 +1,7 @@
 // The view context: a narrow view matched against a full turn of the same place, at the right heading.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -107,6 +108,41 @@ TEST(ViewContext, OnlyTheNarrowViewsSectorsAreJudged) {
   const int seen = std::popcount(narrow.seen.lo) + std::popcount(narrow.seen.hi);
   EXPECT_GE(seen, 22);  // 70 deg of 128 sectors of 2.8 deg: about 25
   EXPECT_LE(seen, 28);
+}
+
+// A narrow view's field is the sectors it saw, one sector in from each edge, counted as bevAgreement counts its
+// sectors: a wedge turned 60 deg left has its field there, and bevAgreement judges structure there only.
+TEST(ViewContext, FieldIsTheViewOneSectorInside) {
+  const ViewSearchConfig cfg;
+  const auto place = makePlace(5);
+  const auto cells = viewOf(place, 0.0, deg2rad(35.0));
+  // The sensor's frame is turned by -60 deg: the wedge it saw lies 60 deg to its left.
+  std::vector<BevCell> left;
+  const double c = std::cos(deg2rad(60.0)), s = std::sin(deg2rad(60.0));
+  for (const auto& b : cells) {
+    const double x = (b.ix + 0.5) * kCell, y = (b.iy + 0.5) * kCell;
+    left.push_back({static_cast<std::int16_t>(std::floor((c * x - s * y) / kCell)),
+                    static_cast<std::int16_t>(std::floor((s * x + c * y) / kCell)), b.cls});
+  }
+  const auto context = viewContext(left, kCell, cfg);
+  const auto field = context.field();
+  ASSERT_EQ(field.size(), static_cast<std::size_t>(ViewContext::kSectors));
+  const int seen = std::popcount(context.seen.lo) + std::popcount(context.seen.hi);
+  const auto in_field = static_cast<int>(std::count(field.begin(), field.end(), true));
+  EXPECT_EQ(in_field, seen - 2);  // one contiguous wedge: its edge sectors drop out
+  auto sector = [](double deg) { return static_cast<std::size_t>((deg + 180.0) / 360.0 * ViewContext::kSectors); };
+  EXPECT_TRUE(field[sector(60.0)]);
+  EXPECT_TRUE(field[sector(40.0)]);
+  EXPECT_FALSE(field[sector(0.0)]);
+  EXPECT_FALSE(field[sector(-120.0)]);
+  // bevAgreement with that field judges the wedge: the view against itself agrees fully; with the opposite field
+  // nothing is judged (0).
+  EXPECT_DOUBLE_EQ(bevAgreement(left, left, kCell, Mat4d::Identity(), 1.0, 45.0, StructureClasses::kCompared, &field),
+                   1.0);
+  std::vector<bool> opposite(field.size());
+  for (std::size_t k = 0; k < field.size(); ++k) opposite[k] = field[(k + field.size() / 2) % field.size()];
+  EXPECT_DOUBLE_EQ(
+      bevAgreement(left, left, kCell, Mat4d::Identity(), 1.0, 45.0, StructureClasses::kCompared, &opposite), 0.0);
 }
 
 TEST(ViewContext, MergedClassesCompareStructureOnly) {

@@ -29,6 +29,9 @@ struct ViewContext {
   int rings() const { return static_cast<int>(building.size()); }
   // Whether any building or vegetation lies in a sector it saw: without, every comparison with it gives 0.
   bool seesStructure() const;
+  // The sectors it saw whose neighbours it also saw (one sector inside the edges of its view), one flag per
+  // sector from -pi: the `field` bevAgreement judges a narrow view's agreement in.
+  std::vector<bool> field() const;
 };
 
 // Whether a scan is a narrow view: it saw less than min_view_deg (VerifyConfig::background_min_view_deg) of the
