@@ -17,6 +17,8 @@ PACKAGES=(
   libpcl-dev
   # service
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
+  # the metrics endpoint: Boost.Beast over Asio (header-only)
+  libboost-dev
   # pose-graph optimisation
   libceres-dev
   # tests, benchmarks, Python clients and plots

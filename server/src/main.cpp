@@ -13,6 +13,7 @@
 #include <map>
 
 #include "call.hpp"
+#include "gauge_refresher.hpp"
 #include "io_poller.hpp"
 #include "metrics_http.hpp"
 #include "server_metrics.hpp"
@@ -136,15 +137,24 @@ void grpcLog(gpr_log_func_args* args) {
     spdlog::debug("{}", line);
 }
 
-// The Prometheus endpoint, when asked for (null otherwise).
-std::unique_ptr<sglc::server::MetricsHttpServer> serveMetrics(const Settings& s, sglc::server::ServiceState& state) {
-  if (s.metrics_listen.empty()) return nullptr;
+// The Prometheus endpoint, when asked for: the gauges are read on a thread of their own, when a scrape asks,
+// and the HTTP server serves what they read. Destroyed in reverse: no scrape outlives the refresher.
+struct MetricsEndpoint {
+  std::unique_ptr<sglc::server::GaugeRefresher> refresher;
+  std::unique_ptr<sglc::server::MetricsHttpServer> http;
+};
+
+MetricsEndpoint serveMetrics(const Settings& s, sglc::server::ServiceState& state) {
+  if (s.metrics_listen.empty()) return {};
   sglc::server::declareServerGauges(state.metrics(), state);
-  auto http = std::make_unique<sglc::server::MetricsHttpServer>(s.metrics_listen,
-                                                                [&state] { return state.metrics().render(); });
-  spdlog::info("{}",
-               sglc::logging::logLine({{"event", "metrics"}, {"address", s.metrics_listen}, {"port", http->port()}}));
-  return http;
+  MetricsEndpoint endpoint;
+  endpoint.refresher = std::make_unique<sglc::server::GaugeRefresher>(state.metrics());
+  endpoint.http = std::make_unique<sglc::server::MetricsHttpServer>(
+      s.metrics_listen, sglc::server::MetricsSource{[&state] { return state.metrics().render(); },
+                                                    [r = endpoint.refresher.get()] { return r->request(); }});
+  spdlog::info("{}", sglc::logging::logLine(
+                         {{"event", "metrics"}, {"address", s.metrics_listen}, {"port", endpoint.http->port()}}));
+  return endpoint;
 }
 
 // Serves until SIGTERM or SIGINT, then shuts down in order.
@@ -201,7 +211,8 @@ int serve(const Settings& s, sigset_t& signals) {
                    std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));
   server->Wait();
   io_poller.stop();
-  metrics_http.reset();  // its gauges read the store: no scrape may outlive it
+  metrics_http.http.reset();  // its gauges read the store: no scrape or refresh may outlive it
+  metrics_http.refresher.reset();
   state->detach();
   graph.reset();
   store.reset();

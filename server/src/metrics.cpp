@@ -100,11 +100,10 @@ void Metrics::observe(const std::string& name, const Labels& labels, double seco
   h.sum += seconds;
 }
 
-std::string Metrics::render() const {
-  // Gauges are read outside the lock (readers may be slow, e.g. database counts).
+void Metrics::refreshGauges() {
+  const std::lock_guard refresh(refresh_mutex_);
   std::vector<std::pair<std::string, GaugeReader>> readers;
   std::vector<std::function<void()>> hooks;
-  std::string out;
   {
     const std::lock_guard lock(mutex_);
     for (const auto& [name, f] : families_)
@@ -118,25 +117,48 @@ std::string Metrics::render() const {
       // The gauges that depend on it fail on their own and are left out.
     }
   }
-  std::map<std::string, std::vector<Sample>> gauges;
+  auto values = std::make_shared<GaugeValues>();
   for (const auto& [name, read] : readers) {
     try {
-      gauges[name] = read();
+      values->samples[name] = read();
     } catch (...) {
-      // Left out of this scrape (e.g. the map database is still loading).
+      // Left out (e.g. the map database is still loading).
     }
   }
+  values->read_at = std::chrono::steady_clock::now();
   const std::lock_guard lock(mutex_);
-  for (const auto& [name, f] : families_) {
-    if (f.type == Family::Type::kGauge && !gauges.count(name)) continue;
+  gauges_ = std::move(values);
+}
+
+std::string Metrics::render() const {
+  // A copy of the values under the lock; the text is made outside it, so RPCs never wait for a scrape.
+  std::map<std::string, Family> families;
+  std::shared_ptr<const GaugeValues> gauges;
+  {
+    const std::lock_guard lock(mutex_);
+    families = families_;
+    gauges = gauges_;
+  }
+  std::string out;
+  if (gauges) {
+    const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - gauges->read_at).count();
+    out += std::string("# HELP ") + kGaugeAge + " Seconds since the gauges in this exposition were read\n# TYPE " +
+           kGaugeAge + " gauge\n" + kGaugeAge + ' ' + number(std::round(age * 1000) / 1000) + '\n';
+  }
+  for (const auto& [name, f] : families) {
+    const std::vector<Sample>* samples = nullptr;
+    if (f.type == Family::Type::kGauge) {
+      if (!gauges || !gauges->samples.count(name)) continue;
+      samples = &gauges->samples.at(name);
+    }
     const char* type = f.type == Family::Type::kCounter     ? "counter"
                        : f.type == Family::Type::kHistogram ? "histogram"
                                                             : "gauge";
     out += "# HELP " + name + ' ' + helpText(f.help) + "\n# TYPE " + name + ' ' + type + '\n';
     if (f.type == Family::Type::kCounter)
       for (const auto& [labels, v] : f.counters) out += name + labelText(labels) + ' ' + number(v) + '\n';
-    if (f.type == Family::Type::kGauge)
-      for (const auto& s : gauges[name]) out += name + labelText(s.labels) + ' ' + number(s.value) + '\n';
+    if (samples)
+      for (const auto& s : *samples) out += name + labelText(s.labels) + ' ' + number(s.value) + '\n';
     if (f.type != Family::Type::kHistogram) continue;
     for (const auto& [labels, h] : f.histograms) {
       std::uint64_t cumulative = 0;

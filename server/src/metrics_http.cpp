@@ -1,20 +1,34 @@
 #include "metrics_http.hpp"
 
-#include <arpa/inet.h>
-#include <fcntl.h>
-#include <netdb.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <cerrno>
-#include <cstring>
+#include <array>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <boost/asio/write.hpp>
+#include <boost/beast/core/error.hpp>
+#include <boost/beast/core/flat_buffer.hpp>
+#include <boost/beast/core/tcp_stream.hpp>
+#include <boost/beast/http/empty_body.hpp>
+#include <boost/beast/http/error.hpp>
+#include <boost/beast/http/parser.hpp>
+#include <boost/beast/http/read.hpp>
+#include <map>
 #include <stdexcept>
+#include <thread>
 
 namespace sglc::server {
 namespace {
 
+namespace asio = boost::asio;
+namespace beast = boost::beast;
+namespace http = beast::http;
+using tcp = asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
+using Server = MetricsHttpServer;
+
+constexpr std::chrono::milliseconds kWriteTimeout{5000};
+constexpr std::chrono::milliseconds kFreshPoll{20};
+constexpr std::chrono::milliseconds kAcceptBackoff{100};
 
 // Splits "host:port" ("[::1]:9090" for IPv6); throws when there is no port.
 std::pair<std::string, std::string> hostPort(const std::string& address) {
@@ -29,70 +43,6 @@ std::pair<std::string, std::string> hostPort(const std::string& address) {
   return {host, port};
 }
 
-int listenOn(const std::string& address, int& port) {
-  const auto [host, service] = hostPort(address);
-  addrinfo hints{};
-  hints.ai_family = AF_UNSPEC;
-  hints.ai_socktype = SOCK_STREAM;
-  hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
-  addrinfo* found = nullptr;
-  if (const int rc = getaddrinfo(host.empty() ? nullptr : host.c_str(), service.c_str(), &hints, &found); rc != 0)
-    throw std::runtime_error("metrics address '" + address + "': " + gai_strerror(rc));
-  std::string why = "no address";
-  int fd = -1;
-  for (auto* a = found; a != nullptr && fd < 0; a = a->ai_next) {
-    fd = socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
-    if (fd < 0) continue;
-    const int one = 1;
-    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-    if (bind(fd, a->ai_addr, a->ai_addrlen) != 0 || listen(fd, 16) != 0) {
-      why = std::strerror(errno);
-      close(fd);
-      fd = -1;
-    }
-  }
-  freeaddrinfo(found);
-  if (fd < 0) throw std::runtime_error("cannot serve metrics on " + address + ": " + why);
-  sockaddr_storage bound{};
-  socklen_t len = sizeof bound;
-  getsockname(fd, reinterpret_cast<sockaddr*>(&bound), &len);
-  port = ntohs(bound.ss_family == AF_INET6 ? reinterpret_cast<sockaddr_in6*>(&bound)->sin6_port
-                                           : reinterpret_cast<sockaddr_in*>(&bound)->sin_port);
-  return fd;
-}
-
-// Reads the request head (up to the blank line) within the deadline. Returns "" on timeout, what came before
-// the peer closed (no blank line then), and sets `too_large` when the head exceeds the limit.
-std::string readHead(int fd, Clock::time_point deadline, bool& too_large) {
-  std::string head;
-  char buffer[1024];
-  while (head.find("\r\n\r\n") == std::string::npos) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-    pollfd p{fd, POLLIN, 0};
-    if (left <= 0 || poll(&p, 1, static_cast<int>(left)) <= 0) return "";
-    const ssize_t n = recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) return head;  // closed: whatever came (an incomplete request is answered 400)
-    head.append(buffer, static_cast<std::size_t>(n));
-    if (head.size() > MetricsHttpServer::kMaxRequestBytes) {
-      too_large = true;
-      return head;
-    }
-  }
-  return head;
-}
-
-void sendAll(int fd, const std::string& data, Clock::time_point deadline) {
-  std::size_t sent = 0;
-  while (sent < data.size()) {
-    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-    pollfd p{fd, POLLOUT, 0};
-    if (left <= 0 || poll(&p, 1, static_cast<int>(left)) <= 0) return;
-    const ssize_t n = send(fd, data.data() + sent, data.size() - sent, MSG_NOSIGNAL);
-    if (n <= 0) return;
-    sent += static_cast<std::size_t>(n);
-  }
-}
-
 std::string response(int code, const char* reason, const std::string& body, bool head_only,
                      const char* type = "text/plain; charset=utf-8") {
   std::string out = "HTTP/1.1 " + std::to_string(code) + ' ' + reason + "\r\nContent-Type: " + type +
@@ -105,69 +55,185 @@ std::string response(int code, const char* reason, const std::string& body, bool
 
 }  // namespace
 
-MetricsHttpServer::MetricsHttpServer(const std::string& address, std::function<std::string()> render)
-    : render_(std::move(render)) {
-  listen_fd_ = listenOn(address, port_);
-  if (pipe2(wake_, O_CLOEXEC) != 0) {
-    close(listen_fd_);
-    throw std::runtime_error(std::string("metrics: pipe: ") + std::strerror(errno));
+struct MetricsHttpServer::Impl {
+  Impl(MetricsSource s, Limits l) : source(std::move(s)), limits(l) {}
+
+  void listen(const std::string& address);
+  void accept();
+  void release(const asio::ip::address& peer) {
+    --total;
+    if (auto it = per_peer.find(peer); it != per_peer.end() && --it->second <= 0) per_peer.erase(it);
   }
-  thread_ = std::thread([this] { serve(); });
+
+  const MetricsSource source;
+  const Limits limits;
+  // Connections open, in all and per peer address (touched on the I/O thread only, and by the sessions that
+  // the io_context destroys after it: declared before it, so they outlive it).
+  int total = 0;
+  std::map<asio::ip::address, int> per_peer;
+  asio::io_context io{1};
+  tcp::acceptor acceptor{io};
+  asio::steady_timer backoff{io};
+  int port = 0;
+  std::thread thread;
+};
+
+namespace {
+
+// One connection: read the request head within the deadline, answer, read what else comes, close.
+class Session : public std::enable_shared_from_this<Session> {
+ public:
+  Session(tcp::socket socket, Server::Impl& server, asio::ip::address peer)
+      : stream_(std::move(socket)), server_(server), peer_(std::move(peer)), timer_(stream_.get_executor()) {
+    parser_.header_limit(Server::kMaxRequestBytes);
+  }
+  ~Session() { server_.release(peer_); }
+  Session(const Session&) = delete;
+  Session& operator=(const Session&) = delete;
+
+  void start() {
+    stream_.expires_after(server_.limits.request_timeout);  // for the whole head: a slow sender is cut off
+    http::async_read_header(stream_, buffer_, parser_,
+                            [self = shared_from_this()](beast::error_code ec, std::size_t) { self->onHead(ec); });
+  }
+
+ private:
+  void onHead(beast::error_code ec) {
+    if (ec == beast::error::timeout || ec == http::error::end_of_stream) return;  // nothing (complete) came
+    if (ec == http::error::header_limit || ec == http::error::buffer_overflow)
+      return reply(response(431, "Request Header Fields Too Large", "request too large\n", false));
+    if (ec) return reply(response(400, "Bad Request", "malformed request (HTTP/1.x, lines end in CRLF)\n", false));
+    const auto& request = parser_.get();
+    head_only_ = request.method() == http::verb::head;
+    if (request.method() != http::verb::get && !head_only_)
+      return reply(response(405, "Method Not Allowed", "only GET and HEAD\n", false));
+    const auto target = request.target();
+    if (target.substr(0, target.find('?')) != "/metrics")
+      return reply(response(404, "Not Found", "see /metrics\n", head_only_));
+    if (server_.source.refresh) {
+      fresh_ = server_.source.refresh();
+      asked_ = Clock::now();
+    }
+    waitFresh();
+  }
+
+  // Polls for fresh gauges without holding the thread, up to Limits::fresh_wait; then answers with what there is.
+  void waitFresh() {
+    if (fresh_ && !fresh_() && Clock::now() - asked_ < server_.limits.fresh_wait) {
+      timer_.expires_after(kFreshPoll);
+      timer_.async_wait([self = shared_from_this()](beast::error_code ec) {
+        if (!ec) self->waitFresh();
+      });
+      return;
+    }
+    reply(response(200, "OK", server_.source.render(), head_only_, "text/plain; version=0.0.4; charset=utf-8"));
+  }
+
+  void reply(std::string text) {
+    out_ = std::move(text);
+    stream_.expires_after(kWriteTimeout);
+    asio::async_write(stream_, asio::buffer(out_), [self = shared_from_this()](beast::error_code ec, std::size_t) {
+      if (!ec) self->drain();
+    });
+  }
+
+  // The answer is sent: end our side, and read (and drop) what the client still sends until it closes, so that
+  // closing with unread bytes does not reset the connection before the client has read the answer.
+  void drain() {
+    beast::error_code ignored;
+    stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
+    stream_.expires_after(server_.limits.drain_timeout);
+    readDrain();
+  }
+  void readDrain() {
+    stream_.async_read_some(asio::buffer(scratch_), [self = shared_from_this()](beast::error_code ec, std::size_t n) {
+      self->drained_ += n;
+      if (!ec && self->drained_ < Server::kDrainBytes) self->readDrain();
+    });
+  }
+
+  beast::tcp_stream stream_;
+  Server::Impl& server_;
+  const asio::ip::address peer_;
+  asio::steady_timer timer_;
+  beast::flat_buffer buffer_{Server::kMaxRequestBytes};
+  http::request_parser<http::empty_body> parser_;
+  bool head_only_ = false;
+  std::function<bool()> fresh_;
+  Clock::time_point asked_;
+  std::string out_;
+  std::array<char, 4096> scratch_{};
+  std::size_t drained_ = 0;
+};
+
+}  // namespace
+
+void MetricsHttpServer::Impl::listen(const std::string& address) {
+  const auto [host, service] = hostPort(address);
+  beast::error_code ec;
+  tcp::resolver resolver(io);
+  const auto found = resolver.resolve(host, service, tcp::resolver::passive | tcp::resolver::numeric_service, ec);
+  if (ec) throw std::runtime_error("metrics address '" + address + "': " + ec.message());
+  std::string why = "no address";
+  for (const auto& entry : found) {
+    beast::error_code failed;
+    acceptor.open(entry.endpoint().protocol(), failed);
+    if (!failed) acceptor.set_option(asio::socket_base::reuse_address(true), failed);
+    if (!failed) acceptor.bind(entry.endpoint(), failed);
+    if (!failed) acceptor.listen(asio::socket_base::max_listen_connections, failed);
+    if (!failed) {
+      port = acceptor.local_endpoint().port();
+      return;
+    }
+    why = failed.message();
+    acceptor.close(failed);
+  }
+  throw std::runtime_error("cannot serve metrics on " + address + ": " + why);
+}
+
+void MetricsHttpServer::Impl::accept() {
+  acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
+    if (ec == asio::error::operation_aborted) return;
+    if (ec) {  // out of descriptors (the connection stays queued), or an aborted one: pause, then go on
+      backoff.expires_after(kAcceptBackoff);
+      backoff.async_wait([this](beast::error_code e) {
+        if (!e) accept();
+      });
+      return;
+    }
+    beast::error_code peer_ec;
+    const auto peer = socket.remote_endpoint(peer_ec).address();
+    const auto it = per_peer.find(peer);
+    if (!peer_ec && total < limits.max_connections && (it == per_peer.end() || it->second < limits.max_per_peer)) {
+      ++total;
+      ++per_peer[peer];
+      std::make_shared<Session>(std::move(socket), *this, peer)->start();
+    }  // else the socket closes here, unanswered
+    accept();
+  });
+}
+
+MetricsHttpServer::MetricsHttpServer(const std::string& address, MetricsSource source, Limits limits)
+    : impl_(std::make_unique<Impl>(std::move(source), limits)) {
+  impl_->listen(address);
+  impl_->accept();
+  impl_->thread = std::thread([impl = impl_.get()] {
+    for (;;) {
+      try {
+        impl->io.run();
+        return;
+      } catch (const std::exception&) {
+        // A handler failed (out of memory rendering an answer): that connection is dropped, the others go on.
+      }
+    }
+  });
 }
 
 MetricsHttpServer::~MetricsHttpServer() {
-  const char stop = 1;
-  (void)!write(wake_[1], &stop, 1);
-  thread_.join();
-  close(listen_fd_);
-  close(wake_[0]);
-  close(wake_[1]);
+  impl_->io.stop();
+  impl_->thread.join();
 }
 
-void MetricsHttpServer::serve() {
-  for (;;) {
-    pollfd fds[2] = {{listen_fd_, POLLIN, 0}, {wake_[0], POLLIN, 0}};
-    if (poll(fds, 2, -1) < 0) {
-      // EINTR, or a transient failure: wait a little (still woken by stop) instead of spinning or giving up.
-      poll(&fds[1], 1, 100);
-      continue;
-    }
-    if (fds[1].revents != 0) return;
-    const int fd = accept4(listen_fd_, nullptr, nullptr, SOCK_CLOEXEC);
-    if (fd < 0) {
-      // Out of descriptors (EMFILE/ENFILE) leaves the connection queued and poll ready at once: back off.
-      if (errno != EINTR && errno != EAGAIN && errno != ECONNABORTED) poll(&fds[1], 1, 100);
-      continue;
-    }
-    answer(fd);
-    close(fd);
-  }
-}
-
-void MetricsHttpServer::answer(int fd) const {
-  const auto deadline = Clock::now() + kRequestTimeout;
-  bool too_large = false;
-  const std::string head = readHead(fd, deadline, too_large);
-  if (head.empty()) return;  // timed out or closed: nothing to answer
-  if (too_large)
-    return sendAll(fd, response(431, "Request Header Fields Too Large", "request too large\n", false), deadline);
-  // Request line: METHOD SP TARGET SP HTTP/1.x
-  const auto line_end = head.find("\r\n");
-  const std::string line = head.substr(0, line_end);
-  const auto sp1 = line.find(' '), sp2 = line.rfind(' ');
-  if (head.find("\r\n\r\n") == std::string::npos || sp1 == std::string::npos || sp2 <= sp1 ||
-      line.compare(sp2 + 1, 7, "HTTP/1.") != 0)
-    return sendAll(fd, response(400, "Bad Request", "malformed request (HTTP/1.x, lines end in CRLF)\n", false),
-                   deadline);
-  const std::string method = line.substr(0, sp1), target = line.substr(sp1 + 1, sp2 - sp1 - 1);
-  const bool head_only = method == "HEAD";
-  if (method != "GET" && !head_only)
-    return sendAll(fd, response(405, "Method Not Allowed", "only GET and HEAD\n", false), deadline);
-  const std::string path = target.substr(0, target.find('?'));
-  if (path != "/metrics") return sendAll(fd, response(404, "Not Found", "see /metrics\n", head_only), deadline);
-  const std::string body = render_();  // the send gets its own time: a slow render must not void the answer
-  sendAll(fd, response(200, "OK", body, head_only, "text/plain; version=0.0.4; charset=utf-8"),
-          Clock::now() + kRequestTimeout);
-}
+int MetricsHttpServer::port() const { return impl_->port; }
 
 }  // namespace sglc::server

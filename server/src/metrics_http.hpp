@@ -1,39 +1,58 @@
-// A minimal HTTP/1.1 endpoint for Prometheus scrapes: GET (or HEAD) /metrics answers the text exposition,
-// any other path 404, any other method 405, a malformed or oversized request 400/431. One thread serves
-// connections one at a time; each gets kRequestTimeout to send its request, then is closed (a scrape is one
-// small request; the port is meant for a trusted network or loopback). Every response closes the connection.
+// The HTTP/1.1 endpoint for Prometheus scrapes, on Boost.Beast: GET (or HEAD) /metrics answers the text
+// exposition, any other path 404, any other method 405, a malformed or incomplete request 400 (lines must end
+// in CRLF), a request head over kMaxRequestBytes 431. Connections are served concurrently on one thread of
+// asynchronous I/O, each with Limits::request_timeout to send its request head; every answer closes the
+// connection, after the server has read what the client still sends (up to kDrainBytes for
+// Limits::drain_timeout), so that an answer is not lost to a TCP reset. A peer address holds at most
+// Limits::max_per_peer connections and the server at most Limits::max_connections: one over either is closed
+// at once, unanswered.
 #pragma once
 
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <string>
-#include <thread>
 
 namespace sglc::server {
 
+// What the endpoint serves: `render` gives the exposition; `refresh`, when set, is called first and returns a
+// check that says when fresh values are there (GaugeRefresher::request): the answer waits for it at most
+// Limits::fresh_wait, polling, without holding the thread, then renders what there is.
+struct MetricsSource {
+  std::function<std::string()> render;
+  std::function<std::function<bool()>()> refresh;
+};
+
+struct MetricsHttpLimits {
+  std::chrono::milliseconds request_timeout{2000};  // to send the whole request head
+  std::chrono::milliseconds fresh_wait{1000};       // for MetricsSource::refresh's values
+  std::chrono::milliseconds drain_timeout{1000};    // to read what the client sends after the answer
+  int max_connections = 256;
+  int max_per_peer = 16;
+};
+
 class MetricsHttpServer {
  public:
-  static constexpr std::chrono::milliseconds kRequestTimeout{2000};
   static constexpr std::size_t kMaxRequestBytes = 8192;
+  static constexpr std::size_t kDrainBytes = 1 << 20;
 
-  // Binds host:port (port 0: any free port) and starts serving `render`'s text. Throws std::runtime_error
-  // naming the address when it cannot listen.
-  MetricsHttpServer(const std::string& address, std::function<std::string()> render);
-  ~MetricsHttpServer();  // stops serving
+  using Limits = MetricsHttpLimits;
+
+  // Binds host:port (port 0: any free port) and starts serving. Throws std::runtime_error naming the address
+  // when it cannot listen.
+  MetricsHttpServer(const std::string& address, MetricsSource source, Limits limits = {});
+  MetricsHttpServer(const std::string& address, std::function<std::string()> render)
+      : MetricsHttpServer(address, MetricsSource{std::move(render), {}}) {}
+  ~MetricsHttpServer();  // stops serving; connections still open are closed
   MetricsHttpServer(const MetricsHttpServer&) = delete;
   MetricsHttpServer& operator=(const MetricsHttpServer&) = delete;
 
-  int port() const { return port_; }
+  int port() const;
+
+  struct Impl;
 
  private:
-  void serve();
-  void answer(int fd) const;
-
-  std::function<std::string()> render_;
-  int listen_fd_ = -1;
-  int wake_[2] = {-1, -1};  // a pipe: written to stop the thread
-  int port_ = 0;
-  std::thread thread_;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace sglc::server

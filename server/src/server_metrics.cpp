@@ -4,12 +4,14 @@
 
 #include <chrono>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <vector>
 
 #include "service.hpp"
+#include "sglc/v1/sglc.grpc.pb.h"
 #include "sglc/version.hpp"
 #include "sglc/wire/error.hpp"
 
@@ -19,19 +21,39 @@ namespace {
 namespace gx = grpc::experimental;
 using Clock = std::chrono::steady_clock;
 
-// "/sglc.v1.LoopClosure/Ingest" -> service "sglc.v1.LoopClosure", method "Ingest".
-Labels methodLabels(const char* full) {
-  std::string name = full != nullptr ? full : "";
-  if (!name.empty() && name.front() == '/') name.erase(0, 1);
-  const auto slash = name.find('/');
-  if (slash == std::string::npos) return {{"service", ""}, {"method", name}};
-  return {{"service", name.substr(0, slash)}, {"method", name.substr(slash + 1)}};
-}
+// The methods this server serves, by full path ("/sglc.v1.LoopClosure/Ingest"), with their labels. A call to
+// any other path (anyone can send one, before any token is checked) counts under method="unknown": label
+// values come from this closed set, so such calls cannot grow the registry.
+class MethodLabels {
+ public:
+  MethodLabels() {
+    const auto* pool = google::protobuf::DescriptorPool::generated_pool();
+    for (const char* service :
+         {v1::LoopClosure::service_full_name(), v1::MapAdmin::service_full_name(), v1::PoseGraph::service_full_name()})
+      if (const auto* s = pool->FindServiceByName(service))
+        for (int i = 0; i < s->method_count(); ++i) add(service, s->method(i)->name());
+    // gRPC's own services, which the server registers too (health checking, reflection).
+    add("grpc.health.v1.Health", "Check");
+    add("grpc.health.v1.Health", "Watch");
+    add("grpc.reflection.v1alpha.ServerReflection", "ServerReflectionInfo");
+    add("grpc.reflection.v1.ServerReflection", "ServerReflectionInfo");
+  }
+  const Labels& of(const char* path) const {
+    static const Labels unknown = {{"service", "unknown"}, {"method", "unknown"}};
+    const auto it = known_.find(path != nullptr ? path : "");
+    return it == known_.end() ? unknown : it->second;
+  }
+
+ private:
+  void add(const std::string& service, const std::string& method) {
+    known_.emplace("/" + service + "/" + method, Labels{{"service", service}, {"method", method}});
+  }
+  std::map<std::string, Labels, std::less<>> known_;
+};
 
 class MetricsInterceptor final : public gx::Interceptor {
  public:
-  MetricsInterceptor(Metrics& metrics, gx::ServerRpcInfo* info)
-      : metrics_(metrics), labels_(methodLabels(info->method())) {}
+  MetricsInterceptor(Metrics& metrics, const Labels& labels) : metrics_(metrics), labels_(labels) {}
   void Intercept(gx::InterceptorBatchMethods* methods) override {
     if (methods->QueryInterceptionHookPoint(gx::InterceptionHookPoints::PRE_SEND_STATUS)) {
       auto labels = labels_;
@@ -44,7 +66,7 @@ class MetricsInterceptor final : public gx::Interceptor {
 
  private:
   Metrics& metrics_;
-  Labels labels_;
+  const Labels& labels_;
   Clock::time_point start_ = Clock::now();
 };
 
@@ -52,11 +74,12 @@ class MetricsInterceptorFactory final : public gx::ServerInterceptorFactoryInter
  public:
   explicit MetricsInterceptorFactory(Metrics& metrics) : metrics_(metrics) {}
   gx::Interceptor* CreateServerInterceptor(gx::ServerRpcInfo* info) override {
-    return new MetricsInterceptor(metrics_, info);
+    return new MetricsInterceptor(metrics_, methods_.of(info->method()));
   }
 
  private:
   Metrics& metrics_;
+  const MethodLabels methods_;
 };
 
 double residentBytes() {

@@ -39,7 +39,8 @@ EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/":
             "grpc/": "grpc", "absl/": "grpc", "google/protobuf/": "protobuf", "sqlite3.h": "sqlite",
             "faiss/": "faiss", "omp.h": "openmp", "cblas.h": "blas", "spdlog/": "spdlog", "ceres/": "ceres",
             "nlohmann/": "json", "CLI/": "cli11", "benchmark/": "benchmark", "gtest/": "gtest", "gmock/": "gtest",
-            "pybind11/": "pybind11", "pqxx/": "postgres", "libpq-fe.h": "postgres", "pcl/": "pcl"}
+            "pybind11/": "pybind11", "pqxx/": "postgres", "libpq-fe.h": "postgres", "pcl/": "pcl",
+            "boost/asio/": "beast", "boost/beast/": "beast"}
 # Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
 POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
          "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
@@ -66,7 +67,7 @@ LAYERS = {
     # json: the loop exports (export_formats.cpp) that the command line and other C++ clients share.
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json"}),
     "server": (["server/src"], {"types", "core", "config", "storage", "closing", "posegraph", "log", "proto", "wire"},
-               {"eigen", "grpc", "protobuf", "spdlog", "json", "cli11"}),
+               {"eigen", "grpc", "protobuf", "spdlog", "json", "cli11", "beast"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.
     "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),
     # The Python package's engine module (sglc._engine): the engine and its YAML configuration, through pybind11.

@@ -1,15 +1,12 @@
-// The Prometheus exposition (Metrics) and its HTTP endpoint (MetricsHttpServer) on a loopback socket.
-#include <arpa/inet.h>
+// The Prometheus exposition (Metrics): counters, histograms, and gauges read off the request path.
 #include <gtest/gtest.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
 
+#include <future>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "metrics.hpp"
-#include "metrics_http.hpp"
 
 namespace sglc::server {
 namespace {
@@ -39,7 +36,7 @@ TEST(Metrics, CountersAndHistogramsInTheTextFormat) {
   EXPECT_NE(text.find("t_seconds_count{stage=\"a\"} 3\n"), std::string::npos);
 }
 
-TEST(Metrics, LabelValuesAreEscapedAndGaugesReadAtScrape) {
+TEST(Metrics, GaugesAreReadByARefreshNeverByRender) {
   Metrics m;
   int reads = 0;
   m.gauge("g", "a gauge\nwith two lines", [&reads] {
@@ -47,16 +44,22 @@ TEST(Metrics, LabelValuesAreEscapedAndGaugesReadAtScrape) {
     return std::vector<Metrics::Sample>{{{{"map", "a\"b\\c\nd"}}, 2.5}};
   });
   m.gauge("broken", "throws", []() -> std::vector<Metrics::Sample> { throw std::runtime_error("loading"); });
-  const std::string text = m.render();
+  std::string text = m.render();
+  EXPECT_EQ(reads, 0) << "a scrape never runs a reader";
+  EXPECT_EQ(text.find("# TYPE g"), std::string::npos) << "no gauge before the first refresh";
+  EXPECT_EQ(text.find(kGaugeAge), std::string::npos);
+  m.refreshGauges();
+  EXPECT_EQ(reads, 1);
+  text = m.render();
+  m.render();
   EXPECT_EQ(reads, 1);
   EXPECT_NE(text.find("# HELP g a gauge\\nwith two lines\n"), std::string::npos) << text;
   EXPECT_NE(text.find("g{map=\"a\\\"b\\\\c\\nd\"} 2.5\n"), std::string::npos) << text;
   EXPECT_EQ(text.find("broken"), std::string::npos) << "a gauge that cannot be read is left out";
-  m.render();
-  EXPECT_EQ(reads, 2);
+  EXPECT_NE(text.find(std::string("# TYPE ") + kGaugeAge + " gauge\n" + kGaugeAge + " "), std::string::npos) << text;
 }
 
-TEST(Metrics, HooksRunOnceBeforeTheGaugesOfEachScrape) {
+TEST(Metrics, HooksRunOnceBeforeTheGaugesOfEachRefresh) {
   Metrics m;
   int snapshot = 0, seen = -1;
   m.beforeScrape([&] { ++snapshot; });
@@ -65,11 +68,39 @@ TEST(Metrics, HooksRunOnceBeforeTheGaugesOfEachScrape) {
     seen = snapshot;
     return std::vector<Metrics::Sample>{{{}, 1.0}};
   });
-  m.render();
+  m.refreshGauges();
   EXPECT_EQ(snapshot, 1);
   EXPECT_EQ(seen, 1) << "the gauge reads after the hook";
   m.render();
+  m.refreshGauges();
   EXPECT_EQ(snapshot, 2);
+}
+
+// A reader that does not return (a map database that does not answer) holds neither updates nor scrapes,
+// which serve the values read before. (Were a lock held, this test would hang rather than pass.)
+TEST(Metrics, ABlockedReaderHoldsNeitherUpdatesNorRendering) {
+  Metrics m;
+  m.counter("c_total", "x");
+  std::promise<void> entered, release;
+  const auto released = release.get_future().share();
+  int reads = 0;  // written by the reader only; read after the refreshes have ended
+  m.gauge("slow", "blocks on its second read", [&entered, released, &reads] {
+    if (++reads == 2) {
+      entered.set_value();
+      released.wait();
+    }
+    return std::vector<Metrics::Sample>{{{}, static_cast<double>(reads)}};
+  });
+  m.refreshGauges();  // the first read returns at once
+  std::thread refresh([&m] { m.refreshGauges(); });
+  entered.get_future().wait();  // the second is blocked inside the refresh
+  m.add("c_total", {{"code", "OK"}});
+  const auto text = m.render();
+  EXPECT_NE(text.find("c_total{code=\"OK\"} 1\n"), std::string::npos) << text;
+  EXPECT_NE(text.find("\nslow 1\n"), std::string::npos) << "the values read before are served\n" << text;
+  release.set_value();
+  refresh.join();
+  EXPECT_NE(m.render().find("\nslow 2\n"), std::string::npos);
 }
 
 TEST(Metrics, UndeclaredFamilyIsAProgrammingError) {
@@ -77,74 +108,6 @@ TEST(Metrics, UndeclaredFamilyIsAProgrammingError) {
   m.counter("c", "x");
   EXPECT_THROW(m.add("nope", {}), std::logic_error);
   EXPECT_THROW(m.observe("c", {}, 1.0), std::logic_error);  // a counter is not a histogram
-}
-
-// Sends `request` to 127.0.0.1:port and returns everything the server answers until it closes.
-std::string exchange(int port, const std::string& request) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
-    close(fd);
-    return "connect failed";
-  }
-  std::size_t sent = 0;
-  while (sent < request.size()) {
-    const ssize_t n = send(fd, request.data() + sent, request.size() - sent, MSG_NOSIGNAL);
-    if (n <= 0) break;
-    sent += static_cast<std::size_t>(n);
-  }
-  shutdown(fd, SHUT_WR);  // the request is complete
-  std::string out;
-  char buffer[4096];
-  for (ssize_t n; (n = recv(fd, buffer, sizeof buffer, 0)) > 0;) out.append(buffer, static_cast<std::size_t>(n));
-  close(fd);
-  return out;
-}
-
-TEST(MetricsHttp, ServesMetricsAndRefusesTheRest) {
-  MetricsHttpServer http("127.0.0.1:0", [] { return std::string("x_total 7\n"); });
-  ASSERT_GT(http.port(), 0);
-  const auto ok = exchange(http.port(), "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n");
-  EXPECT_EQ(ok.rfind("HTTP/1.1 200 OK\r\n", 0), 0u) << ok;
-  EXPECT_NE(ok.find("Content-Type: text/plain; version=0.0.4"), std::string::npos);
-  EXPECT_NE(ok.find("Content-Length: 10\r\n"), std::string::npos);
-  EXPECT_EQ(ok.substr(ok.size() - 10), "x_total 7\n");
-  const auto head = exchange(http.port(), "HEAD /metrics?x=1 HTTP/1.0\r\n\r\n");
-  EXPECT_EQ(head.rfind("HTTP/1.1 200 OK\r\n", 0), 0u);
-  EXPECT_EQ(head.find("x_total"), std::string::npos) << "HEAD has no body";
-  EXPECT_EQ(exchange(http.port(), "GET / HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 404", 0), 0u);
-  EXPECT_EQ(exchange(http.port(), "POST /metrics HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 405", 0), 0u);
-  EXPECT_EQ(exchange(http.port(), "garbage\r\n\r\n").rfind("HTTP/1.1 400", 0), 0u);
-  EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\n\n").rfind("HTTP/1.1 400", 0), 0u) << "LF only";
-  EXPECT_EQ(exchange(http.port(), std::string("\xff\0\x01 binary", 10)).rfind("HTTP/1.1 400", 0), 0u);
-  EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\r\nX: " + std::string(20000, 'a') + "\r\n\r\n")
-                .rfind("HTTP/1.1 431", 0),
-            0u);
-  // A connection that closes without sending anything gets nothing, and the server goes on.
-  EXPECT_EQ(exchange(http.port(), ""), "");
-  EXPECT_EQ(exchange(http.port(), "GET /metrics HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 200", 0), 0u);
-}
-
-TEST(MetricsHttp, BadAddressesAreNamed) {
-  try {
-    MetricsHttpServer http("no-port", [] { return std::string(); });
-    FAIL() << "no port accepted";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("no-port"), std::string::npos) << e.what();
-  }
-  for (const char* bad : {"127.0.0.1:70000", "127.0.0.1:-1", "127.0.0.1:9x"}) {
-    EXPECT_THROW(MetricsHttpServer(bad, [] { return std::string(); }), std::runtime_error) << bad;
-  }
-  MetricsHttpServer first("127.0.0.1:0", [] { return std::string(); });
-  try {
-    MetricsHttpServer second("127.0.0.1:" + std::to_string(first.port()), [] { return std::string(); });
-    FAIL() << "a port in use accepted";
-  } catch (const std::runtime_error& e) {
-    EXPECT_NE(std::string(e.what()).find("cannot serve metrics on 127.0.0.1:"), std::string::npos) << e.what();
-  }
 }
 
 }  // namespace
