@@ -263,6 +263,10 @@ int main(int argc, char** argv) {
       return 0;
     }
     return serve(sglc::server::resolved(settings), signals);
+  } catch (const sglc::storage::StorageError& e) {
+    // The operator starting the server is told what the database said too (clients never are).
+    std::cerr << "sglc-server: error: " << e.what() << (e.detail().empty() ? "" : " (" + e.detail() + ")") << std::endl;
+    return 1;
   } catch (const std::exception& e) {
     std::cerr << "sglc-server: error: " << e.what() << std::endl;
     return 1;

@@ -214,9 +214,13 @@ Conn::Conn(const std::string& url, std::string setup) : redacted_(redacted(url))
                                            nullptr};
   const std::array<const char*, 9> values = {"10", "sglc", "1", "10", "5", "3", "30000", url.c_str(), nullptr};
   c_.reset(PQconnectdbParams(keys.data(), values.data(), 1));
-  if (!c_ || PQstatus(c_.get()) != CONNECTION_OK)
-    throw StorageError(Code::kUnavailable, "cannot connect to PostgreSQL at " + redacted_,
-                       c_ ? PQerrorMessage(c_.get()) : "out of memory");
+  if (!c_ || PQstatus(c_.get()) != CONNECTION_OK) {
+    // Where the database is (user, host, port, name) is for the operator's log, not for every caller.
+    std::string detail = "cannot connect to PostgreSQL at " + redacted_ + ": ";
+    detail += c_ ? PQerrorMessage(c_.get()) : "out of memory";
+    while (!detail.empty() && detail.back() == '\n') detail.pop_back();
+    throw StorageError(Code::kUnavailable, meaning(Code::kUnavailable), detail);
+  }
   PQsetNoticeReceiver(c_.get(), &onNotice, ending_.get());
   exec(kServerSide);
   if (!setup_.empty()) exec(setup_);
