@@ -17,8 +17,8 @@ PACKAGES=(
   libpcl-dev
   # service
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
-  # the metrics endpoint: Boost.Beast over Asio (header-only)
-  libboost-dev
+  # the metrics endpoint: Boost.Beast over Asio (header-only); Prometheus' promtool checks its exposition
+  libboost-dev prometheus
   # pose-graph optimisation
   libceres-dev
   # tests, benchmarks, Python clients and plots

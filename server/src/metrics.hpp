@@ -26,7 +26,7 @@ inline constexpr std::array<double, 13> kSecondsBuckets = {0.001, 0.0025, 0.005,
                                                            0.25,  0.5,    1.0,   2.5,  5.0,   10.0};
 
 // The family that says how old the gauges in an exposition are.
-inline constexpr const char* kGaugeAge = "sglc_metrics_gauge_age_seconds";
+inline constexpr const char* kGaugeAge = "sglc_metrics_read_age_seconds";
 
 class Metrics {
  public:

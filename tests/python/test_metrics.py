@@ -125,6 +125,31 @@ def test_other_paths_and_methods(metrics_server):
     assert e.value.code == 405
 
 
+def test_promtool_accepts_the_exposition(metrics_server):
+    """Prometheus' own checker (promtool, from Debian's prometheus package) reads a real scrape: no parse
+    error, no lint finding. Taken after calls to unknown method paths, which count under method="unknown"."""
+    import shutil
+    import grpc
+    promtool = shutil.which("promtool")
+    assert promtool, "promtool is missing (Debian's prometheus package: run scripts/install-deps.sh)"
+    address, url = metrics_server
+    with grpc.insecure_channel(address) as ch:
+        for path in ("/no.such.Service/Call", "/sglc.v1.LoopClosure/NoSuchMethod", "/" + "x" * 3000):
+            call = ch.unary_unary(path, request_serializer=lambda b: b, response_deserializer=lambda b: b)
+            with pytest.raises(grpc.RpcError) as e:
+                call(b"", timeout=30)
+            assert e.value.code() == grpc.StatusCode.UNIMPLEMENTED
+    with urllib.request.urlopen(url, timeout=30) as r:
+        text = r.read().decode()
+    samples, _ = parse(text)
+    unknown = [labels for (name, labels) in samples if name == "sglc_rpc_requests_total"
+               and ("method", "unknown") in labels]
+    assert unknown and all(("service", "unknown") in labels for labels in unknown), unknown
+    assert "NoSuchMethod" not in text and "no.such" not in text
+    done = subprocess.run([promtool, "check", "metrics"], input=text, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, f"promtool: {done.stdout}{done.stderr}"
+
+
 def test_bad_metrics_address_stops_the_server(tmp_path):
     binary = _binary("SGLC_SERVER_BIN", "sglc-server")
     if binary is None:
