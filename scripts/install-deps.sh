@@ -17,7 +17,8 @@ PACKAGES=(
   libpcl-dev
   # service
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libspdlog-dev
-  # the metrics endpoint: Boost.Beast over Asio (header-only); Prometheus' promtool checks its exposition
+  # the metrics endpoint: Boost.Beast over Asio (header-only); Prometheus' promtool checks its exposition (the
+  # Prometheus server the package brings is disabled below)
   libboost-dev prometheus
   # pose-graph optimisation
   libceres-dev
@@ -52,3 +53,8 @@ echo "install-deps: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+# The prometheus package is here for its promtool only: where systemd runs, the server it enables is stopped
+# (only when this script installed it).
+if [[ " ${missing[*]} " == *" prometheus "* ]] && [ -d /run/systemd/system ]; then
+  $SUDO systemctl disable --now prometheus.service >/dev/null 2>&1 || true
+fi

@@ -33,6 +33,7 @@ void GaugeRefresher::run() {
   std::unique_lock lock(mutex_);
   for (;;) {
     wake_.wait(lock, [this] { return stop_ || requested_ > finished_; });
+    if (finished_ > 0) wake_.wait_until(lock, finished_at_ + kMinInterval, [this] { return stop_; });
     if (stop_) return;
     // Serves every request made until now; one made while it runs asks for the generation after it.
     running_ = true;
@@ -41,6 +42,7 @@ void GaugeRefresher::run() {
     lock.lock();
     running_ = false;
     finished_ += 1;
+    finished_at_ = std::chrono::steady_clock::now();
   }
 }
 

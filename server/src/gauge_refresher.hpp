@@ -3,6 +3,7 @@
 // scrape, which is then served the values read before (their age is in the exposition).
 #pragma once
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -21,9 +22,13 @@ class GaugeRefresher {
   GaugeRefresher(const GaugeRefresher&) = delete;
   GaugeRefresher& operator=(const GaugeRefresher&) = delete;
 
+  // Refreshes start at least this far apart: a flood of scrapes costs the database at most 4 reads a second,
+  // and a scrape (which waits up to a second for fresh values) still gets values read after it asked.
+  static constexpr std::chrono::milliseconds kMinInterval{250};
+
   // Asks for values read from now on (a refresh in progress is not enough: it may have read its values
   // before), and returns a check that is true once they are there. Never blocks. One refresh serves every
-  // request made before it started, so a flood of scrapes costs one refresh at a time, back to back.
+  // request made before it started.
   std::function<bool()> request();
 
  private:
@@ -35,6 +40,7 @@ class GaugeRefresher {
   std::uint64_t requested_ = 0;  // the newest generation asked for
   std::uint64_t finished_ = 0;   // the newest generation whose refresh has finished
   bool running_ = false;         // generation finished_ + 1 is being read
+  std::chrono::steady_clock::time_point finished_at_;
   bool stop_ = false;
   std::thread thread_;
 };

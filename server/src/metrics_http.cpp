@@ -1,5 +1,7 @@
 #include "metrics_http.hpp"
 
+#include <algorithm>
+
 #include <array>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
@@ -15,6 +17,8 @@
 #include <map>
 #include <stdexcept>
 #include <thread>
+
+#include "connection_slots.hpp"
 
 namespace sglc::server {
 namespace {
@@ -43,6 +47,17 @@ std::pair<std::string, std::string> hostPort(const std::string& address) {
   return {host, port};
 }
 
+// One peer, for the per-peer limit: an IPv4 address (also when it comes IPv4-mapped), or an IPv6 /64 (what one
+// host or site is given).
+std::string peerKey(const asio::ip::address& a) {
+  if (!a.is_v6()) return a.to_string();
+  const auto v6 = a.to_v6();
+  if (v6.is_v4_mapped()) return asio::ip::make_address_v4(asio::ip::v4_mapped, v6).to_string();
+  auto bytes = v6.to_bytes();
+  std::fill(bytes.begin() + 8, bytes.end(), 0);
+  return asio::ip::address_v6(bytes).to_string() + "/64";
+}
+
 std::string response(int code, const char* reason, const std::string& body, bool head_only,
                      const char* type = "text/plain; charset=utf-8") {
   std::string out = "HTTP/1.1 " + std::to_string(code) + ' ' + reason + "\r\nContent-Type: " + type +
@@ -55,22 +70,24 @@ std::string response(int code, const char* reason, const std::string& body, bool
 
 }  // namespace
 
+namespace {
+class Session;
+}  // namespace
+
 struct MetricsHttpServer::Impl {
-  Impl(MetricsSource s, Limits l) : source(std::move(s)), limits(l) {}
+  Impl(MetricsSource s, Limits l)
+      : source(std::move(s)), limits(l), slots(limits.max_connections, limits.max_per_peer) {}
 
   void listen(const std::string& address);
   void accept();
-  void release(const asio::ip::address& peer) {
-    --total;
-    if (auto it = per_peer.find(peer); it != per_peer.end() && --it->second <= 0) per_peer.erase(it);
-  }
+  void admit(tcp::socket socket);
 
   const MetricsSource source;
   const Limits limits;
-  // Connections open, in all and per peer address (touched on the I/O thread only, and by the sessions that
-  // the io_context destroys after it: declared before it, so they outlive it).
-  int total = 0;
-  std::map<asio::ip::address, int> per_peer;
+  // The connections open (touched on the I/O thread only, and by the sessions that the io_context destroys
+  // after it: declared before it, so they outlive it).
+  ConnectionSlots slots;
+  std::map<ConnectionSlots::Id, std::weak_ptr<Session>> sessions;
   asio::io_context io{1};
   tcp::acceptor acceptor{io};
   asio::steady_timer backoff{io};
@@ -83,13 +100,23 @@ namespace {
 // One connection: read the request head within the deadline, answer, read what else comes, close.
 class Session : public std::enable_shared_from_this<Session> {
  public:
-  Session(tcp::socket socket, Server::Impl& server, asio::ip::address peer)
-      : stream_(std::move(socket)), server_(server), peer_(std::move(peer)), timer_(stream_.get_executor()) {
+  Session(tcp::socket socket, Server::Impl& server, ConnectionSlots::Id id)
+      : stream_(std::move(socket)), server_(server), id_(id), timer_(stream_.get_executor()) {
     parser_.header_limit(Server::kMaxRequestBytes);
   }
-  ~Session() { server_.release(peer_); }
+  ~Session() {
+    server_.slots.leave(id_);
+    server_.sessions.erase(id_);
+  }
   Session(const Session&) = delete;
   Session& operator=(const Session&) = delete;
+
+  // Its slot went to a newcomer: close, which ends what it waits for.
+  void evict() {
+    beast::error_code ignored;
+    stream_.socket().close(ignored);
+    timer_.cancel();
+  }
 
   void start() {
     stream_.expires_after(server_.limits.request_timeout);  // for the whole head: a slow sender is cut off
@@ -99,7 +126,9 @@ class Session : public std::enable_shared_from_this<Session> {
 
  private:
   void onHead(beast::error_code ec) {
-    if (ec == beast::error::timeout || ec == http::error::end_of_stream) return;  // nothing (complete) came
+    server_.slots.requestReceived(id_);  // answered from now on: not evicted
+    if (ec == beast::error::timeout || ec == http::error::end_of_stream || ec == asio::error::operation_aborted)
+      return;  // nothing (complete) came, or evicted
     if (ec == http::error::header_limit || ec == http::error::buffer_overflow)
       return reply(response(431, "Request Header Fields Too Large", "request too large\n", false));
     if (ec) return reply(response(400, "Bad Request", "malformed request (HTTP/1.x, lines end in CRLF)\n", false));
@@ -154,7 +183,7 @@ class Session : public std::enable_shared_from_this<Session> {
 
   beast::tcp_stream stream_;
   Server::Impl& server_;
-  const asio::ip::address peer_;
+  const ConnectionSlots::Id id_;
   asio::steady_timer timer_;
   beast::flat_buffer buffer_{Server::kMaxRequestBytes};
   http::request_parser<http::empty_body> parser_;
@@ -201,16 +230,33 @@ void MetricsHttpServer::Impl::accept() {
       });
       return;
     }
-    beast::error_code peer_ec;
-    const auto peer = socket.remote_endpoint(peer_ec).address();
-    const auto it = per_peer.find(peer);
-    if (!peer_ec && total < limits.max_connections && (it == per_peer.end() || it->second < limits.max_per_peer)) {
-      ++total;
-      ++per_peer[peer];
-      std::make_shared<Session>(std::move(socket), *this, peer)->start();
-    }  // else the socket closes here, unanswered
+    try {
+      admit(std::move(socket));
+    } catch (const std::exception&) {
+      // Out of memory for this connection: it is closed; the server goes on accepting.
+    }
     accept();
   });
+}
+
+void MetricsHttpServer::Impl::admit(tcp::socket socket) {
+  beast::error_code ec;
+  const auto peer = socket.remote_endpoint(ec);
+  if (ec) return;
+  const auto admission = slots.admit(peerKey(peer.address()));
+  if (!admission) return;  // every slot is busy answering: closed here, unanswered
+  for (const auto id : admission->evicted)
+    if (const auto it = sessions.find(id); it != sessions.end())
+      if (const auto evicted = it->second.lock()) evicted->evict();
+  std::shared_ptr<Session> session;
+  try {
+    session = std::make_shared<Session>(std::move(socket), *this, admission->id);
+  } catch (...) {
+    slots.leave(admission->id);
+    throw;
+  }
+  sessions[admission->id] = session;
+  session->start();
 }
 
 MetricsHttpServer::MetricsHttpServer(const std::string& address, MetricsSource source, Limits limits)

@@ -3,9 +3,10 @@
 // in CRLF), a request head over kMaxRequestBytes 431. Connections are served concurrently on one thread of
 // asynchronous I/O, each with Limits::request_timeout to send its request head; every answer closes the
 // connection, after the server has read what the client still sends (up to kDrainBytes for
-// Limits::drain_timeout), so that an answer is not lost to a TCP reset. A peer address holds at most
-// Limits::max_per_peer connections and the server at most Limits::max_connections: one over either is closed
-// at once, unanswered.
+// Limits::drain_timeout), so that an answer is not lost to a TCP reset. A peer (an IPv4 address, an IPv6 /64)
+// holds at most Limits::max_per_peer connections and the server at most Limits::max_connections; a newcomer
+// beyond either takes the slot of the oldest connection still waiting for its request (ConnectionSlots), and
+// is refused only when every slot is busy answering.
 #pragma once
 
 #include <chrono>

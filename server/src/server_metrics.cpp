@@ -35,8 +35,7 @@ class MethodLabels {
     // gRPC's own services, which the server registers too (health checking, reflection).
     add("grpc.health.v1.Health", "Check");
     add("grpc.health.v1.Health", "Watch");
-    add("grpc.reflection.v1alpha.ServerReflection", "ServerReflectionInfo");
-    add("grpc.reflection.v1.ServerReflection", "ServerReflectionInfo");
+    add("grpc.reflection.v1alpha.ServerReflection", "ServerReflectionInfo");  // gRPC 1.51 registers no v1
   }
   const Labels& of(const char* path) const {
     static const Labels unknown = {{"service", "unknown"}, {"method", "unknown"}};
@@ -126,6 +125,11 @@ void declareStoreGauges(Metrics& m, const ServiceState& state) {
       });
     };
   };
+  m.gauge("sglc_map_database_up",
+          "1 when the newest read of the map database succeeded, 0 when it failed or the database is loading", [snap] {
+            const std::lock_guard lock(snap->mutex);
+            return std::vector<S>{{{}, snap->valid ? 1.0 : 0.0}};
+          });
   m.gauge("sglc_maps", "Maps in the database", one([](const StoreSnapshot& s) { return double(s.stats.maps); }));
   m.gauge("sglc_map_scans", "Scans stored per map", perMap([](const storage::MapInfo& x) { return double(x.scans); }));
   m.gauge("sglc_map_robots", "Robots per map", perMap([](const storage::MapInfo& x) { return double(x.robots); }));

@@ -197,8 +197,8 @@ Conn::Conn(const std::string& url, std::string setup) : redacted_(redacted(url))
   PQconninfoOption* parsed = PQconninfoParse(url.c_str(), &parse_error);
   if (!parsed) {
     PQfreemem(parse_error);  // it may quote the password: not passed on
-    throw StorageError(Code::kInvalidArgument, "the PostgreSQL URL " + redacted_ + " is not valid",
-                       "libpq cannot parse the URL");
+    throw StorageError(Code::kInvalidArgument, "the PostgreSQL URL is not valid",
+                       "libpq cannot parse the URL " + redacted_);
   }
   PQconninfoFree(parsed);
   // Our defaults first: the URL's own settings (expanded from dbname) override them. Keepalives and the TCP

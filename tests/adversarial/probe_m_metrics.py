@@ -1,7 +1,7 @@
 """M. The metrics port under abuse. 100,000 calls to unknown gRPC method paths (up to 6 KB each, sent without a
 token to a server that wants one) count under method="unknown": the exposition stays small and the server's
 memory flat. Idle, half-sent, TLS and oversized connections to the metrics port do not keep a scrape from being
-answered."""
+answered, also when idle connections from many addresses hold every slot."""
 import os
 import re
 import socket
@@ -119,6 +119,17 @@ def held_connections(tmp):
             payload_sock.settimeout(30)
             answer = payload_sock.recv(200).decode(errors="replace")
             assert answer.startswith(f"HTTP/1.1 {want}"), f"expected {want}, got '{h.short(answer)}'"
+        # Every slot held by idle connections from 16 addresses (16 each: the per-peer and the total limit): a
+        # scrape from another address takes the oldest idle one's slot.
+        for a in range(16):
+            for _ in range(16):
+                c = socket.socket()
+                c.bind((f"127.0.1.{a + 1}", 0))
+                c.connect(("127.0.0.1", mport))
+                held.append(c)
+        status, body, secs = scrape(mport, source="127.0.0.5")
+        h.note(f"scrape with every slot held by idle connections from 16 addresses: {status} in {secs:.2f} s")
+        assert status.startswith("HTTP/1.1 200"), f"expected a 200 scrape on a full server, got '{status}'"
         s.assert_alive()
     finally:
         for c in held:

@@ -2,6 +2,8 @@
 // started after it.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <future>
 #include <thread>
 
@@ -55,6 +57,22 @@ TEST(GaugeRefresher, ARequestDuringARefreshWaitsForTheNextOne) {
   ASSERT_TRUE(eventually(fresh));
   EXPECT_EQ(reads.load(), 2) << "answered by a second read";
   EXPECT_NE(m.render().find("\ng 2\n"), std::string::npos) << m.render();
+}
+
+// Back-to-back requests (a flood of scrapes) get one refresh each, started at least kMinInterval apart.
+TEST(GaugeRefresher, RefreshesStartAtLeastTheMinimumIntervalApart) {
+  Metrics m;
+  std::atomic<int> reads{0};
+  m.gauge("g", "x", [&reads] { return std::vector<Metrics::Sample>{{{}, static_cast<double>(++reads)}}; });
+  GaugeRefresher refresher(m);
+  const auto start = std::chrono::steady_clock::now();
+  for (int i = 0; i < 6; ++i) ASSERT_TRUE(eventually(refresher.request()));
+  const auto elapsed = std::chrono::steady_clock::now() - start;
+  // The first request may be served by the first refresh, if that had not started reading yet; the last five
+  // each waited for a refresh that started at least kMinInterval after the one before.
+  const int n = reads.load();
+  EXPECT_TRUE(n == 6 || n == 7) << n;
+  EXPECT_GE(elapsed, 5 * GaugeRefresher::kMinInterval - 20ms);
 }
 
 }  // namespace

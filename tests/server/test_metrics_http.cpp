@@ -151,35 +151,61 @@ TEST(MetricsHttp, IdleAndSlowConnectionsDoNotHoldAScrape) {
   for (const int fd : held) close(fd);
 }
 
-TEST(MetricsHttp, ConnectionsAreLimitedPerPeerAndInAll) {
+// Over the per-peer or the total limit, the oldest connection still waiting for its request gives its slot to
+// the newcomer: many idle connections, from one address or from many, cannot keep a scrape out.
+TEST(MetricsHttp, ANewcomerTakesTheSlotOfTheOldestIdleConnection) {
   MetricsHttpLimits limits;
   limits.request_timeout = 60s;
   limits.max_per_peer = 3;
   limits.max_connections = 5;
   MetricsHttpServer http("127.0.0.1:0", MetricsSource{[] { return std::string("x 1\n"); }, {}}, limits);
-  std::vector<int> held;
-  for (int i = 0; i < 3; ++i) held.push_back(connectTo(http.port()));
-  const int fourth = connectTo(http.port());
-  EXPECT_TRUE(closedByServer(fourth)) << "a fourth connection from one peer is closed at once";
-  close(fourth);
-  EXPECT_EQ(exchange(http.port(), kScrape, "127.0.0.2").rfind("HTTP/1.1 200", 0), 0u) << "another peer is served";
-  held.push_back(connectTo(http.port(), "127.0.0.2"));
-  held.push_back(connectTo(http.port(), "127.0.0.3"));  // five in all
-  const int sixth = connectTo(http.port(), "127.0.0.4");
-  EXPECT_TRUE(closedByServer(sixth)) << "a sixth connection in all is closed at once";
-  close(sixth);
-  for (const int fd : held) EXPECT_TRUE(stillOpen(fd));
-  for (const int fd : held) close(fd);
-  // The slots come back once the server has seen the closes.
-  std::string answer;
-  for (int attempt = 0; attempt < 600 && answer.rfind("HTTP/1.1 200", 0) != 0; ++attempt) {
-    answer = exchange(http.port(), kScrape);
-    if (answer.empty()) std::this_thread::sleep_for(50ms);
-  }
-  EXPECT_EQ(answer.rfind("HTTP/1.1 200", 0), 0u);
+  std::vector<int> one_peer;
+  for (int i = 0; i < 4; ++i) one_peer.push_back(connectTo(http.port()));
+  EXPECT_TRUE(closedByServer(one_peer[0])) << "the peer's fourth connection takes its oldest one's slot";
+  for (int i = 1; i < 4; ++i) EXPECT_TRUE(stillOpen(one_peer[i]));
+  const int b = connectTo(http.port(), "127.0.0.2"), c = connectTo(http.port(), "127.0.0.3");  // five in all
+  EXPECT_EQ(exchange(http.port(), kScrape, "127.0.0.4").rfind("HTTP/1.1 200", 0), 0u)
+      << "a full server serves a scrape";
+  EXPECT_TRUE(closedByServer(one_peer[1])) << "in the oldest idle connection's slot";
+  for (const int fd : {one_peer[2], one_peer[3], b, c}) EXPECT_TRUE(stillOpen(fd));
+  for (const int fd : one_peer) close(fd);
+  close(b);
+  close(c);
 }
 
-// A scrape asks for fresh gauges and waits for them a bounded time, then answers with what there is.
+// Only when every slot is busy answering is a newcomer refused (closed at once, unanswered).
+TEST(MetricsHttp, ANewcomerIsRefusedWhenEverySlotIsBusyAnswering) {
+  std::atomic<int> asked{0};
+  std::atomic<bool> release{false};
+  MetricsHttpLimits limits;
+  limits.max_connections = 2;
+  limits.fresh_wait = 60s;  // the two scrapes below wait (busy answering) until the test releases them
+  MetricsHttpServer http("127.0.0.1:0",
+                         MetricsSource{[] { return std::string("x 1\n"); },
+                                       [&] {
+                                         ++asked;
+                                         return std::function<bool()>([&release] { return release.load(); });
+                                       }},
+                         limits);
+  std::vector<int> scrapes;
+  for (const char* from : {"127.0.0.1", "127.0.0.2"}) {
+    scrapes.push_back(connectTo(http.port(), from));
+    sendAll(scrapes.back(), kScrape);
+  }
+  for (int i = 0; i < 6000 && asked.load() < 2; ++i) std::this_thread::sleep_for(10ms);
+  ASSERT_EQ(asked.load(), 2) << "both requests are being answered";
+  const int third = connectTo(http.port(), "127.0.0.3");
+  EXPECT_TRUE(closedByServer(third));
+  close(third);
+  release = true;
+  for (const int fd : scrapes) {
+    EXPECT_EQ(readToEnd(fd).rfind("HTTP/1.1 200", 0), 0u);
+    close(fd);
+  }
+}
+
+// A scrape asks for fresh gauges and is answered with them once they are there; when they do not come, it is
+// answered after a bounded wait with what there is.
 TEST(MetricsHttp, AScrapeWaitsForFreshGaugesABoundedTime) {
   std::atomic<int> asked{0}, rendered{0};
   MetricsHttpLimits limits;
@@ -199,6 +225,26 @@ TEST(MetricsHttp, AScrapeWaitsForFreshGaugesABoundedTime) {
   EXPECT_EQ(rendered.load(), 1);
   EXPECT_EQ(exchange(never.port(), "GET /nope HTTP/1.1\r\n\r\n").rfind("HTTP/1.1 404", 0), 0u);
   EXPECT_EQ(asked.load(), 1) << "only a scrape asks for a refresh";
+
+  // Values that become fresh a little later (another thread reads them) are the ones served.
+  std::atomic<int> value{1};
+  std::atomic<bool> ready{false};
+  std::thread reader;
+  limits.fresh_wait = 60s;
+  MetricsHttpServer later("127.0.0.1:0",
+                          MetricsSource{[&value] { return "x " + std::to_string(value.load()) + "\n"; },
+                                        [&] {
+                                          reader = std::thread([&] {
+                                            std::this_thread::sleep_for(50ms);
+                                            value = 2;
+                                            ready = true;
+                                          });
+                                          return std::function<bool()>([&ready] { return ready.load(); });
+                                        }},
+                          limits);
+  const auto answer = exchange(later.port(), kScrape);
+  reader.join();
+  EXPECT_EQ(answer.substr(answer.size() - 4), "x 2\n") << answer;
 }
 
 TEST(MetricsHttp, BadAddressesAreNamed) {
