@@ -5,10 +5,12 @@
 #include <cstring>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <vector>
 
+#include "ascii_value.hpp"
 #include "file_bytes.hpp"
 #include "sglc/types.hpp"
 
@@ -19,33 +21,39 @@ const std::vector<std::string> kPcdKeys{"VERSION", "FIELDS", "SIZE",      "TYPE"
                                         "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
 
 constexpr std::size_t kMaxHeaderBytes = 1 << 16;
-constexpr std::uint64_t kMaxPoints = 500'000'000;  // far above any LiDAR scan, below what would exhaust memory
+constexpr std::uint64_t kMaxPoints = 500'000'000;  // elements other than points (PLY faces), header sanity
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw InputError(path + ": " + what); }
 
-// The file's bytes, its header lines (up to and including `last_key`'s line) and where the data starts.
+// A file's header lines (up to and including `last_key`'s line), read from its first 64 KiB alone, and where
+// the data starts; the data itself (`body`) is read by loadBody once the header passed its checks.
 struct Header {
-  std::vector<char> bytes;
+  explicit Header(const std::string& path) : file(path) {}
+  RegularFile file;
   std::vector<std::string> lines;
   std::uint64_t data_offset = 0;
   std::uint64_t file_size = 0;
+  std::vector<char> body;  // the bytes after the header, once loaded
+
+  void loadBody() { body = file.read(data_offset, static_cast<std::size_t>(file_size - data_offset)); }
 };
 
-Header readHeader(const std::string& path, const std::string& last_key, const char* format) {
-  Header h;
-  h.bytes = readAll(path);
-  h.file_size = h.bytes.size();
-  const std::size_t limit = std::min<std::size_t>(h.bytes.size(), kMaxHeaderBytes);
+// The header of a scan file, after the file limits (a regular file no larger than kMaxScanFileBytes).
+std::unique_ptr<Header> readHeader(const std::string& path, const std::string& last_key, const char* format) {
+  auto h = std::make_unique<Header>(path);
+  checkScanFileSize(h->file);
+  h->file_size = h->file.size();
+  const auto head = h->file.read(0, static_cast<std::size_t>(std::min<std::uint64_t>(h->file_size, kMaxHeaderBytes)));
   std::size_t pos = 0;
-  while (pos < limit) {
-    const auto* nl = static_cast<const char*>(std::memchr(h.bytes.data() + pos, '\n', limit - pos));
+  while (pos < head.size()) {
+    const auto* nl = static_cast<const char*>(std::memchr(head.data() + pos, '\n', head.size() - pos));
     if (!nl) break;
-    std::string line(static_cast<const char*>(h.bytes.data() + pos), nl);
-    pos = static_cast<std::size_t>(nl - h.bytes.data()) + 1;
+    std::string line(head.data() + pos, nl);
+    pos = static_cast<std::size_t>(nl - head.data()) + 1;
     if (!line.empty() && line.back() == '\r') line.pop_back();
-    h.lines.push_back(line);
+    h->lines.push_back(line);
     if (line.rfind(last_key, 0) == 0) {
-      h.data_offset = pos;
+      h->data_offset = pos;
       return h;
     }
   }
@@ -68,12 +76,21 @@ std::uint64_t count(const std::string& text, const std::string& path, const std:
 // PCL 1.13 goes on reading header keys after DATA (a "COUNT ..." line at the start of the data changes the
 // layout after the buffer was sized: heap overflow), and turns an ascii line with the wrong number of values
 // into a point at the origin. So: no line of the data may start with a header key, and ascii data must be
-// exactly `points` lines of `values` numbers.
-void checkPcdBody(const Header& h, const std::string& path, bool ascii, std::uint64_t points, std::uint64_t values) {
-  const char* begin = h.bytes.data() + h.data_offset;
-  const char* end = h.bytes.data() + h.bytes.size();
+// exactly `points` lines of `values` numbers, each a value of its field's declared type.
+struct PcdField {
+  std::string name;
+  AsciiType type;
+  std::uint64_t count = 1;
+};
+
+void checkPcdBody(const Header& h, const std::string& path, bool ascii, std::uint64_t points,
+                  const std::vector<PcdField>& fields, std::uint64_t values) {
+  const char* begin = h.body.data();
+  const char* end = h.body.data() + h.body.size();
   std::uint64_t lines = 0;
+  std::uint64_t file_line = h.lines.size();
   for (const char* line = begin; line < end;) {
+    ++file_line;
     const char* nl = static_cast<const char*>(std::memchr(line, '\n', static_cast<std::size_t>(end - line)));
     const char* stop = nl ? nl : end;
     for (const auto& key : kPcdKeys)
@@ -88,12 +105,13 @@ void checkPcdBody(const Header& h, const std::string& path, bool ascii, std::uin
         if (w.size() != values)
           fail(path, "PCD ascii line " + std::to_string(lines) + " has " + std::to_string(w.size()) +
                          " values, the header declares " + std::to_string(values));
-        for (const auto& v : w) {
-          char* used = nullptr;
-          std::strtod(v.c_str(), &used);
-          if (used != v.c_str() + v.size())
-            fail(path, "PCD ascii line " + std::to_string(lines) + ": '" + v + "' is not a number");
-        }
+        std::size_t k = 0;
+        for (const auto& f : fields)
+          for (std::uint64_t c = 0; c < f.count; ++c, ++k)
+            if (const auto why = asciiValueError(w[k], f.type))
+              fail(path, "PCD ascii line " + std::to_string(lines) + " (line " + std::to_string(file_line) +
+                             " of the file), field '" + f.name + "' (" + f.type.name() + "): value '" +
+                             w[k].substr(0, 40) + "' " + *why);
       }
     }
     line = stop + 1;
@@ -105,7 +123,8 @@ void checkPcdBody(const Header& h, const std::string& path, bool ascii, std::uin
 }  // namespace
 
 void checkPcdHeader(const std::string& path) {
-  const Header h = readHeader(path, "DATA", "PCD");
+  const auto header = readHeader(path, "DATA", "PCD");
+  Header& h = *header;
   // Only the keys of the PCD v0.7 specification, each at most once and in its order (PCL 1.13 crashes on an
   // unknown line, and reads SIZE/TYPE/COUNT against the FIELDS seen before them).
   const std::vector<std::string>& kOrder = kPcdKeys;
@@ -130,6 +149,7 @@ void checkPcdHeader(const std::string& path) {
       (keys.count("COUNT") && keys["COUNT"].size() != fields))
     fail(path, "PCD header: FIELDS, SIZE, TYPE and COUNT list different numbers of entries");
   std::uint64_t point_bytes = 0, values = 0;
+  std::vector<PcdField> value_fields;
   for (std::size_t i = 0; i < fields; ++i) {
     const auto size = count(keys["SIZE"][i], path, "PCD SIZE");
     const std::string& type = keys["TYPE"][i];
@@ -142,10 +162,12 @@ void checkPcdHeader(const std::string& path) {
     if (n < 1 || n > 4096) fail(path, "PCD field '" + keys["FIELDS"][i] + "': COUNT must be 1..4096");
     point_bytes += size * n;
     values += n;
+    value_fields.push_back({keys["FIELDS"][i], AsciiType{type[0], static_cast<int>(size)}, n});
   }
   const auto width = count(keys["WIDTH"][0], path, "PCD WIDTH");
   const auto height = count(keys["HEIGHT"][0], path, "PCD HEIGHT");
   const auto points = count(keys["POINTS"][0], path, "PCD POINTS");
+  checkScanPoints(path, points, "POINTS in the PCD header");
   if (height == 0 || width > kMaxPoints || height > kMaxPoints || width * height != points || points > kMaxPoints)
     fail(path, "PCD header: WIDTH x HEIGHT must equal POINTS (at most " + std::to_string(kMaxPoints) + ")");
   const std::string& data = keys["DATA"][0];
@@ -153,10 +175,11 @@ void checkPcdHeader(const std::string& path) {
   if (data == "binary" && left < points * point_bytes)
     fail(path, "PCD binary data holds " + std::to_string(left) + " bytes for " + std::to_string(points) +
                    " points of " + std::to_string(point_bytes) + " bytes");
+  h.loadBody();  // the header is sound and within the limits
   if (data == "binary_compressed") {
     // Two uint32 (compressed size, uncompressed size), then the LZF data: both must fit the file and the points.
     if (left < 8) fail(path, "PCD binary_compressed data is truncated");
-    const auto* b = reinterpret_cast<const unsigned char*>(h.bytes.data() + h.data_offset);
+    const auto* b = reinterpret_cast<const unsigned char*>(h.body.data());
     const std::uint64_t compressed = b[0] | (b[1] << 8) | (b[2] << 16) | (std::uint64_t(b[3]) << 24);
     const std::uint64_t uncompressed = b[4] | (b[5] << 8) | (b[6] << 16) | (std::uint64_t(b[7]) << 24);
     if (compressed > left - 8 || uncompressed != points * point_bytes || (points > 0 && compressed == 0))
@@ -166,7 +189,7 @@ void checkPcdHeader(const std::string& path) {
   }
   if (data != "ascii" && data != "binary" && data != "binary_compressed")
     fail(path, "PCD DATA '" + data + "' is not ascii, binary or binary_compressed");
-  checkPcdBody(h, path, data == "ascii", points, values);
+  checkPcdBody(h, path, data == "ascii", points, value_fields, values);
 }
 
 namespace {
@@ -188,16 +211,19 @@ void checkPlyVertexProperties(const std::vector<std::string>& names, const std::
 }  // namespace
 
 void checkPlyHeader(const std::string& path) {
-  const Header h = readHeader(path, "end_header", "PLY");
+  const auto header = readHeader(path, "end_header", "PLY");
+  Header& h = *header;
   if (h.lines.empty() || h.lines[0] != "ply") fail(path, "not a PLY file (first line is not 'ply')");
   std::string format;
   std::uint64_t vertices = 0, vertex_bytes = 0;
   std::vector<std::string> names;
+  std::vector<AsciiType> types;
   bool in_vertex = false, seen_vertex = false;
-  static const std::map<std::string, int> kSizes{{"char", 1},  {"uchar", 1},   {"int8", 1},   {"uint8", 1},
-                                                 {"short", 2}, {"ushort", 2},  {"int16", 2},  {"uint16", 2},
-                                                 {"int", 4},   {"uint", 4},    {"int32", 4},  {"uint32", 4},
-                                                 {"float", 4}, {"float32", 4}, {"double", 8}, {"float64", 8}};
+  static const std::map<std::string, AsciiType> kTypes{
+      {"char", {'I', 1}},  {"uchar", {'U', 1}},   {"int8", {'I', 1}},   {"uint8", {'U', 1}},
+      {"short", {'I', 2}}, {"ushort", {'U', 2}},  {"int16", {'I', 2}},  {"uint16", {'U', 2}},
+      {"int", {'I', 4}},   {"uint", {'U', 4}},    {"int32", {'I', 4}},  {"uint32", {'U', 4}},
+      {"float", {'F', 4}}, {"float32", {'F', 4}}, {"double", {'F', 8}}, {"float64", {'F', 8}}};
   for (std::size_t i = 1; i < h.lines.size(); ++i) {
     const auto w = words(h.lines[i]);
     if (w.empty()) continue;
@@ -216,13 +242,15 @@ void checkPlyHeader(const std::string& path) {
         if (seen_vertex) fail(path, "PLY: two vertex elements");
         seen_vertex = true;
         vertices = n;
+        checkScanPoints(path, vertices, "the PLY vertex count");
       }
     } else if (w[0] == "property" && in_vertex) {
       if (w.size() != 3) fail(path, "PLY vertex property '" + h.lines[i] + "': only scalar properties are supported");
-      const auto it = kSizes.find(w[1]);
-      if (it == kSizes.end()) fail(path, "PLY vertex property type '" + w[1] + "' is unknown");
-      vertex_bytes += static_cast<std::uint64_t>(it->second);
+      const auto it = kTypes.find(w[1]);
+      if (it == kTypes.end()) fail(path, "PLY vertex property type '" + w[1] + "' is unknown");
+      vertex_bytes += static_cast<std::uint64_t>(it->second.bytes);
       names.push_back(w[2]);
+      types.push_back(it->second);
     }
   }
   if (format != "ascii" && format != "binary_little_endian" && format != "binary_big_endian")
@@ -236,6 +264,10 @@ void checkPlyHeader(const std::string& path) {
   if (left < need)
     fail(path,
          "PLY data holds " + std::to_string(left) + " bytes, too few for " + std::to_string(vertices) + " vertices");
+  if (format == "ascii") {
+    h.loadBody();
+    checkPlyAsciiVertices(h.body, h.lines.size(), vertices, names, types, path);
+  }
 }
 
 }  // namespace sglc::detail

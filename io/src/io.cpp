@@ -15,10 +15,12 @@ using detail::readAll;
 using detail::writeAll;
 
 Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
-  const auto data = readAll(path);
-  if (data.size() % 16 != 0)
-    throw InputError(path + ": size " + std::to_string(data.size()) +
+  const detail::RegularFile file(path);
+  if (file.size() % 16 != 0)
+    throw InputError(path + ": size " + std::to_string(file.size()) +
                      " bytes is not a multiple of 16 (4 float32 per point); truncated file?");
+  detail::checkScanPoints(path, file.size() / 16, "16 bytes each in the file");
+  const auto data = file.readAll();
   const std::size_t n = data.size() / 16;
   Points points(n);
   if (intensities) intensities->resize(n);
@@ -34,7 +36,11 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
 }
 
 std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points) {
-  const auto data = readAll(path);
+  const detail::RegularFile file(path);
+  if (file.size() > std::uint64_t{kMaxScanPoints} * 4)
+    throw InputError(path + ": " + std::to_string(file.size()) + " bytes, more than the labels of " +
+                     std::to_string(kMaxScanPoints) + " points (the most a scan may have)");
+  const auto data = file.readAll();
   std::size_t width = 4;
   if (points > 0) {
     // One label per point, 1, 2 or 4 bytes wide (nuScenes-lidarseg uint8, uint16 sets, SemanticKITTI uint32).
@@ -61,6 +67,7 @@ namespace {
 // Calls f(line, "path:line") for each line that is not blank or a '#' comment, until f returns false.
 template <typename F>
 void forEachDataLine(const std::string& path, F&& f) {
+  detail::requireRegularFile(path);  // a FIFO would block the open
   std::ifstream in(path);
   if (!in) throw InputError(path + ": cannot open (" + std::strerror(errno) + ")");
   std::string line;

@@ -1,5 +1,6 @@
 #include "sglc/npy.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -19,9 +20,13 @@ struct NpyArray {
   bool big_endian = false;
   bool fortran = false;
   std::vector<std::size_t> shape;
-  const unsigned char* data = nullptr;  // the elements, right after the header
   std::size_t elements = 0;
+  std::uint64_t data_offset = 0;        // where the elements start in the file
+  std::vector<char> bytes;              // the elements, once read
+  const unsigned char* data = nullptr;  // bytes.data()
 };
+
+constexpr std::size_t kMaxHeaderBytes = 1 << 16;
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) { throw InputError(path + ": " + what); }
 
@@ -86,11 +91,14 @@ void parseShape(std::string_view text, NpyArray& a, const std::string& path) {
   a.elements = total;
 }
 
-NpyArray parseNpy(const std::vector<char>& bytes, const std::string& path) {
+// The header alone is read first: the declared shape is checked against the file's size (and, by the caller,
+// against the point cap) before any data is read.
+NpyArray parseNpyHeader(const detail::RegularFile& file, const std::string& path) {
   static constexpr std::string_view kMagic("\x93NUMPY", 6);
-  if (bytes.size() < 10 || std::string_view(bytes.data(), 6) != kMagic)
+  const auto prefix = file.read(0, static_cast<std::size_t>(std::min<std::uint64_t>(file.size(), 12)));
+  if (prefix.size() < 10 || std::string_view(prefix.data(), 6) != kMagic)
     fail(path, "not an .npy file (no \\x93NUMPY magic)");
-  const auto* u = reinterpret_cast<const unsigned char*>(bytes.data());
+  const auto* u = reinterpret_cast<const unsigned char*>(prefix.data());
   const unsigned major = u[6];
   std::size_t header_len = 0;
   std::size_t offset = 0;
@@ -98,26 +106,35 @@ NpyArray parseNpy(const std::vector<char>& bytes, const std::string& path) {
     header_len = u[8] | (std::size_t(u[9]) << 8);
     offset = 10;
   } else if (major == 2 || major == 3) {
-    if (bytes.size() < 12) fail(path, "truncated .npy header");
+    if (prefix.size() < 12) fail(path, "truncated .npy header");
     header_len = u[8] | (std::size_t(u[9]) << 8) | (std::size_t(u[10]) << 16) | (std::size_t(u[11]) << 24);
     offset = 12;
   } else {
     fail(path, "npy format version " + std::to_string(major) + " is not supported (1, 2 or 3)");
   }
-  if (header_len > bytes.size() - offset) fail(path, "truncated .npy header");
-  const std::string_view header(bytes.data() + offset, header_len);
+  if (header_len > file.size() - offset) fail(path, "truncated .npy header");
+  if (header_len > kMaxHeaderBytes)
+    fail(path, "npy header of " + std::to_string(header_len) + " bytes is too long (at most 64 KiB)");
+  const auto text = file.read(offset, header_len);
+  const std::string_view header(text.data(), text.size());
   NpyArray a;
   parseDescr(dictValue(header, "descr", path), a, path);
   const auto fortran = dictValue(header, "fortran_order", path);
   if (fortran != "False" && fortran != "True") fail(path, "npy fortran_order is neither True nor False");
   a.fortran = fortran == "True";
   parseShape(dictValue(header, "shape", path), a, path);
-  const std::size_t data_bytes = bytes.size() - offset - header_len;
+  a.data_offset = offset + header_len;
+  const std::uint64_t data_bytes = file.size() - a.data_offset;
   if (a.elements > std::numeric_limits<std::size_t>::max() / a.width || a.elements * a.width != data_bytes)
     fail(path, "npy data is " + std::to_string(data_bytes) + " bytes but the header declares " +
                    std::to_string(a.elements) + " elements of " + std::to_string(a.width) + " bytes");
-  a.data = u + offset + header_len;
   return a;
+}
+
+// The elements, once the header's shape passed the caller's checks.
+void readNpyData(const detail::RegularFile& file, NpyArray& a) {
+  a.bytes = file.read(a.data_offset, a.elements * a.width);
+  a.data = reinterpret_cast<const unsigned char*>(a.bytes.data());
 }
 
 // Element `k` (in storage order) as raw little-endian-corrected bytes.
@@ -177,12 +194,15 @@ void writeNpy(const std::string& path, const char* descr, const std::string& sha
 }  // namespace
 
 Points readNpyPoints(const std::string& path) {
-  const auto bytes = detail::readAll(path);
-  const NpyArray a = parseNpy(bytes, path);
+  const detail::RegularFile file(path);
+  detail::checkScanFileSize(file);
+  NpyArray a = parseNpyHeader(file, path);
   if (a.kind != 'f' || (a.width != 4 && a.width != 8))
     fail(path, "npy points must be float32 or float64, not " + std::string(1, a.kind) + std::to_string(a.width));
   if (a.shape.size() != 2 || a.shape[1] < 3)
     fail(path, "npy points must have shape (N, 3) or (N, C >= 3), not " + shapeText(a));
+  detail::checkScanPoints(path, a.shape[0], "rows of the header's shape " + shapeText(a));
+  readNpyData(file, a);
   const std::size_t n = a.shape[0];
   const std::size_t cols = a.shape[1];
   Points points(n);
@@ -197,12 +217,14 @@ Points readNpyPoints(const std::string& path) {
 }
 
 std::vector<std::uint32_t> readNpyLabels(const std::string& path) {
-  const auto bytes = detail::readAll(path);
-  const NpyArray a = parseNpy(bytes, path);
+  const detail::RegularFile file(path);
+  NpyArray a = parseNpyHeader(file, path);
   if (a.kind != 'i' && a.kind != 'u')
     fail(path, "npy labels must be integers, not " + std::string(1, a.kind) + std::to_string(a.width));
   if (!(a.shape.size() == 1 || (a.shape.size() == 2 && a.shape[1] == 1)))
     fail(path, "npy labels must have shape (N,) or (N, 1), not " + shapeText(a));
+  detail::checkScanPoints(path, a.shape[0], "labels in the header's shape " + shapeText(a));
+  readNpyData(file, a);
   std::vector<std::uint32_t> labels(a.shape[0]);
   for (std::size_t i = 0; i < labels.size(); ++i) {
     const auto v = labelElement(a, i);

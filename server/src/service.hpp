@@ -14,6 +14,7 @@
 #include "sglc/pipeline.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
+#include "sglc/types.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
 #include "stream_registry.hpp"
 
@@ -24,7 +25,7 @@ using posegraph::GraphOptimiser;
 using posegraph::GraphOptimiserOptions;
 
 struct ServiceLimits {
-  std::size_t max_points = 2'000'000;                     // per scan
+  std::size_t max_points = kMaxScanPoints;                // per scan
   std::string backup_dir;                                 // Backup paths are resolved inside it
   int compute_threads = 1;                                // engine work runs on at most this many threads at once
   std::size_t max_inflight_bytes = std::size_t{1} << 30;  // scan memory in flight (MemoryBudget)

@@ -23,7 +23,7 @@ struct Settings {
   int threads = 0;             // compute threads; 0 = the machine's cores
   int max_calls = 256;         // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
   double max_message_mb = 64;
-  std::uint64_t max_points = 2'000'000;
+  std::uint64_t max_points = kMaxScanPoints;  // the scan file readers' cap too
   std::string tls_cert, tls_key, tokens;
   std::string backup_dir;  // empty: "backups" beside the database
   double shutdown_grace_s = 10;

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <cstddef>
 #include <cstdint>
 #include <stdexcept>
 #include <string>
@@ -32,6 +33,10 @@ class InputError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// Points per scan: the default of the server's `max_points` setting, and the cap of the scan file readers
+// (sglc/scan_file.hpp), which refuse a file declaring more points from its size or header, before reading it.
+inline constexpr std::size_t kMaxScanPoints = 2'000'000;
 
 // Checks a scan before sending or any work, by the rules a server applies: one label per point or none at all
 // (an unlabelled scan, which the labeller labels), and finite coordinates. Throws InputError naming the first
