@@ -102,15 +102,16 @@ LabelledScan unpackScan(const v1::Scan& scan) {
 
 LabelledScan decodeScan(std::string_view points, std::string_view labels, std::size_t max_points) {
   const std::size_t n = checkedPointCount(points, labels);
-  if (n == 0) throw WireError("scan is empty");
   if (n > max_points)
     throw WireError(
         "scan has " + std::to_string(n) + " points, the server accepts at most " + std::to_string(max_points),
         grpc::StatusCode::RESOURCE_EXHAUSTED);
   LabelledScan scan{unpackPoints(points), unpackLabels(labels)};
-  for (std::size_t i = 0; i < n; ++i)
-    if (!scan.points[i].allFinite())
-      throw WireError("scan point " + std::to_string(i) + " has a non-finite coordinate (NaN or inf)");
+  try {
+    validateScan(scan);  // the rule clients apply before sending: not empty, finite coordinates
+  } catch (const InputError& e) {
+    throw WireError(e.what());
+  }
   return scan;
 }
 

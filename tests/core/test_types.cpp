@@ -32,7 +32,11 @@ TEST(ValidateScan, OneLabelPerPointOrNone) {
   EXPECT_EQ(errorOf(scan), "scan has 4 points but 5 labels");
   scan.labels.clear();  // unlabelled: the labeller labels it
   EXPECT_EQ(errorOf(scan), "");
-  EXPECT_EQ(errorOf(LabelledScan{}), "");
+}
+
+TEST(ValidateScan, AnEmptyScanIsRefusedAsTheServerRefusesIt) {
+  EXPECT_EQ(errorOf(LabelledScan{}), "scan is empty");
+  EXPECT_EQ(errorOf(LabelledScan{{}, {}}), "scan is empty");
 }
 
 TEST(ValidateScan, NamesTheFirstNonFinitePoint) {

@@ -77,9 +77,11 @@ def test_inputs_and_errors(kitti):
         engine.fingerprint(p[:, :2])
     with pytest.raises(TypeError):
         engine.match(f1, "not a fingerprint")
-    empty = engine.fingerprint(np.zeros((0, 3), np.float32))
-    assert empty.nodes == 0 and empty.warnings  # a scan that cannot close loops says so
-    assert not engine.match(empty, f1).is_loop
+    # A scan without points is refused as the server refuses it (not fingerprinted into an empty one).
+    with pytest.raises(ValueError, match="scan is empty"):
+        engine.fingerprint(np.zeros((0, 3), np.float32))
+    with pytest.raises(ValueError, match="scan is empty"):
+        engine.fingerprint(np.zeros((0, 3), np.float32), np.zeros(0, np.uint32))
 
 
 def test_config(tmp_path, kitti):

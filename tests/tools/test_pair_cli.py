@@ -96,5 +96,30 @@ with tempfile.TemporaryDirectory() as tmp:
         check(len(lines) == 1 and "error" in lines[0], f"{name}: one-line error (got {p.stderr!r})")
         check(p.stdout == "", f"{name}: nothing on stdout")
 
+# A scan file without points is refused with the server's words, whatever its format, not fingerprinted.
+with tempfile.TemporaryDirectory() as tmp:
+    empty = {".bin": b"", ".pcd": b"VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 0\n"
+                                b"HEIGHT 1\nPOINTS 0\nDATA ascii\n"}
+    for ext, blob in empty.items():
+        path = os.path.join(tmp, "empty" + ext)
+        with open(path, "wb") as f:
+            f.write(blob)
+        p = subprocess.run([binary, "--scan-a", path, "--scan-b", scan("004501")[0]], capture_output=True, text=True,
+                           timeout=120)
+        check(p.returncode == 1 and f"{path}: scan is empty" in p.stderr and p.stdout == "",
+              f"empty {ext} scan: exit 1 with '{path}: scan is empty' (got {p.returncode}: {p.stderr.strip()!r})")
+
+# A FIFO given as a scan is refused at once, not waited on (the timeout turns a hang into a failure).
+with tempfile.TemporaryDirectory() as tmp:
+    fifo = os.path.join(tmp, "fifo.bin")
+    os.mkfifo(fifo)
+    try:
+        p = subprocess.run([binary, "--scan-a", fifo, "--scan-b", scan("004501")[0]], capture_output=True, text=True,
+                           timeout=30)
+        check(p.returncode == 1 and "is a FIFO" in p.stderr and fifo in p.stderr,
+              f"FIFO scan: exit 1 naming the file as a FIFO (got {p.returncode}: {p.stderr.strip()!r})")
+    except subprocess.TimeoutExpired:
+        check(False, "FIFO scan: sglc-pair still blocked after 30 s")
+
 print(f"{0 if failures else 1} passed, {len(failures)} failed")
 sys.exit(1 if failures else 0)

@@ -55,6 +55,17 @@ nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fi
   return out;
 }
 
+// A scan file, held to the rules the server applies to a scan (not empty, ...): InputError naming the file.
+sglc::LabelledScan readChecked(const std::string& path, const std::string& labels, const std::string& label_field) {
+  auto scan = sglc::readScan(path, labels, label_field);
+  try {
+    sglc::validateScan(scan);
+  } catch (const sglc::InputError& e) {
+    throw sglc::InputError(path + ": " + e.what());
+  }
+  return scan;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -91,8 +102,8 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (scan_a.empty() || scan_b.empty()) throw sglc::InputError("--scan-a and --scan-b are required");
-    const auto a = sglc::readScan(scan_a, labels_a, label_field);
-    const auto b = sglc::readScan(scan_b, labels_b, label_field);
+    const auto a = readChecked(scan_a, labels_a, label_field);
+    const auto b = readChecked(scan_b, labels_b, label_field);
     auto t0 = std::chrono::steady_clock::now();
     sglc::ScanReport report_a, report_b;
     const auto fa = pipeline.fingerprint(a, &report_a);

@@ -38,9 +38,9 @@ class InputError : public std::runtime_error {
 // (sglc/scan_file.hpp), which refuse a file declaring more points from its size or header, before reading it.
 inline constexpr std::size_t kMaxScanPoints = 2'000'000;
 
-// Checks a scan before sending or any work, by the rules a server applies: one label per point or none at all
-// (an unlabelled scan, which the labeller labels), and finite coordinates. Throws InputError naming the first
-// offending point.
+// Checks a scan before sending or any work, by the rules a server applies (the wire codec's decodeScan calls it):
+// at least one point ("scan is empty"), one label per point or none at all (an unlabelled scan, which the
+// labeller labels), and finite coordinates. Throws InputError naming the first offending point.
 void validateScan(const LabelledScan& scan);
 
 }  // namespace sglc
