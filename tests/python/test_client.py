@@ -33,6 +33,39 @@ def test_requests_without_a_server():
     c.close()
 
 
+def test_integer_arguments_must_be_integers():
+    c = sglc.Client("127.0.0.1:1", timeout=5)
+    pts = np.zeros((5, 3), np.float32)
+    for bad in (1.5, 2.0, True, "7", np.float32(3)):
+        with pytest.raises(TypeError, match="seq must be an integer"):
+            c.ingest_request("m", "r", "s", bad, pts)
+        with pytest.raises(TypeError, match="seq must be an integer"):
+            c.query("m", points=pts, seq=bad)
+        with pytest.raises(TypeError, match="scan_id must be an integer"):
+            c.query("m", scan_id=bad)
+        with pytest.raises(TypeError, match="top_k must be an integer"):
+            c.query_options(top_k=bad)
+        with pytest.raises(TypeError, match=r"verify_scan_ids\[\] must be an integer"):
+            c.query_options(verify_scan_ids=[1, bad])
+        with pytest.raises(TypeError, match="scan_id must be an integer"):
+            c.get_scan(bad)
+    with pytest.raises(TypeError, match="not a bool"):
+        c.ingest_request("m", "r", "s", np.bool_(True), pts)
+    # Python and NumPy integers of any width are integers.
+    for good in (7, np.int64(7), np.uint16(7), np.int32(7)):
+        assert c.ingest_request("m", "r", "s", good, pts).key.seq == 7
+        assert c.query_options(top_k=good, exclude_recent=good).top_k == 7
+    c.close()
+
+
+def test_ingest_stream_items_of_the_wrong_type_are_a_type_error():
+    c = sglc.Client("127.0.0.1:1", timeout=5)
+    for bad in (("m", "r", "s", 1, np.zeros((5, 3))), None, 42):
+        with pytest.raises(TypeError, match="item 0 is a .*expected a sglc.ScanInput or a dict"):
+            next(c.ingest_stream([bad]))
+    c.close()
+
+
 def test_service_flow(client, kitti, reference_pose):
     info = client.server_info()
     assert info.label_preset == "semantickitti" and info.labeller_mode == "auto" and info.version

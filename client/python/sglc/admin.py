@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from typing import List, Optional
 
+from ._args import integer
 from ._stubs import pb2
 from .results import Backup, MapInfo, RobotInfo, ScanInfo, ServerInfo, SessionInfo, Stats
 
@@ -32,7 +33,7 @@ class AdminCalls:
         return [SessionInfo.from_proto(x) for x in r.sessions]
 
     def get_scan(self, scan_id: int, include_graph: bool = False, timeout: Optional[float] = None) -> ScanInfo:
-        r = self._admin_call("GetScan", pb2.GetScanRequest(scan_id=int(scan_id), include_graph=include_graph), timeout)
+        r = self._admin_call("GetScan", pb2.GetScanRequest(scan_id=integer("scan_id", scan_id), include_graph=include_graph), timeout)
         return ScanInfo.from_proto(r)
 
     def delete_session(self, map: str, robot: str, session: str, timeout: Optional[float] = None) -> int:

@@ -7,6 +7,7 @@ from typing import Iterable, Iterator, Optional, Sequence, Union
 import grpc
 
 from . import packing
+from ._args import integer
 from ._stubs import pb2, pb2_grpc
 from .admin import AdminCalls
 from .errors import SglcError
@@ -113,13 +114,13 @@ class Client(AdminCalls, PoseGraphCalls):
         be loops, so a pose is estimated for rejected ones too (see QueryOptions in sglc.proto)."""
         if scope not in SCOPES:
             raise ValueError(f"unknown scope {scope!r} (expected all, same, other or sessions)")
-        o = pb2.QueryOptions(scope=SCOPES[scope], exclude_seconds=float(exclude_seconds), top_k=int(top_k),
-                             candidates=int(candidates), include_rejected=bool(include_rejected),
+        o = pb2.QueryOptions(scope=SCOPES[scope], exclude_seconds=float(exclude_seconds), top_k=integer("top_k", top_k),
+                             candidates=integer("candidates", candidates), include_rejected=bool(include_rejected),
                              known_loops=bool(known_loops))
         if exclude_recent is not None:
-            o.exclude_recent = int(exclude_recent)
+            o.exclude_recent = integer("exclude_recent", exclude_recent)
         o.sessions.extend(sessions)
-        o.verify_scan_ids.extend(int(i) for i in verify_scan_ids)
+        o.verify_scan_ids.extend(integer("verify_scan_ids[]", i) for i in verify_scan_ids)
         if refine is not None:
             o.refine = bool(refine)
             o.refine_set = True
@@ -134,7 +135,7 @@ class Client(AdminCalls, PoseGraphCalls):
         None (the server labels the scan, its labeller mode permitting). odometry_pose: 4x4 array-like.
         query_options: a QueryOptions message, or keyword arguments of query_options()."""
         p, lab = packing.pack_scan(points, labels)
-        r = pb2.IngestRequest(key=pb2.ScanKey(map=map, robot=robot, session=session, seq=int(seq)),
+        r = pb2.IngestRequest(key=pb2.ScanKey(map=map, robot=robot, session=session, seq=integer("seq", seq)),
                               scan=pb2.Scan(points=p, labels=lab), store_raw=store_raw, query=query)
         if stamp is not None:
             r.stamp = float(stamp)
@@ -191,8 +192,14 @@ class Client(AdminCalls, PoseGraphCalls):
         if window < 1:
             raise ValueError("window must be at least 1")
         with self.open_session(timeout) as session:
-            for item in scans:
-                session.send(**(item if isinstance(item, dict) else item.as_kwargs()))
+            for i, item in enumerate(scans):
+                if isinstance(item, dict):
+                    session.send(**item)
+                elif isinstance(item, ScanInput):
+                    session.send(**item.as_kwargs())
+                else:
+                    raise TypeError(f"ingest_stream: item {i} is a {type(item).__name__}; expected a sglc.ScanInput "
+                                    f"or a dict of ingest() arguments")
                 while len(session) >= window:
                     yield session.next()
             session.end_requests()
@@ -207,11 +214,11 @@ class Client(AdminCalls, PoseGraphCalls):
         relocalization). options: a QueryOptions message, or keyword arguments of query_options()."""
         if (scan_id is None) == (points is None):
             raise ValueError("give either scan_id or points (with optional labels)")
-        r = pb2.QueryRequest(map=map, robot=robot, session=session, seq=int(seq))
+        r = pb2.QueryRequest(map=map, robot=robot, session=session, seq=integer("seq", seq))
         if scan_id is not None:
             if labels is not None:
                 raise ValueError("labels go with points, not with scan_id")
-            r.scan_id = int(scan_id)
+            r.scan_id = integer("scan_id", scan_id)
         else:
             p, lab = packing.pack_scan(points, labels)
             r.scan.points, r.scan.labels = p, lab

@@ -5,6 +5,7 @@ from typing import List, Optional
 
 import grpc
 
+from ._args import integer
 from ._stubs import pb2
 from .errors import InternalError, SglcError
 from .results import LoopEdge, MapEvent, ScanPose, SessionFrame
@@ -61,7 +62,7 @@ class PoseGraphCalls:
     def poses(self, map: str, robot: str = "", session: str = "", page_size: int = 1000,
               timeout: Optional[float] = None) -> List[ScanPose]:
         """Every graph node's pose (scans ingested with an odometry pose), in scan-id order, all pages."""
-        request = pb2.GetPosesRequest(map=map, robot=robot, session=session, page_size=page_size)
+        request = pb2.GetPosesRequest(map=map, robot=robot, session=session, page_size=integer("page_size", page_size))
         return [ScanPose.from_proto(p) for p in self._pages("GetPoses", request, "poses", timeout)]
 
     def session_frames(self, map: str, timeout: Optional[float] = None) -> List[SessionFrame]:
@@ -73,13 +74,13 @@ class PoseGraphCalls:
     def loops(self, map: str, robot: str = "", page_size: int = 1000,
               timeout: Optional[float] = None) -> List[LoopEdge]:
         """The verified loops of the map's pose graph (with at least one end in `robot`'s scans if given)."""
-        request = pb2.GetLoopsRequest(map=map, robot=robot, page_size=page_size)
+        request = pb2.GetLoopsRequest(map=map, robot=robot, page_size=integer("page_size", page_size))
         return [LoopEdge.from_proto(e) for e in self._pages("GetLoops", request, "loops", timeout)]
 
     def watch(self, map: str, after_version: int = 0, timeout: Optional[float] = None) -> MapWatch:
         """A MapWatch yielding each new pose-graph solution above after_version. timeout: of the whole stream
         (default none). Deleting the map ends the watch with NotFoundError."""
-        call = self._graph.WatchMap(pb2.WatchMapRequest(map=map, after_version=after_version), timeout=timeout,
+        call = self._graph.WatchMap(pb2.WatchMapRequest(map=map, after_version=integer("after_version", after_version)), timeout=timeout,
                                     metadata=self._metadata)
         return MapWatch(call)
 
