@@ -138,13 +138,22 @@ class Feeder {
       while (stream.outstanding() > 0) handle(stream.next());
     } catch (const sc::RpcError&) {
       // What the server answered before the break is in order on the stream: report it, resend the rest.
-      try {
-        while (stream.outstanding() > 0) handle(stream.next());
-      } catch (const std::exception&) {
-      }
+      handleAnswered(stream);
+      throw;
+    } catch (const std::exception&) {
+      // A scan that cannot be read: the scans sent before it are answered (and counted as stored) first.
+      handleAnswered(stream);
       throw;
     }
     stream.finish();
+  }
+
+  // Reports the answers to the scans still outstanding, up to the first failure (which the caller reports).
+  void handleAnswered(sc::IngestSession& stream) {
+    try {
+      while (stream.outstanding() > 0) handle(stream.next());
+    } catch (const std::exception&) {
+    }
   }
 
   void send(sc::IngestSession& stream, std::size_t i) {

@@ -213,3 +213,67 @@ TEST(Cli, IngestResendsEachUnansweredScanOnceAfterTheStreamBreaks) {
   }
   for (int i = 3; i < frames; ++i) EXPECT_TRUE(all.count(i)) << "seq " << i << " never resent";
 }
+
+namespace {
+
+// Answers every scan, except that it ends the stream with INVALID_ARGUMENT on the seq `reject` (as the server
+// does on a scan it refuses).
+class AnsweringLoopClosure final : public sglc::v1::LoopClosure::Service {
+ public:
+  explicit AnsweringLoopClosure(std::int64_t reject) : reject_(reject) {}
+  grpc::Status IngestStream(
+      grpc::ServerContext*,
+      grpc::ServerReaderWriter<sglc::v1::IngestResponse, sglc::v1::IngestRequest>* stream) override {
+    sglc::v1::IngestRequest r;
+    while (stream->Read(&r)) {
+      if (r.key().seq() == reject_) return {grpc::StatusCode::INVALID_ARGUMENT, "scan is empty"};
+      sglc::v1::IngestResponse response;
+      response.set_scan_id(1000 + r.key().seq());
+      stream->Write(response);
+    }
+    return grpc::Status::OK;
+  }
+
+ private:
+  std::int64_t reject_;
+};
+
+// Runs `sglc ingest` over four frames (window 4) against the fakes; frame `corrupt` is a truncated .bin.
+t::RunResult ingestFour(std::int64_t reject, int corrupt) {
+  t::TempDir tmp;
+  const auto dir = tmp.path() / "seq";
+  std::filesystem::create_directories(dir / "velodyne");
+  for (int i = 0; i < 4; ++i) {
+    const auto path = (dir / "velodyne" / ("00000" + std::to_string(i) + ".bin")).string();
+    sglc::writeKittiBin(path, {{1.0f * i, 2, 3}}, {0.5f});
+    if (i == corrupt) std::filesystem::resize_file(path, 10);
+  }
+  AnsweringLoopClosure loop(reject);
+  AcceptingMapAdmin admin;
+  int port = 0;
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  builder.RegisterService(&loop);
+  builder.RegisterService(&admin);
+  const auto server = builder.BuildAndStart();
+  EXPECT_TRUE(server && port > 0);
+  auto r = t::run({t::cliBinary(), "ingest", "--server", "127.0.0.1:" + std::to_string(port), "--map", "m", "--robot",
+                   "r", "--no-progress", "--window", "4", dir.string()});
+  server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  return r;
+}
+
+}  // namespace
+
+// The count in "after N of M scans were stored" is the scans the server acknowledged: those sent before a scan
+// that cannot be read are answered first (it said 0 while two were stored).
+TEST(Cli, IngestFailureCountsTheScansActuallyStored) {
+  const auto unreadable = ingestFour(-1, 2);
+  EXPECT_EQ(unreadable.exit_code, 1) << unreadable.err;
+  EXPECT_NE(unreadable.err.find("000002.bin"), std::string::npos) << unreadable.err;
+  EXPECT_NE(unreadable.err.find("after 2 of 4 scans were stored"), std::string::npos) << unreadable.err;
+  const auto refused = ingestFour(1, -1);
+  EXPECT_EQ(refused.exit_code, 1) << refused.err;
+  EXPECT_NE(refused.err.find("INVALID_ARGUMENT"), std::string::npos) << refused.err;
+  EXPECT_NE(refused.err.find("after 1 of 4 scans were stored"), std::string::npos) << refused.err;
+}
