@@ -4,8 +4,38 @@
 #include <sstream>
 
 #include "rpc_error.hpp"
+#include "sglc/names.hpp"
 
 namespace sglc::server {
+
+namespace {
+
+int hexDigit(char c) {
+  if (c >= '0' && c <= '9') return c - '0';
+  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+  return -1;
+}
+
+// A map name as the token file writes it: "%XX" (two hex digits) is the byte 0xXX, so that any name can be
+// written ("%2C" a comma, "%23" a '#', "%20" a space, "%25" a '%', "%2A" a map named "*"); any other '%' stands
+// for itself, as in files written before escapes existed.
+std::string unescapeMap(const std::string& text) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const int hi = i + 2 < text.size() && text[i] == '%' ? hexDigit(text[i + 1]) : -1;
+    const int lo = hi >= 0 ? hexDigit(text[i + 2]) : -1;
+    if (lo >= 0) {
+      out += static_cast<char>(hi * 16 + lo);
+      i += 2;
+    } else {
+      out += text[i];
+    }
+  }
+  return out;
+}
+
+}  // namespace
 
 TokenTable TokenTable::load(const std::string& path) {
   TokenTable table;
@@ -17,22 +47,39 @@ TokenTable TokenTable::load(const std::string& path) {
   int no = 0;
   while (std::getline(in, line)) {
     ++no;
+    const std::string where = path + ":" + std::to_string(no);
     if (auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
     std::istringstream ss(line);
     std::string token, maps, extra;
     if (!(ss >> token)) continue;
-    if (!(ss >> maps) || (ss >> extra))
-      throw std::runtime_error(path + ":" + std::to_string(no) + ": expected 'TOKEN map1,map2' or 'TOKEN *'");
-    if (token.size() < 8)
-      throw std::runtime_error(path + ":" + std::to_string(no) + ": token shorter than 8 characters");
+    if (!(ss >> maps) || (ss >> extra)) throw std::runtime_error(where + ": expected 'TOKEN map1,map2' or 'TOKEN *'");
+    if (token.size() < 8) throw std::runtime_error(where + ": token shorter than 8 characters");
     auto& set = table.tokens_[token];
     std::istringstream ms(maps);
     std::string map;
-    while (std::getline(ms, map, ','))
-      if (!map.empty()) set.insert(map);
+    while (std::getline(ms, map, ',')) {
+      if (map.empty()) continue;
+      if (map == "*") {
+        set.insert(kAllMaps);
+        continue;
+      }
+      map = unescapeMap(map);
+      if (const auto why = nameError(map))
+        throw std::runtime_error(where + ": map name '" + maps.substr(0, 80) + "' " + *why);
+      set.insert(map);
+    }
   }
   if (table.tokens_.empty()) throw std::runtime_error(path + ": no tokens");
   return table;
+}
+
+TokenTable::Grant TokenTable::grantOf(const std::string& token) const {
+  auto t = tokens_.find(token);
+  if (t == tokens_.end()) throw RpcError(grpc::StatusCode::UNAUTHENTICATED, "unknown token");
+  Grant grant;
+  grant.all = t->second.count(kAllMaps) > 0;
+  grant.maps = &t->second;
+  return grant;
 }
 
 TokenTable::Grant TokenTable::authenticate(const grpc::ServerContextBase& ctx) const {
@@ -49,11 +96,7 @@ TokenTable::Grant TokenTable::authenticate(const grpc::ServerContextBase& ctx) c
   const std::string prefix = "Bearer ";
   if (value.rfind(prefix, 0) != 0)
     throw RpcError(grpc::StatusCode::UNAUTHENTICATED, "authorization metadata must be 'Bearer TOKEN'");
-  auto t = tokens_.find(value.substr(prefix.size()));
-  if (t == tokens_.end()) throw RpcError(grpc::StatusCode::UNAUTHENTICATED, "unknown token");
-  grant.all = t->second.count("*") > 0;
-  grant.maps = &t->second;
-  return grant;
+  return grantOf(value.substr(prefix.size()));
 }
 
 void TokenTable::require(const Grant& grant, const std::string& map) {

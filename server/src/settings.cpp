@@ -39,7 +39,9 @@ void addServer(Table<Settings>& t) {
   t.add(duration<Settings>(
       "server.stream_idle_timeout_s", [](auto& s) -> auto& { return s.streams.idle_timeout; }, 1000, closed(0.1, 86400),
       "close an ingest stream that sends nothing for this long (s)"));
-  t.add(field<Settings>(SGLC_KEY(tokens), {}, "bearer token file: 'TOKEN map1,map2' or 'TOKEN *' per line"));
+  t.add(field<Settings>(SGLC_KEY(tokens), {},
+                        "bearer token file: 'TOKEN map1,map2' or 'TOKEN *' per line ('#' comments; "
+                        "%XX in a map name is the byte XX: %2C ',', %23 '#', %20 ' ', %25 '%')"));
   t.add(field<Settings>(SGLC_KEY(tls_cert), {}, "PEM certificate chain (TLS, with tls_key)"));
   t.add(field<Settings>(SGLC_KEY(tls_key), {}, "PEM private key"));
   t.add(field<Settings>(SGLC_KEY(backup_dir), {},
