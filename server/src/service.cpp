@@ -382,9 +382,18 @@ grpc::Status MapAdminService::Backup(grpc::ServerContext* ctx, const v1::BackupR
     const auto dir = fs::path(state_.limits().backup_dir);
     std::error_code ec;
     fs::create_directories(dir, ec);
-    if (ec)
-      throw storage::StorageError(storage::StorageError::Code::kIo, "the server's backup directory cannot be created",
+    if (ec) {
+      using Code = storage::StorageError::Code;
+      // A read-only file system (or no permission) is UNAVAILABLE, as for the database itself; a full one
+      // RESOURCE_EXHAUSTED.
+      const Code code = ec == std::errc::read_only_file_system || ec == std::errc::permission_denied ||
+                                ec == std::errc::operation_not_permitted
+                            ? Code::kReadOnly
+                        : ec == std::errc::no_space_on_device ? Code::kFull
+                                                              : Code::kIo;
+      throw storage::StorageError(code, "the server's backup directory cannot be created",
                                   dir.string() + ": " + ec.message());
+    }
     const auto dest = (dir / name).string();
     state_.store().backup(dest);
     resp->set_path(dest);

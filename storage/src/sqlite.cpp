@@ -27,10 +27,24 @@ StorageError::Code classify(int rc) {
 
 namespace {
 
-// A read-only file system shows up as an I/O error (EROFS) rather than SQLITE_READONLY.
+// The errno of the last failed system call on the database file or, when that has none, on its journal or WAL
+// file. A COMMIT that fails writing the WAL leaves sqlite3_system_errno at 0; the WAL file keeps the errno.
+int lastFileErrno(sqlite3* db) {
+  int e = 0;
+  sqlite3_file_control(db, "main", SQLITE_FCNTL_LAST_ERRNO, &e);
+  if (e != 0) return e;
+  sqlite3_file* journal = nullptr;
+  if (sqlite3_file_control(db, "main", SQLITE_FCNTL_JOURNAL_POINTER, &journal) == SQLITE_OK && journal &&
+      journal->pMethods && journal->pMethods->xFileControl)
+    journal->pMethods->xFileControl(journal, SQLITE_FCNTL_LAST_ERRNO, &e);
+  return e;
+}
+
+// A read-only file system shows up as an I/O error (EROFS) rather than SQLITE_READONLY, as a full disk may.
 StorageError::Code classify(sqlite3* db, int rc) {
   if (db && (rc & 0xFF) == SQLITE_IOERR) {
-    const int e = sqlite3_system_errno(db);
+    int e = sqlite3_system_errno(db);
+    if (e == 0) e = lastFileErrno(db);
     if (e == EROFS || e == EACCES || e == EPERM) return StorageError::Code::kReadOnly;
     if (e == ENOSPC || e == EDQUOT) return StorageError::Code::kFull;
   }

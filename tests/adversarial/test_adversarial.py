@@ -30,7 +30,8 @@ import adv_harness as h  # noqa: E402
 
 MODULES = ["probe_a_malformed", "probe_b_transforms", "probe_c_streams", "probe_d_corrupt_stream",
            "probe_e_random_bytes", "probe_f_idempotent", "probe_g_second_server", "probe_h_small",
-           "probe_i_auth", "probe_j_memory", "probe_k_crash", "probe_l_sigterm", "probe_m_metrics", "probe_o_files"]
+           "probe_i_auth", "probe_j_memory", "probe_k_crash", "probe_l_sigterm", "probe_m_metrics",
+           "probe_n_read_only", "probe_o_files"]
 
 SQL_WORDS = ("INSERT", "SELECT", "UNIQUE constraint", "sqlite")
 
