@@ -7,6 +7,14 @@
 // entries alike): a reader that has seen id n has seen every committed id below it. Each write appends an entry
 // to the journal (sglc_changes) and notifies; a process applies other processes' entries to its catalogue and
 // indexes when notified (or polled), and before each of its own writes, under the lock.
+//
+// A process that stops inside a write (SIGSTOP, a paused container, a VM stall: its connection stays up) would
+// hold the lock, and so stop every process's writes, for as long as it is stopped. The write transaction
+// therefore sets its own idle_in_transaction_session_timeout (StoreOptions::stall_timeout_ms): the process
+// does only in-memory work between a write's statements, so a transaction idle that long belongs to a stopped
+// process, and the server ends its session, which frees the lock. When the process resumes, its next statement
+// fails with kUnavailable (nothing of the write was committed, nothing applied to the catalogue, which changes
+// only after COMMIT), the caller retries (ingest is idempotent) and the next write reconnects.
 #pragma once
 
 #include <atomic>
@@ -54,7 +62,9 @@ struct Core {
 };
 
 // A write: holds write_mutex and a transaction on the writer that holds the database-wide write lock, and has
-// applied every other process's committed change. Commit with commit(); destruction rolls back.
+// applied every other process's committed change. Commit with commit(); destruction rolls back. The server
+// ends the transaction when it sends nothing for stall_timeout_ms (above): every statement then fails with
+// kUnavailable.
 class WriteTx {
  public:
   explicit WriteTx(Core& core);

@@ -174,7 +174,12 @@ const Conn& reconnected(Core& core) {
 }
 
 WriteTx::WriteTx(Core& core) : core_(core), write_(core.write_mutex), tx_(reconnected(core)) {
-  core_.writer.query("SELECT pg_advisory_xact_lock($1, $2)", {kLockSpace, kWriteLock});
+  // The transaction's own idle limit (set_config(..., true) is SET LOCAL), in the statement that takes the lock:
+  // from here on, a process that stops between statements (frozen) holds the lock at most stall_timeout_ms
+  // before the server ends its session. The process does only in-memory work between a write's statements.
+  core_.writer.query(
+      "SELECT set_config('idle_in_transaction_session_timeout', $3, true), pg_advisory_xact_lock($1, $2)",
+      {kLockSpace, kWriteLock, std::to_string(std::max(0, core_.options.stall_timeout_ms))});
   journal::catchUp(core_);
 }
 

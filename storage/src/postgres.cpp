@@ -35,8 +35,10 @@ Code classify(const char* sqlstate) {
   if (s == "53100") return Code::kFull;                      // disk_full
   if (s == "25006" || s == "42501") return Code::kReadOnly;  // read-only transaction, insufficient privilege
   if (s == "55P03" || s == "40001" || s == "40P01" || s == "57014") return Code::kBusy;  // lock/statement timeout
-  if (s.rfind("08", 0) == 0 || s.rfind("57P", 0) == 0 || s.empty()) return Code::kUnavailable;  // connection
-  if (s == "XX001" || s == "XX002" || s == "42P01" || s == "42703") return Code::kCorrupt;      // damage, missing table
+  // The connection is gone: lost, or ended by the server (57P01 terminated, 57P05 idle session, 25P03 a
+  // transaction idle past idle_in_transaction_session_timeout: a stalled writer). A retry reconnects.
+  if (s.rfind("08", 0) == 0 || s.rfind("57P", 0) == 0 || s == "25P03" || s.empty()) return Code::kUnavailable;
+  if (s == "XX001" || s == "XX002" || s == "42P01" || s == "42703") return Code::kCorrupt;  // damage, missing table
   if (s == "22021") return Code::kInvalidArgument;  // a name that is not valid UTF-8 (text columns hold UTF-8)
   return Code::kIo;
 }

@@ -64,6 +64,10 @@ struct StoreOptions {
   enum class Sync { kOff, kNormal, kFull };
   Sync sync = Sync::kFull;  // SQLite synchronous mode: kFull survives power loss, kNormal only process crashes
   int busy_timeout_ms = 5000;
+  // PostgreSQL: a write transaction that sends nothing for this long (its process frozen: SIGSTOP, a paused
+  // container, a VM stall) is ended by the server, which frees the write lock for the other replicas; the
+  // frozen process finds its transaction gone when it resumes (kUnavailable) and reconnects. 0: never.
+  int stall_timeout_ms = 5000;
   double cache_mb = 256;       // fingerprints kept in memory (least recently used evicted)
   bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
   double max_db_mb = 0;        // quota: writes beyond it fail with kFull (0: unlimited)
