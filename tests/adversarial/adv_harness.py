@@ -148,13 +148,13 @@ def channel(addr):
 class Server:
     """One sglc-server process on a free loopback port with its own database and log."""
 
-    def __init__(self, db, extra=(), token=None, port=None, wait=True, sync_normal=True):
+    def __init__(self, db, extra=(), token=None, port=None, wait=True, sync_normal=True, log_path=None):
         self.db = db
         self.extra = list(extra)
         self.token = token
         self.port = port or free_port()
         self.addr = f"127.0.0.1:{self.port}"
-        self.log_path = db + f".{self.port}.log"
+        self.log_path = log_path or db + f".{self.port}.log"  # a PostgreSQL URL needs one given
         cmd = [SERVER, "--db", db, "--listen", self.addr, *(["--sync-normal"] if sync_normal else []), *self.extra]
         for attempt in range(3):
             wait_for_binary()
