@@ -112,19 +112,29 @@ class Follower {
 };
 
 // The pose graphs this process solves: a session-level advisory lock per map on a connection of its own, so
-// that a process that dies (or loses its connection) frees its maps for another to take over.
+// that a process that dies (or loses its connection) frees its maps for another to take over. So does a
+// process that stops (frozen): the connection has idle_session_timeout = stall_timeout_ms, and a thread of
+// this process sends a statement every third of it while the process runs.
 class GraphOwner {
  public:
-  explicit GraphOwner(std::string url) : url_(std::move(url)) {}
+  GraphOwner(std::string url, int stall_timeout_ms);
+  ~GraphOwner();
+  GraphOwner(const GraphOwner&) = delete;
+  GraphOwner& operator=(const GraphOwner&) = delete;
   // Whether this process holds map_id's lock (checked live: a lost connection loses every lock), taking it
   // when free (MapStore::GraphClaim).
   MapStore::GraphClaim claim(std::int64_t map_id);
 
  private:
+  void keepAlive();
   std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;
   const std::string url_;
+  const int stall_ms_;
   std::unique_ptr<Conn> conn_;
   std::set<std::int64_t> held_;
+  std::thread keeper_;
 };
 
 }  // namespace sglc::storage::pg

@@ -191,6 +191,32 @@ std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref
   return id;
 }
 
+GraphOwner::GraphOwner(std::string url, int stall_timeout_ms) : url_(std::move(url)), stall_ms_(stall_timeout_ms) {
+  if (stall_ms_ > 0) keeper_ = std::thread([this] { keepAlive(); });
+}
+
+GraphOwner::~GraphOwner() {
+  {
+    std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (keeper_.joinable()) keeper_.join();
+}
+
+void GraphOwner::keepAlive() {
+  std::unique_lock lock(mutex_);
+  while (!stop_) {
+    wake_.wait_for(lock, std::chrono::milliseconds(std::max(50, stall_ms_ / 3)));
+    if (stop_ || !conn_) continue;
+    try {
+      conn_->exec("SELECT 1");
+    } catch (const StorageError&) {
+      // Lost (or ended): the next claim finds out and reconnects.
+    }
+  }
+}
+
 MapStore::GraphClaim GraphOwner::claim(std::int64_t map_id) {
   using Claim = MapStore::GraphClaim;
   // One 64-bit key per map, apart from the store's (int, int) keys: the two kinds never conflict.
@@ -205,7 +231,9 @@ MapStore::GraphClaim GraphOwner::claim(std::int64_t map_id) {
         conn_.reset();
       }
     }
-    if (!conn_) conn_ = std::make_unique<Conn>(url_);
+    if (!conn_)
+      conn_ = std::make_unique<Conn>(
+          url_, stall_ms_ > 0 ? "SET idle_session_timeout = " + std::to_string(stall_ms_) : std::string());
     if (held_.count(map_id)) return Claim::kHeld;
     if (!conn_->query("SELECT pg_try_advisory_lock($1)", {kGraphKeys + map_id}).boolean(0, 0)) return Claim::kElsewhere;
     held_.insert(map_id);

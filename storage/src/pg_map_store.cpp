@@ -112,7 +112,7 @@ class PgMapStore final : public MapStore {
 
  private:
   Core core_;
-  GraphOwner owner_{core_.options.path};
+  GraphOwner owner_{core_.options.path, core_.options.stall_timeout_ms};
   std::unique_ptr<Follower> follower_;
 };
 

@@ -21,8 +21,8 @@ Table<StoreOptions> makeTable() {
       "wait this long for a lock another connection holds (ms)"));
   t.add(field<StoreOptions>(
       "stall_timeout_ms", [](auto& o) -> auto& { return o.stall_timeout_ms; }, atLeast(0),
-      "PostgreSQL: a replica idle this long inside a write transaction (frozen, paused) loses it and the write "
-      "lock, freeing the other replicas' writes (ms; 0: never)"));
+      "PostgreSQL: a replica stopped this long (frozen, paused) inside a write loses it and the write lock, and "
+      "loses its maps' pose graphs to the other replicas (ms; 0: never)"));
   t.add(field<StoreOptions>(
       "snapshot_index", [](auto& o) -> auto& { return o.snapshot_index; }, {},
       "save the FAISS indexes beside the database on close, load them on open"));

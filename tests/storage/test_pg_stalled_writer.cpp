@@ -3,6 +3,10 @@
 // transaction (StoreOptions::stall_timeout_ms): the other replicas write again, the stalled one finds its
 // transaction gone when it resumes (kUnavailable: worth a retry, nothing of it stored) and its next write
 // reconnects. The stall is simulated in-process: a write transaction on a store's core that sends nothing.
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <chrono>
 #include <optional>
 #include <thread>
@@ -75,6 +79,58 @@ TEST_F(PgStalledWriter, AWriterThatKeepsSendingKeepsItsTransaction) {
     tx.conn().query("SELECT pg_sleep(0.05)");
   }
   EXPECT_NO_THROW(tx.commit(0, [] {}));
+}
+
+// A map's pose-graph lock lives on a session with idle_session_timeout = stall_timeout_ms (a frozen holder loses
+// it): while the process runs, its keep-alive holds the session open, so the lock stays put however long the
+// holder goes without claiming.
+TEST_F(PgStalledWriter, AGraphHolderThatRunsKeepsItsMapsPastTheStallTimeout) {
+  using Claim = MapStore::GraphClaim;
+  auto o = backend_.options();
+  o.stall_timeout_ms = 300;
+  auto a = MapStore::open(o);
+  auto b = MapStore::open(o);
+  const auto id = a->createMap("m", 8).id;
+  EXPECT_EQ(a->claimGraph(id), Claim::kTaken);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  EXPECT_EQ(b->claimGraph(id), Claim::kElsewhere);
+  EXPECT_EQ(a->claimGraph(id), Claim::kHeld);  // not lost and taken again
+}
+
+// ... and a holder whose process is frozen (SIGSTOP: its connection stays up) loses them within about the
+// timeout: another process takes the map over.
+TEST_F(PgStalledWriter, AFrozenGraphHolderLosesItsMaps) {
+  using Claim = MapStore::GraphClaim;
+  auto o = backend_.options();
+  o.stall_timeout_ms = 500;
+  const auto id = MapStore::open(o)->createMap("m", 8).id;
+  int ready[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  const pid_t child = ::fork();  // no thread runs here yet: the child opens its own store
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    auto holder = MapStore::open(o);
+    const char ok = holder->claimGraph(id) == Claim::kTaken ? 'y' : 'n';
+    if (::write(ready[1], &ok, 1) != 1) ::_exit(1);
+    for (;;) ::pause();
+  }
+  char ok = 0;
+  ASSERT_EQ(::read(ready[0], &ok, 1), 1);
+  ASSERT_EQ(ok, 'y');
+  auto other = MapStore::open(o);
+  EXPECT_EQ(other->claimGraph(id), Claim::kElsewhere);
+  ::kill(child, SIGSTOP);
+  const auto t0 = Clock::now();
+  bool taken = false;
+  while (!taken && Clock::now() - t0 < std::chrono::seconds(30)) {
+    taken = other->claimGraph(id) == Claim::kTaken;
+    if (!taken) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  const auto waited = std::chrono::duration<double>(Clock::now() - t0).count();
+  ::kill(child, SIGKILL);
+  ::waitpid(child, nullptr, 0);
+  EXPECT_TRUE(taken) << "a frozen holder kept the map's pose graph for 30 s";
+  EXPECT_LT(waited, 10.0);
 }
 
 }  // namespace

@@ -66,7 +66,8 @@ struct StoreOptions {
   int busy_timeout_ms = 5000;
   // PostgreSQL: a write transaction that sends nothing for this long (its process frozen: SIGSTOP, a paused
   // container, a VM stall) is ended by the server, which frees the write lock for the other replicas; the
-  // frozen process finds its transaction gone when it resumes (kUnavailable) and reconnects. 0: never.
+  // frozen process finds its transaction gone when it resumes (kUnavailable) and reconnects. Its pose-graph
+  // locks (claimGraph) go the same way after this long. 0: never.
   int stall_timeout_ms = 5000;
   double cache_mb = 256;       // fingerprints kept in memory (least recently used evicted)
   bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
