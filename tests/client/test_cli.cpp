@@ -172,6 +172,14 @@ class AcceptingMapAdmin final : public sglc::v1::MapAdmin::Service {
   }
 };
 
+// A server on a free loopback port with the fake services given; port 0 when it could not start.
+std::unique_ptr<grpc::Server> serveFakes(std::initializer_list<grpc::Service*> services, int& port) {
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  for (auto* service : services) builder.RegisterService(service);
+  return builder.BuildAndStart();
+}
+
 }  // namespace
 
 // A stream that breaks mid-run is reopened and only the unanswered scans are sent again, each once: every frame
@@ -189,11 +197,7 @@ TEST(Cli, IngestResendsEachUnansweredScanOnceAfterTheStreamBreaks) {
   BreakingLoopClosure loop;
   AcceptingMapAdmin admin;
   int port = 0;
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
-  builder.RegisterService(&loop);
-  builder.RegisterService(&admin);
-  const auto server = builder.BuildAndStart();
+  const auto server = serveFakes({&loop, &admin}, port);
   ASSERT_TRUE(server && port > 0);
   const auto r = t::run({t::cliBinary(), "ingest", "--server", "127.0.0.1:" + std::to_string(port), "--map", "m",
                          "--robot", "r", "--json", "--no-progress", "--window", "4", dir.string()});
@@ -251,11 +255,7 @@ t::RunResult ingestFour(std::int64_t reject, int corrupt) {
   AnsweringLoopClosure loop(reject);
   AcceptingMapAdmin admin;
   int port = 0;
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
-  builder.RegisterService(&loop);
-  builder.RegisterService(&admin);
-  const auto server = builder.BuildAndStart();
+  const auto server = serveFakes({&loop, &admin}, port);
   EXPECT_TRUE(server && port > 0);
   auto r = t::run({t::cliBinary(), "ingest", "--server", "127.0.0.1:" + std::to_string(port), "--map", "m", "--robot",
                    "r", "--no-progress", "--window", "4", dir.string()});

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <fstream>
 
+#include "io_files.hpp"
 #include "sglc/io.hpp"
 #include "sglc/npy.hpp"
 #include "sglc/pcl_cloud.hpp"
@@ -16,24 +17,9 @@
 namespace sglc {
 namespace {
 
+using test::npy;
 using test::TempDir;
-
-void writeBytes(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  ASSERT_TRUE(out.good());
-}
-
-// An .npy file with the given header dictionary and raw data (version 1).
-std::string npy(const std::string& dict, const std::string& data) {
-  std::string header = dict;
-  header.append((64 - (10 + header.size() + 1) % 64) % 64, ' ');
-  header += '\n';
-  std::string out("\x93NUMPY\x01\x00", 8);
-  out += static_cast<char>(header.size() & 0xff);
-  out += static_cast<char>(header.size() >> 8);
-  return out + header + data;
-}
+using test::writeBytes;
 
 template <typename T>
 std::string bytesOf(std::initializer_list<T> values, bool big_endian = false) {

@@ -13,6 +13,7 @@
 #include <fstream>
 #include <future>
 
+#include "io_files.hpp"
 #include "sglc/io.hpp"
 #include "sglc/npy.hpp"
 #include "sglc/scan_file.hpp"
@@ -23,12 +24,7 @@ namespace sglc {
 namespace {
 
 using test::TempDir;
-
-void writeBytes(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  ASSERT_TRUE(out.good());
-}
+using test::writeBytes;
 
 // A file of `size` bytes that starts with `head`; the rest is a hole (no disk space, reads as zeros).
 std::string sparseFile(const std::string& path, const std::string& head, std::uint64_t size) {
@@ -58,13 +54,7 @@ std::string errorWithin30s(const std::string& fifo, const std::function<void()>&
 }
 
 std::string npyHeader(const std::string& shape, const std::string& descr = "<f4") {
-  std::string dict = "{'descr': '" + descr + "', 'fortran_order': False, 'shape': " + shape + ", }";
-  dict.append((64 - (10 + dict.size() + 1) % 64) % 64, ' ');
-  dict += '\n';
-  std::string out("\x93NUMPY\x01\x00", 8);
-  out += static_cast<char>(dict.size() & 0xff);
-  out += static_cast<char>(dict.size() >> 8);
-  return out + dict;
+  return test::npy("{'descr': '" + descr + "', 'fortran_order': False, 'shape': " + shape + ", }", "");
 }
 
 bool has(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
