@@ -103,8 +103,9 @@ TEST(ScanLimits, SparseGiantsAreRefusedFromTheirSizeOrHeader) {
       {sparseFile(dir.file("g.pcd"), pcd, giant), "bytes, larger than"},
       {sparseFile(dir.file("g.ply"), ply, giant), "bytes, larger than"},
   };
-  for (const auto& [path, reason] : giants) {
-    const std::string msg = errorOf([&] { readScan(path, ""); });
+  for (const auto& giant_file : giants) {
+    const auto& [path, reason] = giant_file;
+    const std::string msg = errorOf([&giant_file] { readScan(giant_file.first, ""); });
     EXPECT_TRUE(has(msg, path + ": ") && has(msg, reason)) << msg;
   }
 }
