@@ -8,35 +8,6 @@
 
 namespace sglc::server {
 
-namespace {
-
-int hexDigit(char c) {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  return -1;
-}
-
-// A map name as the token file writes it: "%XX" (two hex digits) is the byte 0xXX, so that any name can be
-// written ("%2C" a comma, "%23" a '#', "%20" a space, "%25" a '%', "%2A" a map named "*"); any other '%' stands
-// for itself, as in files written before escapes existed.
-std::string unescapeMap(const std::string& text) {
-  std::string out;
-  for (std::size_t i = 0; i < text.size(); ++i) {
-    const int hi = i + 2 < text.size() && text[i] == '%' ? hexDigit(text[i + 1]) : -1;
-    const int lo = hi >= 0 ? hexDigit(text[i + 2]) : -1;
-    if (lo >= 0) {
-      out += static_cast<char>(hi * 16 + lo);
-      i += 2;
-    } else {
-      out += text[i];
-    }
-  }
-  return out;
-}
-
-}  // namespace
-
 TokenTable TokenTable::load(const std::string& path) {
   TokenTable table;
   if (path.empty()) return table;
@@ -63,7 +34,7 @@ TokenTable TokenTable::load(const std::string& path) {
         set.insert(kAllMaps);
         continue;
       }
-      map = unescapeMap(map);
+      map = percentDecoded(map);  // "%2C" a comma, "%23" a '#', "%2A" a map named "*"
       if (const auto why = nameError(map))
         throw std::runtime_error(where + ": map name '" + maps.substr(0, 80) + "' " + *why);
       set.insert(map);

@@ -4,9 +4,10 @@
 #include <poll.h>
 
 #include <array>
-#include <cctype>
 #include <cstdio>
 #include <cstring>
+
+#include "sglc/names.hpp"
 
 namespace sglc::storage::pg {
 namespace {
@@ -56,20 +57,6 @@ void onNotice(void* ending, const PGresult* notice) {
 constexpr const char* kServerSide =
     "SET tcp_keepalives_idle = 10; SET tcp_keepalives_interval = 5; SET tcp_keepalives_count = 3; "
     "SET tcp_user_timeout = 30000";
-
-std::string percentDecoded(const std::string& text) {
-  std::string out;
-  for (std::size_t i = 0; i < text.size(); ++i) {
-    if (text[i] == '%' && i + 2 < text.size() && std::isxdigit(static_cast<unsigned char>(text[i + 1])) &&
-        std::isxdigit(static_cast<unsigned char>(text[i + 2]))) {
-      out += static_cast<char>(std::stoi(text.substr(i + 1, 2), nullptr, 16));
-      i += 2;
-    } else {
-      out += text[i];
-    }
-  }
-  return out;
-}
 
 }  // namespace
 

@@ -60,5 +60,14 @@ TEST(Names, EmptyLongAndControlCharactersAreRefusedUtf8IsNot) {
     EXPECT_EQ(nameError(std::string("a") + c + "b"), "has a control character") << int(c);
 }
 
+TEST(Names, PercentEscapesAreDecodedAndAStrayPercentStandsForItself) {
+  EXPECT_EQ(percentDecoded("a%2Cb%23c%20d%2a"), "a,b#c d*");
+  EXPECT_EQ(percentDecoded("100%25"), "100%");
+  EXPECT_EQ(percentDecoded("50% off %zz %4"), "50% off %zz %4") << "not two hex digits: literal";
+  EXPECT_EQ(percentDecoded("%00x"), std::string("\0x", 2));
+  EXPECT_EQ(percentDecoded("%"), "%");
+  EXPECT_EQ(percentDecoded(""), "");
+}
+
 }  // namespace
 }  // namespace sglc

@@ -13,4 +13,8 @@ inline constexpr std::size_t kMaxNameBytes = 256;
 // character"), or nullopt. Any other bytes are allowed (UTF-8 names are common); names are compared as bytes.
 std::optional<std::string> nameError(const std::string& name);
 
+// Names as text files and URLs write them: "%XX" (two hex digits) is the byte 0xXX; any other '%' stands for
+// itself. (The token file's map names; a PostgreSQL URL's parameter names, which libpq decodes the same way.)
+std::string percentDecoded(const std::string& text);
+
 }  // namespace sglc
