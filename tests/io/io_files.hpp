@@ -1,10 +1,14 @@
-// Files the io tests write byte for byte: raw bytes, and NumPy .npy files (version 1) with any header.
+// Files the io tests write byte for byte (raw bytes, NumPy .npy files of version 1 with any header), and the
+// error a reader gives.
 #pragma once
 
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 #include <string>
+
+#include "sglc/types.hpp"
 
 namespace sglc::test {
 
@@ -23,6 +27,16 @@ inline std::string npy(const std::string& dict, const std::string& data) {
   out += static_cast<char>(header.size() & 0xff);
   out += static_cast<char>(header.size() >> 8);
   return out + header + data;
+}
+
+// The message of the InputError that f throws, or "(no InputError)" (which no expected message contains).
+inline std::string errorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(no InputError)";
 }
 
 }  // namespace sglc::test

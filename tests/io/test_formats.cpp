@@ -17,6 +17,7 @@
 namespace sglc {
 namespace {
 
+using test::errorOf;
 using test::npy;
 using test::TempDir;
 using test::writeBytes;
@@ -31,16 +32,6 @@ std::string bytesOf(std::initializer_list<T> values, bool big_endian = false) {
     s.append(b, sizeof(T));
   }
   return s;
-}
-
-std::string errorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  ADD_FAILURE() << "no InputError";
-  return "";
 }
 
 Points samplePoints() { return {Vec3f(1.5f, -2.25f, 0.125f), Vec3f(-3, 4, 5), Vec3f(100.5f, 0, -1.75f)}; }

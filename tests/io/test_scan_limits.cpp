@@ -23,6 +23,7 @@
 namespace sglc {
 namespace {
 
+using test::errorOf;
 using test::TempDir;
 using test::writeBytes;
 
@@ -31,15 +32,6 @@ std::string sparseFile(const std::string& path, const std::string& head, std::ui
   writeBytes(path, head);
   std::filesystem::resize_file(path, size);
   return path;
-}
-
-std::string errorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(no InputError)";
 }
 
 // f's InputError, or a failure (not a hang) when f is still blocked on the FIFO at `fifo` after 30 s: a writer
