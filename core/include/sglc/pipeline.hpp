@@ -4,6 +4,7 @@
 #pragma once
 
 #include "sglc/config.hpp"
+#include "sglc/evidence.hpp"
 #include "sglc/fingerprint.hpp"
 #include "sglc/labels.hpp"
 
@@ -14,6 +15,10 @@ namespace sglc {
 
 struct LoopResult {
   bool is_loop = false;
+  // The loop model's probability that the pair is a true loop at pose T (sglc/loop_model.hpp): a loop when it
+  // reaches verify.min_probability. 0 when no pose hypothesis was found.
+  double probability = 0.0;
+  Evidence evidence;  // what the probability was computed from
   // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support x proximity
   // (exp(-|t| / verify.score_distance_m), so the nearer of two revisits ranks first).
   double score = 0.0;
