@@ -1,7 +1,6 @@
 #include "sglc/closing/loop_finder.hpp"
 
 #include "sglc/elapsed.hpp"
-#include "sglc/view_context.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -118,29 +117,23 @@ std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query,
   if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
   applyScope(opt, who, &req);  // checked even when the candidates are listed
   if (!opt.verify_scan_ids.empty()) return listed(query, who.map, opt.verify_scan_ids);
-  const auto& c = pipeline_.config();
-  if (c.view_search.enabled && isNarrowView(query, c.verify.background_min_view_deg))
-    return viewRanked(query, std::move(req), exec);
-  return store_.search(req);
+  return viewRanked(query, std::move(req), exec);
 }
 
 std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query, storage::SearchRequest req,
                                                        const Execution& exec) const {
-  const auto& config = pipeline_.config().view_search;
-  const auto mine_context = viewContext(query.background, query.background_cell, config, query.labeller_structure);
-  // Without structure in view every similarity is 0, and the order would be the descriptor's: spare the reads.
-  if (!mine_context.seesStructure()) return store_.search(req);
-  const ViewMatcher mine(mine_context);
+  // Full views, and narrow ones without structure in view: the descriptor's order (spare the reads).
+  const auto ranking = pipeline_.viewRanking(query);
+  if (!ranking.active()) return store_.search(req);
   const auto k = static_cast<std::size_t>(req.k);
-  req.k = std::max(req.k, config.max_scans);
+  req.k = std::max(req.k, pipeline_.config().view_search.max_scans);
   auto hits = store_.search(req);
   std::vector<double> similarity(hits.size(), -1.0);  // -1: deleted meanwhile
   exec.forEach(hits.size(), [&](std::size_t i) {
     if (i % 64 == 0) exec.checkAlive();
     const auto fp = store_.fingerprint(hits[i].scan_id);
     if (!fp) return;
-    similarity[i] =
-        mine.match(viewContext(fp->background, fp->background_cell, config, fp->labeller_structure)).similarity;
+    similarity[i] = ranking.similarity(*fp);
   });
   std::vector<std::size_t> order(hits.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
@@ -184,10 +177,7 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   // Candidates are verified independently (at once where exec allows) and kept in search order. Loops from the
   // background alone cost more to find: only the first candidates of the search may give one; more of a narrow
   // view's, which its view context ranks and whose search is narrower.
-  const auto& c = pipeline_.config();
-  const bool narrow = c.view_search.enabled && isNarrowView(query, c.verify.background_min_view_deg);
-  const auto background =
-      static_cast<std::size_t>(narrow ? c.view_search.background_candidates : c.verify.background_candidates);
+  const auto background = pipeline_.backgroundCandidates(query);
   std::vector<std::optional<Verified>> verified(hits.size());
   exec.forEach(hits.size(), [&](std::size_t i) {
     exec.checkAlive();

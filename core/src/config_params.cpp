@@ -149,7 +149,6 @@ void addMatching(Table<Config>& t) {
                       "consensus candidates per node of the smaller graph"));
   t.add(field<Config>(SGLC_KEY(match.consensus_max_hypotheses), closed(1, 1e7),
                       "agreeing consensus triples examined at most (flat ones count)"));
-  t.add(field<Config>(SGLC_KEY(match.consensus_t_g), closed(0, 1), "graph similarity that consensus matches need"));
   t.add(field<Config>(SGLC_KEY(ransac.inlier_threshold), above(0), "node-centre residual of an inlier (m)"));
   t.add(field<Config>(SGLC_KEY(ransac.max_iterations), closed(1, 1e6), "hypotheses (all triples when fewer)"));
   t.add(field<Config>(SGLC_KEY(ransac.seed), {}, "random seed: results never change run to run"));
@@ -158,48 +157,21 @@ void addMatching(Table<Config>& t) {
 }
 
 void addVerification(Table<Config>& t) {
-  t.add(field<Config>(SGLC_KEY(verify.t_g), closed(0, 1), "graph similarity threshold exp(-mean inlier residual)"));
-  t.add(field<Config>(SGLC_KEY(verify.t_b), closed(0, 1), "background agreement threshold"));
+  t.add(field<Config>(SGLC_KEY(verify.min_probability), closed(0, 1),
+                      "a pair is a loop when the loop model's probability reaches this"));
+  t.add(field<Config>(SGLC_KEY(verify.model), {}, "loop model file (tools/calibrate); empty: the built-in model"));
   t.add(field<Config>(SGLC_KEY(verify.max_translation), finite(),
-                      "loops farther apart are rejected (m; <= 0: no limit)"));
-  t.add(field<Config>(SGLC_KEY(verify.score_distance_m), finite(),
-                      "score x exp(-|t| / this): nearer revisits rank first (m; <= 0: off)"));
-  t.add(field<Config>(SGLC_KEY(verify.bev_cell_m), above(0), "background agreement grid cell (m)"));
-  t.add(field<Config>(SGLC_KEY(verify.bev_radius_m), above(0), "background agreement grid half-size (m)"));
-  t.add(field<Config>(SGLC_KEY(verify.confirm_below_inliers), atLeast(0),
-                      "loops with fewer node inliers need the planes to confirm them (0: never)"));
-  t.add(field<Config>(SGLC_KEY(verify.confirm_min_fitness), closed(0, 1), "confirming planes: share explained"));
-  t.add(field<Config>(SGLC_KEY(verify.confirm_max_rmse_m), above(0), "confirming planes: largest RMSE (m)"));
-  t.add(field<Config>(SGLC_KEY(verify.confirm_min_constraint), atLeast(0),
-                      "confirming planes: smallest horizontal constraint (0: any)"));
-  t.add(field<Config>(SGLC_KEY(verify.align_min_background), closed(0, 1),
-                      "plane alignment: least background agreement at the coarse pose"));
-  t.add(field<Config>(SGLC_KEY(verify.align_max_shift_m), finite(),
-                      "plane alignment: largest move from the coarse pose (m; <= 0 disables)"));
-  t.add(field<Config>(SGLC_KEY(verify.align_max_turn_deg), closed(0, 180),
-                      "plane alignment: largest turn from the coarse pose (deg)"));
-  t.add(field<Config>(SGLC_KEY(verify.align_node_gate_m), above(0),
-                      "plane alignment: node inliers must stay this close (m)"));
+                      "reject loops whose translation exceeds this (m); <= 0 disables"));
+  t.add(field<Config>(SGLC_KEY(verify.fit_max_shift_m), finite(),
+                      "the plane fit of a pose hypothesis may move it at most this far (m); <= 0: no fit"));
+  t.add(field<Config>(SGLC_KEY(verify.fit_max_turn_deg), closed(0, 180),
+                      "the plane fit of a pose hypothesis may turn it at most this much (deg)"));
   t.add(field<Config>(SGLC_KEY(verify.background_max_nodes), closed(0, 2000),
-                      "background-only loops: only when a scan has at most this many nodes (0: never)"));
+                      "background hypotheses for scans with at most this many landmarks (0: never)"));
   t.add(field<Config>(SGLC_KEY(verify.background_candidates), closed(0, 200),
-                      "background-only loops: tried on this many candidates per query"));
-  t.add(field<Config>(SGLC_KEY(verify.background_min_overlap), closed(0, 1),
-                      "background-only loops: least band plane overlap"));
-  t.add(
-      field<Config>(SGLC_KEY(verify.background_max_rmse_m), above(0), "background-only loops: largest plane RMSE (m)"));
-  t.add(field<Config>(SGLC_KEY(verify.background_min_constraint), atLeast(0),
-                      "background-only loops: least horizontal constraint of the planes"));
-  t.add(field<Config>(SGLC_KEY(verify.background_min_agreement), closed(0, 1),
-                      "background-only loops: least background agreement"));
-  t.add(field<Config>(SGLC_KEY(verify.background_min_overlay), closed(0, 1),
-                      "background-only loops: least agreement of an overlay before its plane fit"));
+                      "a query's first candidates that may get background hypotheses"));
   t.add(field<Config>(SGLC_KEY(verify.background_min_view_deg), closed(0, 360),
-                      "a scan that saw less of the horizon is a narrow view (view_search) (deg)"));
-  t.add(field<Config>(SGLC_KEY(verify.background_pin_margin), closed(0, 1),
-                      "background-only loops: least agreement lost 2 and 4 m along a corridor (0: off)"));
-  t.rule({"verify.bev_radius_m", "verify.bev_cell_m"}, "at most 2000 cells apart",
-         [](const Config& c) { return c.verify.bev_radius_m / c.verify.bev_cell_m <= 2000; });
+                      "a scan that saw less of the horizon is a narrow view (deg)"));
 }
 
 void addFingerprint(Table<Config>& t) {
@@ -259,26 +231,16 @@ void addRefinement(Table<Config>& t) {
   t.add(
       field<Config>(SGLC_KEY(bev_search.min_correspondences), atLeast(3), "BEV search: plane pairs an overlay needs"));
   t.add(field<Config>(SGLC_KEY(view_search.enabled), {},
-                      "narrow views: candidates ranked by the view context, background loops at its heading"));
+                      "narrow views: candidates ranked by the view context, overlays at its heading"));
   t.add(field<Config>(SGLC_KEY(view_search.rings), closed(2, 200), "view context: rings"));
   t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100),
                       "view context and view agreement: structure used (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
                       "view context: scans a narrow query is compared with (nearest by descriptor)"));
   t.add(field<Config>(SGLC_KEY(view_search.background_candidates), closed(0, 200),
-                      "a narrow query's candidates tried for a background-only loop"));
+                      "a narrow query's first candidates that may get background hypotheses"));
   t.add(field<Config>(SGLC_KEY(view_search.shifts_per_heading), closed(1, 10),
                       "narrow view's overlay search: best shifts kept at each heading step"));
-  t.add(field<Config>(SGLC_KEY(view_search.min_overlap), closed(0, 1),
-                      "narrow view's background-only loop: plane overlap at least"));
-  t.add(field<Config>(SGLC_KEY(view_search.max_rmse_m), closed(0.001, 1),
-                      "narrow view's background-only loop: plane RMSE at most (m)"));
-  t.add(field<Config>(SGLC_KEY(view_search.min_evidence), closed(0, 1),
-                      "narrow view's background-only loop: view agreement x overlap x context similarity at least"));
-  t.add(field<Config>(SGLC_KEY(view_search.agreement_cell_m), closed(0.5, 5), "view agreement grid cell (m)"));
-  t.add(field<Config>(SGLC_KEY(view_search.pin_landmarks), closed(1, 100),
-                      "landmarks that pin a narrow view's background-only loop along the street"));
-  t.add(field<Config>(SGLC_KEY(view_search.landmark_gate_m), closed(0.05, 10), "landmark pinning gate (m)"));
 }
 
 #undef SGLC_KEY

@@ -4,11 +4,11 @@
 #include <cmath>
 #include <tuple>
 
-#include "agreement.hpp"
 #include "fast_math.hpp"
 #include "pose_guard.hpp"
 #include "sglc/bev_search.hpp"
 #include "sglc/labeller.hpp"
+#include "sglc/view_context.hpp"
 #include "sglc/voxel_map.hpp"
 
 namespace sglc {
@@ -44,7 +44,10 @@ constexpr float kMaxCoordinate = 320.0f;
 
 }  // namespace
 
-Pipeline::Pipeline(Config config) : config_(std::move(config)), labels_((validateConfig(config_), config_.labels)) {}
+Pipeline::Pipeline(Config config)
+    : config_(std::move(config)),
+      labels_((validateConfig(config_), config_.labels)),
+      model_(LoopModel::load(config_.verify.model)) {}
 
 std::vector<std::uint32_t> Pipeline::ownLabels(const LabelledScan& input, ScanReport& rep) const {
   const auto& c = config_;
@@ -155,9 +158,10 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
   // agree there. No one of them alone: along a street of repeated facades a pose a few metres off explains as
   // many planes, loosely, and where the structure repeats its bird's-eye view can agree as well.
   if (!known_loop || (r.is_loop && planes_kept) || !c.bev_search.enabled || !c.refine.enabled) return;
+  const PairView view = pairView(query, candidate, c);
   auto evidence = [&](const Mat4d& T, double fitness, double rmse) {
     const double u = rmse / c.refine.cauchy_m;
-    return fitness * detail::agreementAt(query, candidate, T, c.verify) / (1.0 + u * u);
+    return fitness * fieldAgreement(query, candidate, view, T, 2.0, 25.0) / (1.0 + u * u);
   };
   // Compared as (evidence, fitness, -rmse): ties (disjoint views agree 0) go to more planes, then the tighter
   // fit, then the earlier contender.
@@ -223,6 +227,32 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   r.T = T;
   r.refined = true;
   return kept;
+}
+
+double ViewRanking::similarity(const Fingerprint& fp) const {
+  if (!matcher_) return 0.0;
+  return matcher_->match(viewContext(fp.background, fp.background_cell, *config_, fp.labeller_structure)).similarity;
+}
+
+bool Pipeline::isNarrow(const Fingerprint& scan) const {
+  return viewSpanDeg(scan.background, scan.background_cell) < config_.verify.background_min_view_deg;
+}
+
+ViewRanking Pipeline::viewRanking(const Fingerprint& query) const {
+  ViewRanking r;
+  if (!config_.view_search.enabled || !isNarrow(query)) return r;
+  const auto context =
+      viewContext(query.background, query.background_cell, config_.view_search, query.labeller_structure);
+  if (!context.seesStructure()) return r;
+  r.matcher_ = std::make_shared<const ViewMatcher>(context);
+  r.config_ = &config_.view_search;
+  return r;
+}
+
+std::size_t Pipeline::backgroundCandidates(const Fingerprint& query) const {
+  const bool narrow = config_.view_search.enabled && isNarrow(query);
+  return static_cast<std::size_t>(narrow ? config_.view_search.background_candidates
+                                         : config_.verify.background_candidates);
 }
 
 LoopResult Pipeline::match(const Fingerprint& query, const Fingerprint& candidate) const {

@@ -35,8 +35,7 @@ TEST(Config, DefaultsArePaperValues) {
   EXPECT_EQ(c.match.d_b, 2.0);
   EXPECT_EQ(c.match.d_l, 20.0);
   EXPECT_EQ(c.match.t_m, 2);
-  EXPECT_EQ(c.verify.t_g, 0.5);
-  EXPECT_EQ(c.verify.t_b, 0.45);  // the paper's value for worse segmentation (Ford Campus); 0.5 on KITTI
+  EXPECT_EQ(c.verify.max_translation, 10.0);
   // Node classes: vehicle, trunk, pole.
   ASSERT_EQ(c.labels.node_classes.size(), 3u);
   EXPECT_EQ(c.labels.node_classes[0].name, "vehicle");
@@ -79,8 +78,8 @@ TEST(Config, OverridesKeepTheRest) {
   EXPECT_EQ(c.match.min_cosine, d.match.min_cosine);
   EXPECT_EQ(c.descriptor.d_i, d.descriptor.d_i);
   EXPECT_EQ(c.descriptor.k_eigen, d.descriptor.k_eigen);
-  EXPECT_EQ(c.verify.t_g, d.verify.t_g);
-  EXPECT_EQ(c.verify.t_b, d.verify.t_b);
+  EXPECT_EQ(c.verify.min_probability, d.verify.min_probability);
+  EXPECT_EQ(c.verify.fit_max_shift_m, d.verify.fit_max_shift_m);
   EXPECT_TRUE(c.refine.enabled);
   EXPECT_EQ(c.labels.building, d.labels.building);
   EXPECT_EQ(c.labels.node_classes.size(), d.labels.node_classes.size());
@@ -102,8 +101,8 @@ TEST(Config, InvalidValueNamesField) {
   const Case cases[] = {
       {"graph: {d_max: -1}", "graph.d_max"},
       {"graph: {d_max: 0}", "graph.d_max"},
-      {"verify: {t_b: 2}", "verify.t_b"},
-      {"verify: {t_g: -0.1}", "verify.t_g"},
+      {"verify: {min_probability: 2}", "verify.min_probability"},
+      {"verify: {fit_max_turn_deg: -0.1}", "verify.fit_max_turn_deg"},
       {"descriptor: {k_eigen: 0}", "descriptor.k_eigen"},
       {"descriptor: {d_i: 0}", "descriptor.d_i"},
       {"match: {d_b: -0.5}", "match.d_b"},
@@ -196,10 +195,10 @@ std::string fingerprintOf(const Config& c) {
     << " " << c.descriptor.ring_max_m << " " << c.descriptor.sectors << "|" << c.match.d_b << " " << c.match.min_cosine
     << " " << c.match.d_l << " " << c.match.triangle_tol << " " << c.match.t_m << " " << c.match.prune_min_matches
     << "|" << c.ransac.inlier_threshold << " " << c.ransac.max_iterations << " " << c.ransac.seed << " "
-    << c.ransac.min_triangle_height << " " << c.ransac.min_inliers << "|" << c.verify.t_g << " " << c.verify.t_b << " "
-    << c.verify.max_translation << " " << c.verify.bev_cell_m << " " << c.verify.bev_radius_m << "|"
-    << c.fingerprint.instance_voxel_m << " " << c.fingerprint.background_cell_m << " "
-    << c.fingerprint.background_max_range_m << " " << c.fingerprint.plane_voxel_m << " "
+    << c.ransac.min_triangle_height << " " << c.ransac.min_inliers << "|" << c.verify.min_probability << " "
+    << c.verify.model << " " << c.verify.max_translation << " " << c.verify.fit_max_shift_m << " "
+    << c.verify.fit_max_turn_deg << "|" << c.fingerprint.instance_voxel_m << " " << c.fingerprint.background_cell_m
+    << " " << c.fingerprint.background_max_range_m << " " << c.fingerprint.plane_voxel_m << " "
     << c.fingerprint.plane_min_points << " " << c.fingerprint.plane_max_thickness_m << " "
     << c.fingerprint.plane_max_range_m << "|" << c.fine.enabled << " " << c.fine.max_iterations << " "
     << c.fine.max_corr_start_m << " " << c.fine.max_corr_end_m << " " << c.fine.huber_m << " " << c.fine.converged_m
@@ -225,7 +224,8 @@ TEST(Config, DumpParsesBackEveryField) {
   c.descriptor.rings = 12;
   c.match.triangle_tol = 0.3;
   c.ransac.seed = 0xFFFFFFFFFFFFFFFFull;
-  c.verify.t_b = 0.45;
+  c.verify.min_probability = 0.45;
+  c.verify.model = "models/loop model.txt";
   c.fingerprint.plane_max_thickness_m = 0.05;
   c.fine.enabled = false;
   c.refine.converged_m = 1e-7;
@@ -239,7 +239,7 @@ TEST(Config, DumpParsesBackEveryField) {
 TEST(Config, DumpRoundTripIsExactForAnyDouble) {
   Config c;
   c.match.d_b = 1.0 / 3.0;
-  c.verify.t_g = 2.0 / 3.0;
+  c.verify.min_probability = 2.0 / 3.0;
   c.cluster.range_m = 0.1 + 0.2;  // 0.30000000000000004
   const std::string yaml = dumpConfig(c);
   const Config back = parseConfig(yaml);
@@ -249,10 +249,10 @@ TEST(Config, DumpRoundTripIsExactForAnyDouble) {
     return o.str();
   };
   EXPECT_EQ(show(back.match.d_b), show(c.match.d_b));
-  EXPECT_EQ(show(back.verify.t_g), show(c.verify.t_g));
+  EXPECT_EQ(show(back.verify.min_probability), show(c.verify.min_probability));
   EXPECT_EQ(show(back.cluster.range_m), show(c.cluster.range_m));
   EXPECT_EQ(back.match.d_b, c.match.d_b);
-  EXPECT_EQ(back.verify.t_g, c.verify.t_g);
+  EXPECT_EQ(back.verify.min_probability, c.verify.min_probability);
   EXPECT_EQ(back.cluster.range_m, c.cluster.range_m);
 }
 
@@ -260,12 +260,12 @@ TEST(Config, LoadConfigFile) {
   test::TempDir dir;
   {
     std::ofstream out(dir.file("c.yaml"));
-    out << "graph:\n  d_max: 40\nverify:\n  t_b: 0.3\n";
+    out << "graph:\n  d_max: 40\nverify:\n  min_probability: 0.3\n";
   }
   const Config c = loadConfig(dir.file("c.yaml"));
   EXPECT_EQ(c.graph.d_max, 40.0);
-  EXPECT_EQ(c.verify.t_b, 0.3);
-  EXPECT_EQ(c.verify.t_g, 0.5);
+  EXPECT_EQ(c.verify.min_probability, 0.3);
+  EXPECT_EQ(c.verify.max_translation, 10.0);
   {
     std::ofstream out(dir.file("bad.yaml"));
     out << "graph:\n  typo: 1\n";

@@ -68,7 +68,7 @@ TEST(BevSearch, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
   const Mat4d T = test::makeT(150.0, 2.5, 1.0, 0.05);
   const Fingerprint q = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
   const Fingerprint c = p.fingerprint(test::viewFrom(world, T));
-  LoopResult r = p.verify(q, c);
+  LoopResult r = p.verify(q, c, /*background=*/false);
   ASSERT_FALSE(r.is_loop);
   EXPECT_STREQ(r.reason, "fewer than 3 node matches");
   p.refine(q, c, r);
@@ -84,7 +84,7 @@ TEST(BevSearch, KnownLoopWithoutLandmarksIsRegisteredFromTheBackground) {
   // Switched off: no pose.
   Config off;
   off.bev_search.enabled = false;
-  LoopResult o = Pipeline(off).verify(q, c);
+  LoopResult o = Pipeline(off).verify(q, c, /*background=*/false);
   Pipeline(off).refine(q, c, o, true);
   EXPECT_FALSE(o.refined);
 }

@@ -184,17 +184,24 @@ TEST_F(ConsensusInVerify, VerifiesWhatDescriptorsCannotPair) {
   EXPECT_LT(test::translationError(r.T, truth_), 0.5);
   Config off = config();
   off.match.consensus_max_nodes = 0;
-  EXPECT_STREQ(Pipeline(off).verify(a, b).reason, "fewer than 3 node matches");
+  EXPECT_STREQ(Pipeline(off).verify(a, b, /*background=*/false).reason, "fewer than 3 node matches");
 }
 
-TEST_F(ConsensusInVerify, ConsensusMatchesNeedTheStricterGraphSimilarity) {
-  Config strict = config();
-  strict.match.consensus_t_g = 1.0;  // no real alignment has a zero residual
-  const Pipeline p(strict);
+// A pose from landmarks paired by geometry is named as such in the evidence (the loop model weighs the source),
+// and like every hypothesis it is a loop only at verify.min_probability; refused, the reason says so.
+TEST_F(ConsensusInVerify, ConsensusPoseIsJudgedByTheModelLikeAnyOther) {
+  const Pipeline p(config());
   const auto r = p.verify(p.fingerprint(a_), p.fingerprint(b_));
-  EXPECT_FALSE(r.is_loop);
-  EXPECT_STREQ(r.reason, "graph similarity below match.consensus_t_g (nodes paired by consensus)");
-  EXPECT_GT(r.graph_similarity, strict.verify.t_g);  // verify.t_g alone would have let it through
+  EXPECT_EQ(r.evidence.source, PoseSource::kConsensus);
+  EXPECT_EQ(r.score, r.probability);
+  Config strict = config();
+  strict.verify.min_probability = 1.0;
+  const Pipeline q(strict);
+  const auto refused = q.verify(q.fingerprint(a_), q.fingerprint(b_));
+  EXPECT_FALSE(refused.is_loop);
+  EXPECT_EQ(refused.probability, r.probability);
+  EXPECT_NE(std::string(refused.reason).find("loop probability below verify.min_probability"), std::string::npos)
+      << refused.reason;
 }
 
 // Real HDL-32E scans (nuScenes scene 1072, 4 m apart): consecutive scans whose few nodes the descriptors

@@ -140,13 +140,13 @@ TEST(Params, EngineTableKeysAreUniqueAndDefaultsValid) {
 TEST(Params, EngineTableReadsAndWritesTheStruct) {
   const auto& t = engineParams();
   Config c;
-  t.assign(c, "verify.t_g", 0.4);
+  t.assign(c, "verify.min_probability", 0.4);
   t.assign(c, "ransac.seed", std::uint64_t{7});
   t.assign(c, "labels.road", std::vector<std::uint32_t>{1, 2});
-  EXPECT_EQ(c.verify.t_g, 0.4);
+  EXPECT_EQ(c.verify.min_probability, 0.4);
   EXPECT_EQ(c.ransac.seed, 7u);
   EXPECT_EQ(c.labels.road, (std::vector<std::uint32_t>{1, 2}));
-  EXPECT_EQ(std::get<double>(t.find("verify.t_g")->get(c)), 0.4);
+  EXPECT_EQ(std::get<double>(t.find("verify.min_probability")->get(c)), 0.4);
   // A preset replaces every list; lists edited afterwards make the labels "custom".
   t.assign(c, "labels.preset", std::string("nuscenes"));
   EXPECT_EQ(c.labels.road, (std::vector<std::uint32_t>{24}));

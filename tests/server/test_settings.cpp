@@ -28,7 +28,7 @@ TEST(ServerSettings, OneRegistryOverFourSections) {
     EXPECT_TRUE(keys.insert(p.info.key).second) << p.info.key;
   }
   EXPECT_EQ(sections, (std::set<std::string>{"engine", "pose_graph", "server", "storage"}));
-  for (const auto* key : {"server.max_calls", "storage.sync", "pose_graph.debounce_ms", "engine.verify.t_b",
+  for (const auto* key : {"server.max_calls", "storage.sync", "pose_graph.debounce_ms", "engine.verify.min_probability",
                           "engine.refine.max_shift_m", "engine.labels.preset"})
     EXPECT_TRUE(keys.count(key)) << key;
   EXPECT_NO_THROW(settingsTable().validate(Settings{}));
@@ -37,14 +37,15 @@ TEST(ServerSettings, OneRegistryOverFourSections) {
 TEST(ServerSettings, FileThenOverridesInOrder) {
   test::TempDir dir;
   const auto path = dir.file("s.yaml");
-  std::ofstream(path) << "server: {max_calls: 64, threads: 3}\nstorage: {sync: off}\n"
-                         "pose_graph: {debounce_ms: 50}\nengine: {verify: {t_b: 0.3}, labels: {preset: nuscenes}}\n";
+  std::ofstream(path)
+      << "server: {max_calls: 64, threads: 3}\nstorage: {sync: off}\n"
+         "pose_graph: {debounce_ms: 50}\nengine: {verify: {min_probability: 0.3}, labels: {preset: nuscenes}}\n";
   const auto s = settingsFrom(path, {{"--set", "server.max_calls=32"}, {"--max-calls 16", "server.max_calls=16"}});
   EXPECT_EQ(s.max_calls, 16);  // the last override wins
   EXPECT_EQ(s.threads, 3);     // from the file
   EXPECT_EQ(s.store.sync, storage::StoreOptions::Sync::kOff);
   EXPECT_EQ(s.graph.debounce.count(), 50);
-  EXPECT_EQ(s.engine.verify.t_b, 0.3);
+  EXPECT_EQ(s.engine.verify.min_probability, 0.3);
   EXPECT_EQ(s.engine.labels.road, (std::vector<std::uint32_t>{24}));  // the preset's lists
   EXPECT_EQ(s.engine.labels.preset, "nuscenes");
   // Text from the command line is taken as given (a path may hold '#' or ': ').

@@ -126,7 +126,8 @@ class InProcess final : public Backend {
     std::vector<Candidate> out;
     for (const auto& f : found) {
       const auto& r = f.result;
-      out.push_back({frames_.at(f.scan_id), r.score, r.is_loop, r.refined, r.inliers, r.T, f.descriptor_distance});
+      out.push_back({frames_.at(f.scan_id), r.score, r.is_loop, r.refined, r.inliers, r.T, f.descriptor_distance,
+                     r.probability, r.considered});
     }
     return out;
   }

@@ -9,6 +9,7 @@
 
 #include "sglc/config.hpp"
 #include "sglc/descriptors.hpp"
+#include "sglc/pipeline.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc::eval {
@@ -21,6 +22,9 @@ struct Candidate {
   int inliers = 0;
   Mat4d T = Mat4d::Identity();  // maps the candidate's points into the query's frame
   float descriptor_distance = 0;
+  double probability = 0;  // the loop model's (the server back-end: from the answer when it carries one)
+  // The in-process back-end: every hypothesis verification judged, at its pose before refinement.
+  std::vector<LoopResult::Judged> considered;
 };
 
 // Per-frame stage times (ms); zero for stages a call did not run.

@@ -5,6 +5,7 @@
 #include <iomanip>
 #include <limits>
 
+#include "calibration.hpp"
 #include "progress.hpp"
 #include "protocols.hpp"
 
@@ -76,7 +77,7 @@ void judge(Tally& t, const Run& run, const FrameSource& map, const SequenceOptio
 }
 
 Tally queryAll(Run& run, const FrameSource& map, const LoopQuery& query, const SequenceOptions& o,
-               const std::vector<double>& nearest) {
+               const std::vector<double>& nearest, CalibrationLog& log) {
   std::ofstream rows(run.out + "/relocalization.csv");
   rows << "frame,match_frame,score,distance_m,nearest_map_m,outcome\n" << std::setprecision(6);
   std::ofstream pose_rows(run.out + "/pose_errors.csv");
@@ -91,6 +92,10 @@ Tally queryAll(Run& run, const FrameSource& map, const LoopQuery& query, const S
     const auto cands = run.backend.query(scan, query, &times);
     run.timings.add(times);
     judge(t, run, map, o, f, nearest[q], cands, rows, pose_rows);
+    for (const auto& c : cands) {
+      const Mat4d gt = run.source.pose(f).inverse() * map.pose(c.frame);
+      log.add(f, c, &gt);
+    }
     bar.step(q + 1);
   }
   return t;
@@ -101,7 +106,9 @@ Tally queryAll(Run& run, const FrameSource& map, const LoopQuery& query, const S
 void relocalizationProtocol(Run& run, const FrameSource& map, const LoopQuery& query, const SequenceOptions& o) {
   const auto nearest = nearestMapFrame(run.source, map);
   storeFrames(run, map, map.frames());
-  const Tally t = queryAll(run, map, query, o, nearest);
+  CalibrationLog log(run.out + "/evidence.csv");
+  const Tally t = queryAll(run, map, query, o, nearest, log);
+  log.summarise(run.summary);
   std::vector<bool> has_true;
   for (double d : nearest) has_true.push_back(d < o.positive_m);
   const auto with_place = static_cast<std::size_t>(std::count(has_true.begin(), has_true.end(), true));

@@ -6,6 +6,7 @@
 #include <iomanip>
 #include <stdexcept>
 
+#include "calibration.hpp"
 #include "progress.hpp"
 #include "protocols.hpp"
 
@@ -95,7 +96,8 @@ void judge(Outcome& o, const Run& run, const LoopTruth& truth, int f, bool has_t
   o.top.push_back(top);
 }
 
-Outcome queryAll(Run& run, const LoopQuery& query, const LoopTruth& truth, const std::vector<bool>& has_true) {
+Outcome queryAll(Run& run, const LoopQuery& query, const LoopTruth& truth, const std::vector<bool>& has_true,
+                 CalibrationLog& log) {
   const auto& frames = run.source.frames();
   Outcome o;
   std::ofstream top1(run.out + "/top1.csv");
@@ -111,6 +113,11 @@ Outcome queryAll(Run& run, const LoopQuery& query, const LoopTruth& truth, const
     run.timings.add(t);
     if (!cands.empty() && cands[0].verified) writeTop1(top1, run, truth, f, cands[0], truth.isTrue(f, cands[0].frame));
     judge(o, run, truth, f, has_true[q], cands);
+    for (const auto& c : cands)
+      if (run.source.hasPose(f) && run.source.hasPose(c.frame)) {
+        const Mat4d gt = run.source.pose(f).inverse() * run.source.pose(c.frame);
+        log.add(f, c, &gt);
+      }
     bar.step(q + 1);
   }
   return o;
@@ -142,7 +149,9 @@ void sequenceProtocol(Run& run, const LoopQuery& query, const SequenceOptions& o
   const auto& frames = run.source.frames();
   const LoopTruth truth(run.source, options);
   const auto has_true = truth.queriesWithTrueLoop(frames, query.exclude_recent);
-  const Outcome o = queryAll(run, query, truth, has_true);
+  CalibrationLog log(run.out + "/evidence.csv");
+  const Outcome o = queryAll(run, query, truth, has_true, log);
+  log.summarise(run.summary);
   const auto curve = detectionCurve(o.decisions);
   writeCurve(run.out + "/pr.csv", curve);
   curveSummary(run.summary, curve);

@@ -87,7 +87,6 @@ struct MatchConfig {
   double consensus_min_cosine = 0.0;     // descriptor similarity floor of a candidate pair (0: no floor)
   int consensus_per_node = 8;            // candidates kept per node of the smaller graph (most similar first)
   int consensus_max_hypotheses = 20000;  // agreeing triples examined at most (flat ones count), seeded order
-  double consensus_t_g = 0.7;            // graph similarity consensus matches need (verify.t_g if higher)
 };
 
 struct RansacConfig {
@@ -98,83 +97,29 @@ struct RansacConfig {
   int min_inliers = 3;
 };
 
+// The loop decision (docs/METHOD.md, section 7): pose hypotheses from named sources (sglc/evidence.hpp), each
+// refined by one guarded plane fit, judged by one model (sglc/loop_model.hpp); a pair is a loop when the model's
+// probability reaches min_probability and its translation is within max_translation.
 struct VerifyConfig {
-  double t_g = 0.5;  // S_graph = exp(-mean inlier residual) threshold
-  // Background agreement threshold. The paper: 0.5 on KITTI, 0.45 where segmentation is worse (Ford Campus).
-  // Ours: 0.45, for labels from a real network (simulated KITTI 00 at 5 % label noise: loop_distance4 pairs
-  // verified 98.7 % -> 99.4 %, with no more false loops among ten descriptor neighbours per frame at 0 % or
-  // 5 % noise; the real negatives that pass t_b are scans 27-30 m apart, which max_translation rejects).
-  double t_b = 0.45;
+  // The probability a loop needs. The default is chosen for a precision of 0.99 on the fitting worlds
+  // (docs/RESULTS.md gives the recall it costs): raise it for fewer false loops, lower it for more loops.
+  double min_probability = 0.5;
+  // A loop model file (tools/calibrate writes them); empty: the model built into the engine.
+  std::string model;
   double max_translation = 10.0;  // reject loops whose translation exceeds this (m); <= 0 disables
-  // Ours: the score is multiplied by exp(-|t| / this), so of two verified candidates the nearer revisit ranks
-  // first (<= 0: no such factor). It does not change which candidates are loops.
-  double score_distance_m = 10.0;
-  double bev_cell_m = 2.0;  // background agreement grid cell (m); 1 m loses loops under label noise
-  // Background agreement grid half-size (m; ours, the reference scores rings out to 50 m). Sparse far cells
-  // are occupied by chance; the near street decides (simulated KITTI 00 pairs at 5 % label noise: F1max 0.84
-  // with 50 m, 0.94 with 25 m; real negatives that pass the graph check are same-street scans 27-30 m apart
-  // that max_translation rejects).
-  double bev_radius_m = 25.0;
-  // Ours: a loop with fewer node inliers than this must be confirmed by the plane stage run from the coarse
-  // pose: of the plane features in the stored height band (fingerprint.background_max_z_m) of whichever scan has
-  // fewer, at least confirm_min_fitness explained, with a point-to-plane RMSE of at most confirm_max_rmse_m. Chance
-  // alignments of three or four landmarks between look-alike streets pass t_g and t_b; their planes do not fit
-  // (simulated KITTI 00, ten descriptor neighbours per frame: 262 such false loops against 4482 true ones without this
-  // check, 1 with it, no true loop lost). 0 disables.
-  int confirm_below_inliers = 8;
-  double confirm_min_fitness = 0.5;
-  double confirm_max_rmse_m = 0.1;
-  // Ours: the confirming planes must also pin the pose on the ground (RefineResult::horizontal_constraint at
-  // least this): two straight streets with walls on both sides fit each other at any shift along them, so such
-  // a fit confirms nothing. Simulated KITTI 00 without labels (labeller), verified top-1 candidates with few
-  // inliers: false loops 0.0-0.9 (one 5.3), true loops 3.3-90. 0 disables.
-  double confirm_min_constraint = 2.0;
-  // Ours: before the background is judged, the candidate's planes are aligned to the query's from the coarse
-  // pose, as the refine stage does but without instance anchor. A pose from three or four landmarks, or from
-  // landmarks another sensor sees from other sides (their box centres then differ by about a metre), is often
-  // 0.5-2 m and several degrees off, and the background judged there disagrees; the planes bring it within
-  // centimetres. The aligned pose stands when it moved at most align_max_shift_m and align_max_turn_deg, its
-  // plane RMSE is at most confirm_max_rmse_m, and at least 3 of the node inliers lie within align_node_gate_m of
-  // it; the background, the plane confirmation and the result's T then use it. A candidate whose background
-  // agreement at the coarse pose is below align_min_background is not aligned (it stays rejected on t_b), which
-  // spares the plane fit for most wrong candidates. align_max_shift_m <= 0 disables the step.
-  double align_min_background = 0.25;
-  double align_max_shift_m = 3.0;
-  double align_max_turn_deg = 15.0;
-  double align_node_gate_m = 2.0;
-  // Ours: loops from the background alone, for places with few landmarks (a sparse sensor, a street without
-  // parked cars: 4-17 nodes on the real nuScenes HDL-32E scans). When the landmarks give no loop and either scan
-  // has at most background_max_nodes nodes, the walls' directions give candidate headings (wallHeadings), the
-  // BEV overlay at those headings a shift (searchBevPose with bev_search's grid), and the planes the pose. With
-  // no landmark to vouch for it, the pose must meet stricter bars than a weak node loop's confirmation: band
-  // plane overlap (as confirm_min_fitness) at least background_min_overlap, plane RMSE at most
-  // background_max_rmse_m, horizontal constraint at least background_min_constraint, background agreement at
-  // least background_min_agreement, and |t| within max_translation. Overlays whose background agreement is
-  // below background_min_overlay before the plane fit are dropped (simulated VLP-16 queries against an HDL-64
-  // map: accepted true loops had 0.45 or more, the best overlay of other places a median of 0.26). The agreement
-  // bar equals t_b: VLP-16 queries at their true place, with the pose within 0.5 m, had a median agreement of 0.53,
-  // and 0.55 turned half of them away (docs/METHOD.md, section 8). A search
-  // costs a few milliseconds, so a loop finder tries it on the first background_candidates candidates of a
-  // query only (in the order it ranks them). background_max_nodes 0 disables it. A scan that saw less than
-  // background_min_view_deg of the horizon (viewSpanDeg) is a narrow view: the walls in a narrow field of view (a
-  // solid-state sensor's 70 deg) overlay on too many other streets at some heading, so a pair with one is
-  // overlaid only at the heading its view context gives (ViewSearchConfig), or not at all without view_search.
-  // A corridor whose planes leave the shift along it free (horizontal constraint under the bar that applies,
-  // the next direction above it) is still accepted when the bird's-eye view pins that shift: moving the pose 2
-  // and 4 m either way along the free direction (RefineResult::weak_shift) lowers the background agreement by at
-  // least background_pin_margin each time (0 switches this off). Simulated VLP-16 queries against an HDL-64 map
-  // that verified nothing at their nearest map scan (seed 12) had 113 poses within 0.5 m from the background,
-  // 85 of them with a horizontal constraint under 2; moved along the free direction, the agreement at those
-  // poses fell by a median of 0.08, and at the 6 poses 2 m or more off it rose.
+  // The plane fit that refines every hypothesis may move it at most this far; a fit that moves it more is
+  // dropped (the hypothesis is judged without plane evidence). <= 0: no plane fit.
+  double fit_max_shift_m = 3.0;
+  double fit_max_turn_deg = 15.0;
+  // Pose hypotheses from the background alone (bird's-eye overlays at the walls' headings, or for a narrow
+  // view at its view context's) are sought when the landmarks' hypothesis does not reach min_probability and
+  // either scan has at most background_max_nodes landmarks (0: never), for the first background_candidates
+  // candidates of a query (view_search.background_candidates for a narrow query): they cost milliseconds.
   int background_max_nodes = 24;
   int background_candidates = 3;
-  double background_min_overlap = 0.3;
-  double background_max_rmse_m = 0.1;
-  double background_min_constraint = 0.5;
-  double background_min_agreement = 0.45;
-  double background_min_overlay = 0.4;
+  // A scan that saw less of the horizon than this (viewSpanDeg) is a narrow view: agreement is judged over its
+  // field, its candidates are ranked by view context, and its overlays are searched at the context's heading.
   double background_min_view_deg = 180.0;
-  double background_pin_margin = 0.05;
 };
 
 struct FingerprintConfig {
@@ -264,36 +209,11 @@ struct ViewSearchConfig {
   // The map's search returns at most 10,000 scans. Each one compared costs a fingerprint read (from the store's
   // cache when it holds it) and about 54 us of CPU; a map larger than this compares only its nearest by descriptor.
   int max_scans = 10000;
-  // A background-only loop of a narrow view: its walls overlay a look-alike street as well as their own, and the
-  // full-view bars (verify.background_*) both refused most true places and passed false ones (simulated rosette
-  // queries against an HDL-64 map, seed 11: Recall@1 0.38). Every overlay near the context's heading gets the
-  // plane fit (no background_min_overlay); the refined pose then stands when
-  // - the plane overlap (as verify.background_min_overlap) is at least min_overlap, and the plane RMSE at most
-  //   max_rmse_m;
-  // - the evidence, view agreement x plane overlap x context similarity, is at least min_evidence. The view
-  //   agreement is the background agreement (bevAgreement) on an agreement_cell_m grid of +-max_range_m, judged
-  //   only in the sectors the narrow view saw: the whole view, not the +-25 m square that a 70 deg wedge fills a
-  //   sixth of;
-  // - the pose is pinned along the street: by the planes or the near background as verify.background_* asks, or
-  //   by pin_landmarks landmarks (nodes of one class within landmark_gate_m of each other), and in any case the
-  //   view agreement is not higher 2 or 4 m along the planes' free direction.
-  // The overlay search keeps the best shifts_per_heading shifts (more than two cells apart) at each heading step,
-  // and the plane fit from each whose planes and view agree most stands for the pair: walls along a street overlay
-  // alike all along it, and with the single best shift of each heading a fifth of the rosette queries (seed 12)
-  // had no pose near the truth among their first 10 candidates, with 3 a tenth.
-  // The score is the evidence x exp(-|t| / verify.score_distance_m). A loop finder tries this on the first
-  // background_candidates of a narrow query's candidates (verify.background_candidates for others): the context
-  // ranks the true place within the first 10 for 0.98 of rosette queries, and a narrow search tries about 5
-  // heading steps (3 headings a sector apart), not all. Its scores run lower than a full view's (the context
-  // similarity is a factor): a min_score set for full views drops some of them. Measured in docs/RESULTS.md.
+  // A narrow query's candidates that get background hypotheses (the context ranks the true place within the
+  // first 10 for 0.98 of rosette queries), and the shifts kept at each heading step of its overlay search
+  // (walls along a street overlay alike all along it).
   int background_candidates = 10;
   int shifts_per_heading = 3;
-  double min_overlap = 0.6;
-  double max_rmse_m = 0.03;
-  double min_evidence = 0.06;
-  double agreement_cell_m = 1.0;
-  int pin_landmarks = 2;
-  double landmark_gate_m = 1.0;
 };
 
 // Ours: the built-in labeller for scans without labels (sglc/labeller.hpp). mode: "off" (labels required),

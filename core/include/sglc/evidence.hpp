@@ -5,20 +5,23 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "sglc/config.hpp"
 #include "sglc/fingerprint.hpp"
+#include "sglc/registration.hpp"
 #include "sglc/types.hpp"
+#include "sglc/view_context.hpp"
 
 namespace sglc {
 
 // Where a pose hypothesis came from.
 enum class PoseSource : std::uint8_t {
-  kNone = 0,       // no hypothesis (no pose to judge)
-  kLandmarks,      // RANSAC over descriptor-matched landmarks
-  kConsensus,      // RANSAC over landmarks paired by geometry (small graphs)
-  kWallHeadings,   // bird's-eye overlay at the headings the walls give
-  kViewHeadings,   // bird's-eye overlay at the heading the view context gives (a narrow view)
+  kNone = 0,      // no hypothesis (no pose to judge)
+  kLandmarks,     // RANSAC over descriptor-matched landmarks
+  kConsensus,     // RANSAC over landmarks paired by geometry (small graphs)
+  kWallHeadings,  // bird's-eye overlay at the headings the walls give
+  kViewHeadings,  // bird's-eye overlay at the heading the view context gives (a narrow view)
 };
 const char* poseSourceName(PoseSource source);  // "landmarks", "consensus", "walls", "view", "none"
 
@@ -47,6 +50,41 @@ struct Evidence {
   double context_similarity = 0.0;
   // |t| of the pose (m).
   double translation_m = 0.0;
+  // Whether the scan that saw less is a narrow view (field_deg under verify.background_min_view_deg).
+  bool narrow = false;
 };
+
+// What two scans saw, measured once per pair: the field every agreement is judged over is the field of the scan
+// that saw less. A full view (at least verify.background_min_view_deg of the horizon) is the whole field; a
+// narrow one is its view context's field (ViewContext::field), and its context is compared with the other's.
+struct PairView {
+  bool narrow = false;
+  bool query_saw_less = true;  // else the candidate saw less: its frame is where the field lies
+  double field_deg = 360.0;
+  std::vector<bool> field;  // empty: the whole field
+  ViewMatch context;        // the narrow scan's context over the other's (narrow pairs only)
+};
+PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config);
+
+// Background agreement (bevAgreement) at T_q_c over the pair's field, on a grid of `cell` metres out to
+// `radius`, judged in the frame of the scan that saw less.
+double fieldAgreement(const Fingerprint& query, const Fingerprint& candidate, const PairView& view, const Mat4d& T_q_c,
+                      double cell, double radius);
+
+// The evidence at T_q_c. `planes` is the plane fit the pose came from (its T equal to T_q_c), or null when no
+// fit was made: then the plane terms stay 0.
+Evidence measureEvidence(const Fingerprint& query, const Fingerprint& candidate, const PairView& view,
+                         PoseSource source, const Mat4d& T_q_c, const RefineResult* planes, const Config& config);
+
+// Of the plane features in the height band both scans see (centroid at most max_z above the sensor), the share
+// the scan with fewer has explained by the other under T_q_c (a sparse sensor's planes are matched against a
+// dense one's without its missing planes counting against it).
+double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c, double max_z,
+                   const RefineConfig& config);
+
+// Query landmarks paired one to one with a candidate node of their class within `gate` metres on the ground
+// under T_q_c; `mean_distance` (optional) gets the mean ground distance of the pairs.
+int landmarksAt(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T_q_c, double gate,
+                double* mean_distance = nullptr);
 
 }  // namespace sglc

@@ -7,7 +7,9 @@
 #include "sglc/evidence.hpp"
 #include "sglc/fingerprint.hpp"
 #include "sglc/labels.hpp"
+#include "sglc/loop_model.hpp"
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -19,8 +21,14 @@ struct LoopResult {
   // reaches verify.min_probability. 0 when no pose hypothesis was found.
   double probability = 0.0;
   Evidence evidence;  // what the probability was computed from
-  // In [0, 1]; ranks candidates: graph alignment x background agreement x inlier support x proximity
-  // (exp(-|t| / verify.score_distance_m), so the nearer of two revisits ranks first).
+  // Every hypothesis judged for this pair (the chosen one among them), at its pose after the plane fit.
+  struct Judged {
+    Mat4d T = Mat4d::Identity();
+    Evidence evidence;
+    double probability = 0.0;
+  };
+  std::vector<Judged> considered;
+  // In [0, 1]; ranks candidates: the probability (one scale for every source).
   double score = 0.0;
   int matches = 0;                     // node matches after pruning
   int inliers = 0;                     // RANSAC inliers
@@ -48,19 +56,38 @@ struct ScanReport {
   std::vector<std::string> warnings;
 };
 
+class ViewMatcher;
+
+// A narrow query's ranking of stored scans by view context (docs/METHOD.md, section 6), built once per query:
+// its context is computed and turned once, then compared with each stored scan's.
+class ViewRanking {
+ public:
+  // Whether the ranking applies: the query is a narrow view, view_search is on, and its context sees structure
+  // (without, every similarity would be 0 and the descriptor's order stands).
+  bool active() const { return matcher_ != nullptr; }
+  // The view-context similarity of a stored scan to the query, in [0, 1]; 0 when not active.
+  double similarity(const Fingerprint& stored) const;
+
+ private:
+  friend class Pipeline;
+  std::shared_ptr<const ViewMatcher> matcher_;
+  const ViewSearchConfig* config_ = nullptr;
+};
+
 class Pipeline {
  public:
   explicit Pipeline(Config config = {});
 
   const Config& config() const { return config_; }
+  const LoopModel& model() const { return model_; }
 
   // Throws InputError on an invalid scan. A scan without labels (empty `labels`) is labelled by the built-in
   // labeller unless config.labeller.mode is "off"; in "auto" mode a labelled scan whose label set lacks a
   // landmark role (no ids for trunk, pole or vehicle) gets those from the labeller; "always" ignores given
   // labels. `report` (optional) says which happened and warns about scans that cannot close loops.
   Fingerprint fingerprint(const LabelledScan& scan, ScanReport* report = nullptr) const;
-  // Coarse pose and the loop decision. When the landmarks give no loop, `background` allows a loop from the
-  // background alone (config.verify.background_*: scans with few nodes only).
+  // Pose hypotheses and the loop decision. When the landmarks give no loop, `background` allows hypotheses from
+  // the background alone (config.verify.background_*: scans with few nodes only).
   LoopResult verify(const Fingerprint& query, const Fingerprint& candidate, bool background = true) const;
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
   // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result: from
@@ -70,15 +97,21 @@ class Pipeline {
   // whether a pose was found; is_loop and reason keep verification's decision.
   void refine(const Fingerprint& query, const Fingerprint& candidate, LoopResult& result,
               bool known_loop = false) const;
+  // Whether a scan is a narrow view (less than verify.background_min_view_deg of the horizon).
+  bool isNarrow(const Fingerprint& scan) const;
+  // The query's ranking by view context (inactive for full views or with view_search off).
+  ViewRanking viewRanking(const Fingerprint& query) const;
+  // How many of a query's first candidates may get background hypotheses (verify.background_candidates, or
+  // view_search.background_candidates for a narrow query).
+  std::size_t backgroundCandidates(const Fingerprint& query) const;
   // verify + refine.
   LoopResult match(const Fingerprint& query, const Fingerprint& candidate) const;
 
  private:
-  // A loop from the background alone (walls' headings, BEV overlay, planes), judged by the verify.background_*
-  // bars, and also by the plane confirmation's when `refuted` (the planes already refused the landmarks' pose);
-  // `nodes` is the landmark result it replaces when it is one.
-  LoopResult backgroundLoop(const Fingerprint& query, const Fingerprint& candidate, LoopResult nodes,
-                            bool refuted) const;
+  // The hypothesis from T0 refined by the guarded plane fit, its evidence and probability, into r (T, evidence,
+  // probability, background_similarity, and the plane fit's fitness, rmse and information when it stood).
+  void judge(const Fingerprint& query, const Fingerprint& candidate, const PairView& view, PoseSource source,
+             const Mat4d& T0, LoopResult& r) const;
   // The fine and refine stages from the coarse pose; true when the plane stage's pose was kept.
   bool refinePose(const Fingerprint& query, const Fingerprint& candidate, LoopResult& r) const;
   // The labels the scan is fingerprinted with when they are not the given ones: computed by the labeller, or
@@ -87,6 +120,7 @@ class Pipeline {
 
   Config config_;
   LabelMap labels_;
+  LoopModel model_;
 };
 
 }  // namespace sglc
