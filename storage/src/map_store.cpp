@@ -9,6 +9,7 @@
 
 #include "admin.hpp"
 #include "map_index.hpp"
+#include "map_settings.hpp"
 #include "pg_store.hpp"
 #include "pose_graph_tables.hpp"
 #include "postgres.hpp"
@@ -59,6 +60,12 @@ class SqliteMapStore final : public MapStore {
   std::optional<MapInfo> findMap(const std::string& name) const override;
   std::vector<RobotInfo> listRobots(const std::string& map) const override;
   std::vector<SessionInfo> listSessions(const std::string& map, const std::string& robot) const override;
+  std::optional<FingerprintSettings> mapSettings(const std::string& map) const override {
+    return map_settings::read(core_, map);
+  }
+  std::vector<std::string> recordSettings(const std::string& map) override {
+    return map_settings::recordMissing(core_, map);
+  }
 
   // ---- Scans and blobs
   std::int64_t addScan(const NewScan& scan) override { return scan_table::add(core_, scan); }
@@ -152,6 +159,7 @@ MapInfo SqliteMapStore::createMap(const std::string& name, int dim) {
   sql::Stmt(db, "INSERT OR REPLACE INTO meta(key, value) VALUES('last_map_id', ?)")
       .bind(1, std::to_string(state.id))
       .run();
+  map_settings::write(db, state.id, core_.options.settings);
   state.name = name;
   state.dim = dim;
   state.index = std::make_unique<DescriptorIndex>(dim, core_.options.index);

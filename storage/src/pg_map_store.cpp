@@ -45,6 +45,12 @@ class PgMapStore final : public MapStore {
   }
   std::vector<RobotInfo> listRobots(const std::string& map) const override;
   std::vector<SessionInfo> listSessions(const std::string& map, const std::string& robot) const override;
+  std::optional<FingerprintSettings> mapSettings(const std::string& map) const override {
+    return settings::read(core_, map);
+  }
+  std::vector<std::string> recordSettings(const std::string& map) override {
+    return settings::recordMissing(core_, map);
+  }
 
   // ---- Scans
   std::int64_t addScan(const NewScan& scan) override { return scans::add(core_, scan); }
@@ -134,6 +140,7 @@ MapInfo PgMapStore::createMap(const std::string& name, int dim) {
                  .query("INSERT INTO maps(name, descriptor_dim, created_at) VALUES($1, $2, $3) RETURNING id",
                         {name, dim, nowSeconds()})
                  .i64(0, 0);
+  settings::write(tx.conn(), state.id, core_.options.settings);
   state.name = name;
   state.dim = dim;
   state.index = std::make_unique<DescriptorIndex>(dim, core_.options.index);

@@ -1,5 +1,5 @@
 // The parts of the PostgreSQL map store (pg_map_store.cpp forwards to them), one file each: scans and their
-// blobs, the pose-graph tables, administration.
+// blobs, the pose-graph tables, administration, each map's fingerprint settings.
 #pragma once
 
 #include <string>
@@ -43,5 +43,13 @@ Stats stats(const Core& core, const std::string& map);
 // Bytes our tables take (heap, TOAST and indexes).
 std::int64_t databaseBytes(const Conn& conn);
 }  // namespace admin
+
+namespace settings {
+// Writes `settings` for map `map_id` in the caller's transaction on `db` (nothing for empty settings).
+void write(const Conn& db, std::int64_t map_id, const FingerprintSettings& settings);
+// MapStore::mapSettings and MapStore::recordSettings.
+std::optional<FingerprintSettings> read(const Core& core, const std::string& map);
+std::vector<std::string> recordMissing(Core& core, const std::string& map);
+}  // namespace settings
 
 }  // namespace sglc::storage::pg

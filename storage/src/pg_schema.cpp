@@ -92,6 +92,15 @@ const Migration kMigrations[] = {
      nullptr},
     // 1 -> 2: the structure spectrum in the scan descriptors (fingerprint format 3).
     {"", upgradeDescriptors},
+    // 2 -> 3: the settings each map's fingerprints are made with (map_settings.hpp). Existing maps get none
+    // here: a server records its own with them right after opening (MapStore::recordSettings).
+    {R"sql(
+    ALTER TABLE maps ADD COLUMN IF NOT EXISTS settings_hash text;
+    CREATE TABLE IF NOT EXISTS map_settings(
+      map_id bigint NOT NULL REFERENCES maps(id) ON DELETE CASCADE, position integer NOT NULL, key text NOT NULL,
+      value text NOT NULL, PRIMARY KEY(map_id, position));
+    )sql",
+     nullptr},
 };
 
 // The schema version of the database, 0 for one without our tables; kCorrupt for a database that holds

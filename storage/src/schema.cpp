@@ -49,6 +49,24 @@ void upgradeDescriptors(const sql::Db& db) {
   db.exec("UPDATE maps SET generation = generation + 1");
 }
 
+// 6 -> 7: each map's fingerprint settings (map_settings.hpp). The maps of the file get none here: this step
+// knows no engine settings; a server records its own with them right after opening (MapStore::recordSettings).
+// Tolerates a file that has the column and table already (one turned back to an older version by lowering
+// user_version, as tests do): SQLite has no ADD COLUMN IF NOT EXISTS.
+void addMapSettings(const sql::Db& db) {
+  bool has_column = false;
+  {
+    sql::Stmt st(db, "SELECT 1 FROM pragma_table_info('maps') WHERE name = 'settings_hash'");
+    has_column = st.step();
+  }
+  if (!has_column) db.exec("ALTER TABLE maps ADD COLUMN settings_hash TEXT");
+  db.exec(R"sql(
+    CREATE TABLE IF NOT EXISTS map_settings(
+      map_id INTEGER NOT NULL REFERENCES maps(id) ON DELETE CASCADE, position INTEGER NOT NULL,
+      key TEXT NOT NULL, value TEXT NOT NULL, PRIMARY KEY(map_id, position));
+    )sql");
+}
+
 struct Migration {
   const char* sql;                     // run first
   void (*rewrite)(const sql::Db& db);  // then this, when set
@@ -110,6 +128,8 @@ const Migration kMigrations[] = {
     {"", nullptr},
     // 5 -> 6: the structure spectrum in the scan descriptors (fingerprint format 3).
     {"", upgradeDescriptors},
+    // 6 -> 7: the settings each map's fingerprints are made with.
+    {"", addMapSettings},
 };
 static_assert(std::size(kMigrations) == kSchemaVersion, "one migration per schema version");
 

@@ -116,7 +116,7 @@ TEST_F(PostgresStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
   exec("UPDATE sglc_meta SET value = '1' WHERE key = 'schema_version'");
 
   auto store = backend_.open();
-  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "2");
+  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "3");
   const DescriptorConfig defaults;
   for (std::size_t k = 0; k + 1 < ids.size(); k += 37) {
     SCOPED_TRACE("scan " + std::to_string(k));

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "sglc/fingerprint.hpp"
+#include "sglc/fingerprint_settings.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc::storage {
@@ -73,6 +74,10 @@ struct StoreOptions {
   bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
   double max_db_mb = 0;        // quota: writes beyond it fail with kFull (0: unlimited)
   IndexOptions index;
+  // The settings this process makes fingerprints with (sglc::fingerprintSettings of its engine Config): recorded
+  // with each map createMap creates, and by recordSettings with maps that have none. Empty: maps are created
+  // without settings (tools and tests that make no fingerprints of their own).
+  FingerprintSettings settings;
 };
 
 struct MapInfo {
@@ -208,6 +213,17 @@ class MapStore {
   virtual std::vector<RobotInfo> listRobots(const std::string& map) const = 0;
   virtual std::vector<SessionInfo> listSessions(const std::string& map, const std::string& robot = "") const = 0;
 
+  // The fingerprint settings recorded for `map` (kNotFound for an unknown map): those of the store that created
+  // it, or that recordSettings gave it; nullopt while it has none. kCorrupt when the recorded values do not
+  // match their recorded hash. Read from the database on every call: callers cache it (it never changes once
+  // recorded; a map deleted and created again has a new id).
+  virtual std::optional<FingerprintSettings> mapSettings(const std::string& map) const = 0;
+  // Records StoreOptions::settings for `map` (every map when empty; kNotFound for an unknown name) if it has
+  // none yet: maps created before settings were recorded (SQLite schema < 7, PostgreSQL schema < 3), or by a
+  // store without settings. Returns the names of the maps that got them, in name order; nothing when
+  // StoreOptions::settings is empty. Concurrent callers (replicas) record each map once.
+  virtual std::vector<std::string> recordSettings(const std::string& map = "") = 0;
+
   // Stores a scan (robot and session are created on first use) and returns its id once it is durable
   // (per StoreOptions::sync). All or nothing.
   virtual std::int64_t addScan(const NewScan& scan) = 0;
@@ -283,6 +299,6 @@ bool isPostgresUrl(const std::string& path);
 std::string printableLocation(const std::string& path);
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 6;
+inline constexpr int kSchemaVersion = 7;
 
 }  // namespace sglc::storage
