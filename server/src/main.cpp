@@ -191,6 +191,7 @@ int serve(const Settings& s, sigset_t& signals) {
                                              {"tls", !s.tls_cert.empty()},
                                              {"auth", state->tokens().enabled()}}));
   auto store = openStore(s, *server);
+  state->settingsGuard().recordMissing(*store);  // maps from before settings were recorded get this server's
   auto graph = std::make_unique<sglc::server::GraphOptimiser>(*store, s.graph);
   const auto solves = graph->subscribe([&metrics = state->metrics()](const std::string&, const auto& event) {
     sglc::server::observeSolve(metrics, event);

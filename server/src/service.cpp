@@ -85,8 +85,8 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   wire::checkName("key.session", key.session());
   TokenTable::require(grant, key.map());
   auto input = ingestInput(req);
+  state.usableMap(key.map());
   auto& store = state.store();
-  if (!store.findMap(key.map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + key.map() + "'");
   MemoryBudget::Lease own;
   if (!held)
     own = state.memory().acquire((points.size() + labels.size()) * kScanCostFactor, ctx->deadline(),
@@ -143,8 +143,8 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     const auto grant = state_.tokens().authenticate(*ctx);
     wire::checkName("map", req->map());
     TokenTable::require(grant, req->map());
+    state_.usableMap(req->map());
     auto& store = state_.store();
-    if (!store.findMap(req->map())) throw RpcError(grpc::StatusCode::NOT_FOUND, "no map named '" + req->map() + "'");
     const closing::LoopFinder finder(state_.pipeline(), store);
     closing::QueryOrigin who{req->map(), req->robot(), req->session(), req->seq(), std::nullopt, 0};
     if (req->has_stamp()) {

@@ -9,6 +9,7 @@
 #include "auth.hpp"
 #include "compute_pool.hpp"
 #include "executor.hpp"
+#include "map_settings_guard.hpp"
 #include "memory_budget.hpp"
 #include "server_metrics.hpp"
 #include "sglc/pipeline.hpp"
@@ -40,6 +41,7 @@ class ServiceState {
       : pipeline_(std::move(pipeline)),
         tokens_(std::move(tokens)),
         limits_(std::move(limits)),
+        guard_(fingerprintSettings(pipeline_.config())),
         compute_(std::make_unique<ComputePool>(limits_.compute_threads)),
         memory_(std::make_unique<MemoryBudget>(limits_.max_inflight_bytes)),
         executor_(std::make_unique<Executor>(limits_.compute_threads + 2)),
@@ -54,6 +56,10 @@ class ServiceState {
     graph_.store(nullptr);
   }
   storage::MapStore& store() const;  // throws RpcError(UNAVAILABLE) while loading
+  // The map, when this server's fingerprints may be added to it and compared with its own (MapSettingsGuard):
+  // every ingest and query asks here. NOT_FOUND, FAILED_PRECONDITION, or UNAVAILABLE while loading.
+  storage::MapInfo usableMap(const std::string& map) const { return guard_.require(store(), map); }
+  const MapSettingsGuard& settingsGuard() const { return guard_; }
 
   const Pipeline& pipeline() const { return pipeline_; }
   const TokenTable& tokens() const { return tokens_; }
@@ -69,6 +75,7 @@ class ServiceState {
   Pipeline pipeline_;
   TokenTable tokens_;
   ServiceLimits limits_;
+  MapSettingsGuard guard_;
   std::unique_ptr<ComputePool> compute_;
   std::unique_ptr<MemoryBudget> memory_;
   std::unique_ptr<Executor> executor_;

@@ -5,6 +5,7 @@
 #include <thread>
 
 #include "sglc/config/settings_file.hpp"
+#include "sglc/fingerprint_settings.hpp"
 #include "sglc/storage/store_params.hpp"
 
 namespace sglc::server {
@@ -102,6 +103,7 @@ Settings resolved(Settings s) {
     s.backup_dir =
         storage::isPostgresUrl(s.db) ? "var/backups" : (std::filesystem::path(s.db).parent_path() / "backups").string();
   s.store.path = s.db;
+  s.store.settings = fingerprintSettings(s.engine);  // recorded with the maps this server creates
   return s;
 }
 
@@ -124,7 +126,11 @@ std::string configReference() {
          "Flags and `--set` win over the file.\n`sglc-server --dump-config` prints the values in effect; "
          "`sglc-pair --config` and `sglc-eval --config` read the\n`engine` keys without the `engine.` "
          "prefix. Unknown keys, values of the wrong kind and values out of range\nare refused with the key's "
-         "name. Why the engine's defaults are what they are: `core/include/sglc/config.hpp`.\n\n" +
+         "name. Why the engine's defaults are what they are: `core/include/sglc/config.hpp`.\n\nA map records "
+         "the values of the `engine` sections that shape fingerprints (`labels`, `labeller`, `cluster`,\n`graph`, "
+         "`descriptor`, `fingerprint`) when it is created; a server with other values refuses to ingest into it "
+         "or\nquery it (FAILED_PRECONDITION, `docs/STORAGE.md`). The other `engine` sections may differ between "
+         "servers of one map.\n\n" +
          config::markdownOf(settingsTable(), Settings{});
 }
 
