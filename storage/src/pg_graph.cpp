@@ -34,9 +34,11 @@ std::int64_t addLoop(Core& core, const std::string& map, const LoopRecord& loop)
   const auto info = loop.information ? blob::fromInformation(*loop.information) : std::vector<std::uint8_t>{};
   const auto id = db.query(
                         "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse,"
-                        " created_at, information) VALUES($1, $2, $3, $4, $5, $6, $7, $8, $9, $10) RETURNING id",
+                        " created_at, information, probability) VALUES($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11)"
+                        " RETURNING id",
                         {map_id, loop.query_scan, loop.candidate_scan, Bytes(t), loop.score, loop.inliers, loop.fitness,
-                         loop.rmse, nowSeconds(), loop.information ? Param(Bytes(info)) : Param()})
+                         loop.rmse, nowSeconds(), loop.information ? Param(Bytes(info)) : Param(),
+                         loop.probability ? Param(*loop.probability) : Param()})
                       .i64(0, 0);
   tx.commit(0, [] {});
   return id;
@@ -46,7 +48,7 @@ std::vector<LoopRecord> loops(const Core& core, const std::string& map, std::int
   const auto map_id = core.mapId(map);
   auto db = core.readers.acquire();
   const auto r = db->query(
-      "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information FROM loops"
+      "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information, probability FROM loops"
       " WHERE map_id = $1 AND id > $2 ORDER BY id LIMIT $3",
       {map_id, after_id, limit > 0 ? Param(limit) : Param()});  // LIMIT NULL: no limit
   std::vector<LoopRecord> out;
@@ -65,6 +67,7 @@ std::vector<LoopRecord> loops(const Core& core, const std::string& map, std::int
       if (!l.information)
         throw StorageError(Code::kCorrupt, "loop " + std::to_string(l.id) + " has a damaged information matrix");
     }
+    if (!r.isNull(i, 9)) l.probability = r.f64(i, 9);
     out.push_back(l);
   }
   return out;

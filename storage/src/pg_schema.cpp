@@ -101,6 +101,11 @@ const Migration kMigrations[] = {
       value text NOT NULL, PRIMARY KEY(map_id, position));
     )sql",
      nullptr},
+    // 3 -> 4: the loop model's probability of each loop (NULL for loops recorded before: unknown).
+    {R"sql(
+    ALTER TABLE loops ADD COLUMN probability double precision;
+    )sql",
+     nullptr},
 };
 
 // The schema version of the database, 0 for one without our tables; kCorrupt for a database that holds

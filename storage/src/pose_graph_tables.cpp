@@ -39,7 +39,7 @@ std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& 
       .run();
   sql::Stmt st(db,
                "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, created_at,"
-               " information) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
+               " information, probability) VALUES(?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)");
   st.bind(1, map_id).bind(2, loop.query_scan).bind(3, loop.candidate_scan).bindBlob(4, t).bind(5, loop.score);
   st.bind(6, static_cast<std::int64_t>(loop.inliers)).bind(7, loop.fitness).bind(8, loop.rmse).bind(9, nowSeconds());
   const auto info = loop.information ? blob::fromInformation(*loop.information) : std::vector<std::uint8_t>{};
@@ -47,6 +47,10 @@ std::int64_t addLoop(StoreCore& core, const std::string& map, const LoopRecord& 
     st.bindBlob(10, info);
   else
     st.bindNull(10);
+  if (loop.probability)
+    st.bind(11, *loop.probability);
+  else
+    st.bindNull(11);
   st.run();
   const auto id = sqlite3_last_insert_rowid(db.get());
   tx.commit();
@@ -57,9 +61,10 @@ std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std
                               std::int64_t limit) {
   const auto map_id = core.mapId(map);
   auto reader = core.readers.acquire();
-  sql::Stmt st(*reader,
-               "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information FROM loops"
-               " WHERE map_id = ? AND id > ? ORDER BY id LIMIT ?");
+  sql::Stmt st(
+      *reader,
+      "SELECT id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, information, probability FROM loops"
+      " WHERE map_id = ? AND id > ? ORDER BY id LIMIT ?");
   st.bind(1, map_id).bind(2, after_id).bind(3, limit > 0 ? limit : std::int64_t{-1});  // -1: no limit
   std::vector<LoopRecord> out;
   while (st.step()) {
@@ -77,6 +82,7 @@ std::vector<LoopRecord> loops(const StoreCore& core, const std::string& map, std
       if (!r.information)
         throw StorageError(Code::kCorrupt, "loop " + std::to_string(r.id) + " has a damaged information matrix");
     }
+    if (!st.isNull(9)) r.probability = st.f64(9);
     out.push_back(r);
   }
   return out;

@@ -130,6 +130,11 @@ const Migration kMigrations[] = {
     {"", upgradeDescriptors},
     // 6 -> 7: the settings each map's fingerprints are made with.
     {"", addMapSettings},
+    // 7 -> 8: the loop model's probability of each loop (NULL for loops recorded before: unknown).
+    {R"sql(
+    ALTER TABLE loops ADD COLUMN probability REAL;
+    )sql",
+     nullptr},
 };
 static_assert(std::size(kMigrations) == kSchemaVersion, "one migration per schema version");
 

@@ -29,6 +29,9 @@ void loop(const LoopRecord& loop) {
       (loop.information && !loop.information->allFinite()))
     throw StorageError(Code::kInvalidArgument, "loop has a non-finite value");
   if (loop.query_scan == loop.candidate_scan) throw StorageError(Code::kInvalidArgument, "a loop needs two scans");
+  // NaN fails both comparisons, so it is refused here too.
+  if (loop.probability && !(*loop.probability >= 0.0 && *loop.probability <= 1.0))
+    throw StorageError(Code::kInvalidArgument, "loop probability must be in [0, 1]");
 }
 
 void optimised(const std::vector<OptimisedPose>& poses, const std::vector<SessionFrame>& frames) {

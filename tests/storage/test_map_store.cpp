@@ -769,7 +769,8 @@ TEST(MapStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
       setDescriptor(path, all[k].id, old);
     }
     setBlob(path, all.back().id, {1, 2, 3});
-    execSql(path, format == 1 ? "PRAGMA user_version=4;" : "PRAGMA user_version=5;");
+    execSql(path, format == 1 ? "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=4;"
+                              : "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=5;");
     auto store = MapStore::open(options(path));
     for (std::size_t k = 0; k + 1 < all.size(); ++k) {
       // Recomputed from the stored nodes and background view, with the spectrum's default settings.
@@ -814,8 +815,8 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
   }
   // Back to a version-2 file: no information column, no graph_loop.
   execSql(path,
-          "ALTER TABLE loops DROP COLUMN information; ALTER TABLE maps DROP COLUMN graph_loop;"
-          " PRAGMA user_version=2;");
+          "ALTER TABLE loops DROP COLUMN information; ALTER TABLE loops DROP COLUMN probability;"
+          " ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=2;");
   const Mat6d info = someInformation();
   {
     auto store = MapStore::open(options(path));

@@ -165,6 +165,9 @@ struct LoopRecord {
   int inliers = 0;
   // Information of T (sglc::LoopResult::information); absent for loops recorded without one.
   std::optional<Mat6d> information;
+  // The loop model's probability that the loop is true (sglc::LoopResult::probability), in [0, 1]; absent for
+  // loops recorded before the model (unknown; the pose graph then treats the loop as it always did).
+  std::optional<double> probability;
 };
 
 // A scan as a pose-graph node.
@@ -299,6 +302,6 @@ bool isPostgresUrl(const std::string& path);
 std::string printableLocation(const std::string& path);
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 7;
+inline constexpr int kSchemaVersion = 8;
 
 }  // namespace sglc::storage
