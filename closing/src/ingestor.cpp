@@ -102,6 +102,9 @@ void Ingestor::recordLoops(Ingested& out, const IngestInput& in) const {
       r.inliers = res.inliers;
       r.fitness = res.fitness;
       r.rmse = res.rmse;
+      // A verified loop always has a pose hypothesis, so the loop model gives it a probability above 0; 0 means no
+      // model judged it (a verifier without one): unknown, which the pose graph treats as loops always were.
+      if (res.probability > 0.0) r.probability = res.probability;
       if (res.refined && !res.information.isZero()) r.information = res.information;
       store_.addLoop(in.key.map, r);
       added = true;
