@@ -45,6 +45,7 @@ void toWire(const storage::LoopRecord& l, const v1::LoopEnd& query, const v1::Lo
   o->set_inliers(l.inliers);
   o->set_fitness(l.fitness);
   o->set_rmse(l.rmse);
+  if (l.probability) o->set_probability(*l.probability);  // absent: recorded before the loop model
   if (l.information)
     for (int k = 0; k < 36; ++k) o->add_information((*l.information)(k / 6, k % 6));
 }

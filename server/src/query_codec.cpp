@@ -1,5 +1,6 @@
 #include "query_codec.hpp"
 
+#include "evidence_codec.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 
 namespace sglc::server {
@@ -40,7 +41,8 @@ closing::QueryOptions fromWire(const v1::QueryOptions& o) {
   return q;
 }
 
-void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::RepeatedPtrField<v1::Candidate>* out) {
+void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::RepeatedPtrField<v1::Candidate>* out,
+            bool include_evidence) {
   for (const auto& loop : loops) {
     const auto& r = loop.result;
     auto* c = out->Add();
@@ -49,6 +51,8 @@ void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::Repe
     c->set_session(loop.session);
     c->set_seq(loop.seq);
     c->set_score(r.score);
+    c->set_probability(r.probability);
+    if (include_evidence) toWire(r.evidence, c->mutable_evidence());
     c->set_verified(r.is_loop);
     c->set_inliers(r.inliers);
     c->set_fitness(r.fitness);

@@ -107,7 +107,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
   const auto done = ingestor.commit(std::move(pending), scan);
 
-  toWire(done.loops, resp->mutable_loops());
+  toWire(done.loops, resp->mutable_loops(), req.query_options().include_evidence());
   auto* timing = resp->mutable_timing();
   toWire(done.timing.query, timing);
   timing->set_fingerprint_ms(done.timing.fingerprint_ms);
@@ -167,7 +167,8 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     }
     closing::QueryTiming timing;
     const auto options = fromWire(req->options());
-    toWire(finder.find(*fp, who, options, executionOf(state_, ctx), &timing), resp->mutable_candidates());
+    toWire(finder.find(*fp, who, options, executionOf(state_, ctx), &timing), resp->mutable_candidates(),
+           req->options().include_evidence());
     toWire(timing, resp->mutable_timing());
     resp->mutable_timing()->set_total_ms(msSince(t_start));
     observeStages(state_.metrics(), resp->timing());
