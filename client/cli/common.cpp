@@ -72,6 +72,7 @@ void addQueryFlags(CLI::App* app, QueryFlags& q, bool with_rejected) {
         "--known-loops", q.known_loops,
         "The candidates are known loops (with --verify: a chosen place): estimate a pose for rejected ones too");
   }
+  app->add_flag("--evidence", q.evidence, "Show what the loop model measured for each candidate (its evidence)");
   q.min_score_opt = app->add_option("--min-score", q.min_score, "Drop verified candidates scoring below this");
 }
 
@@ -105,6 +106,7 @@ v1::QueryOptions toQueryOptions(const QueryFlags& q) {
   o.set_include_rejected(q.include_rejected);
   if (q.known_loops && q.no_refine) throw UsageError("--known-loops asks for poses: it cannot go with --no-refine");
   o.set_known_loops(q.known_loops);
+  o.set_include_evidence(q.evidence);
   for (const auto id : q.verify_scan_ids) o.add_verify_scan_ids(id);
   if (q.min_score_opt && q.min_score_opt->count() > 0) o.set_min_score(q.min_score);
   return o;
@@ -136,6 +138,7 @@ json candidateJson(const v1::Candidate& c) {
   j["session"] = c.session();
   j["seq"] = c.seq();
   j["score"] = c.score();
+  j["probability"] = c.has_probability() ? json(c.probability()) : json(nullptr);  // null: an older server
   j["verified"] = c.verified();
   j["inliers"] = c.inliers();
   j["fitness"] = c.fitness();
@@ -144,14 +147,39 @@ json candidateJson(const v1::Candidate& c) {
   j["descriptor_distance"] = c.descriptor_distance();
   j["T"] = transformJson(c.t_query_candidate());
   if (c.information_size() > 0) j["information"] = std::vector<double>(c.information().begin(), c.information().end());
+  if (c.has_evidence()) j["evidence"] = evidenceJson(c.evidence());
+  return j;
+}
+
+json evidenceJson(const v1::Evidence& e) {
+  json j;
+  std::string source = v1::EvidenceSource_Name(e.source());  // "" for a value newer than this client
+  j["source"] = source.empty() ? std::to_string(e.source()) : source.substr(std::string("EVIDENCE_SOURCE_").size());
+  j["landmarks"] = e.landmarks();
+  j["landmark_similarity"] = e.landmark_similarity();
+  j["field_deg"] = e.field_deg();
+  j["agreement"] = e.agreement();
+  j["wide_agreement"] = e.wide_agreement();
+  j["pin"] = e.pin();
+  j["plane_overlap"] = e.plane_overlap();
+  j["plane_rmse_m"] = e.plane_rmse_m();
+  j["constraint"] = e.constraint();
+  j["context_similarity"] = e.context_similarity();
+  j["translation_m"] = e.translation_m();
   return j;
 }
 
 std::string candidateText(const v1::Candidate& c) {
   std::ostringstream ss;
   ss << "scan " << c.scan_id() << " (robot " << c.robot() << ", session " << c.session() << ", seq " << c.seq()
-     << "): score " << std::fixed << std::setprecision(3) << c.score() << ", " << c.inliers() << " inliers"
-     << (c.verified() ? "" : ", NOT verified") << ", " << poseText(c.t_query_candidate());
+     << "): score " << std::fixed << std::setprecision(3) << c.score() << ", probability ";
+  if (c.has_probability())
+    ss << c.probability();
+  else
+    ss << "unknown";
+  ss << ", " << c.inliers() << " inliers" << (c.verified() ? "" : ", NOT verified") << ", "
+     << poseText(c.t_query_candidate());
+  if (c.has_evidence()) ss << "\n      evidence " << evidenceJson(c.evidence()).dump();
   return ss.str();
 }
 

@@ -48,6 +48,7 @@ struct QueryFlags {
   bool no_refine = false;
   bool include_rejected = false;
   bool known_loops = false;
+  bool evidence = false;
   std::vector<std::int64_t> verify_scan_ids;
   double min_score = 0;
   CLI::Option* min_score_opt = nullptr;
@@ -57,6 +58,7 @@ v1::QueryOptions toQueryOptions(const QueryFlags& q);
 
 json transformJson(const v1::Transform& t);
 std::string poseText(const v1::Transform& t);  // translation and yaw, for text output
+json evidenceJson(const v1::Evidence& e);
 json candidateJson(const v1::Candidate& c);
 std::string candidateText(const v1::Candidate& c);
 json timingJson(const v1::Timing& t);

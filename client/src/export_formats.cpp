@@ -42,6 +42,8 @@ nlohmann::ordered_json loopJson(const v1::LoopEdge& l) {
   j["query"] = endJson(l.query());
   j["candidate"] = endJson(l.candidate());
   j["score"] = l.score();
+  // null: recorded before the loop model (unknown).
+  j["probability"] = l.has_probability() ? nlohmann::ordered_json(l.probability()) : nlohmann::ordered_json(nullptr);
   j["inliers"] = l.inliers();
   j["fitness"] = l.fitness();
   j["rmse"] = l.rmse();
@@ -58,7 +60,7 @@ void writeLoopsCsv(const std::vector<v1::LoopEdge>& loops, std::ostream& out) {
     return q + "\"";
   };
   out << "id,query_scan,query_robot,query_session,query_seq,candidate_scan,candidate_robot,candidate_session,"
-         "candidate_seq,score,inliers,fitness,rmse";
+         "candidate_seq,score,probability,inliers,fitness,rmse";
   for (int k = 0; k < 16; ++k) out << ",T" << k / 4 << k % 4;
   out << ",has_information\n";
   char buf[64];
@@ -66,7 +68,13 @@ void writeLoopsCsv(const std::vector<v1::LoopEdge>& loops, std::ostream& out) {
     out << l.id() << "," << l.query().scan_id() << "," << quoted(l.query().robot()) << ","
         << quoted(l.query().session()) << "," << l.query().seq() << "," << l.candidate().scan_id() << ","
         << quoted(l.candidate().robot()) << "," << quoted(l.candidate().session()) << "," << l.candidate().seq();
-    for (double v : {l.score(), double(l.inliers()), l.fitness(), l.rmse()}) {
+    std::snprintf(buf, sizeof buf, ",%.9g,", l.score());
+    out << buf;
+    if (l.has_probability()) {  // empty: recorded before the loop model (unknown)
+      std::snprintf(buf, sizeof buf, "%.17g", l.probability());
+      out << buf;
+    }
+    for (double v : {double(l.inliers()), l.fitness(), l.rmse()}) {
       std::snprintf(buf, sizeof buf, ",%.9g", v);
       out << buf;
     }

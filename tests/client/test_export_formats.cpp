@@ -91,5 +91,32 @@ TEST(ExportFormats, CsvQuotesNamesAndKeepsFullPrecision) {
   EXPECT_DOUBLE_EQ(j["T"][3].get<double>(), 0.1 + 1e-16);
 }
 
+// The loop model's probability: a column beside the score (empty when unknown) and a JSON field (null).
+TEST(ExportFormats, ProbabilityInCsvAndJsonAndUnknownStaysEmpty) {
+  auto known = edge(5, 1, 2, false);
+  known.set_probability(0.1 + 1e-16);
+  const auto unknown = edge(6, 1, 3, false);
+  std::ostringstream out;
+  writeLoopsCsv({known, unknown}, out);
+  std::istringstream in(out.str());
+  std::string header, row1, row2;
+  std::getline(in, header);
+  std::getline(in, row1);
+  std::getline(in, row2);
+  EXPECT_NE(header.find(",score,probability,inliers,"), std::string::npos) << header;
+  // The robot name holds one quoted comma: a naive split has one cell more than the header, before the column.
+  auto cell = [&](const std::string& text, const std::string& name) {
+    std::vector<std::string> names, cells;
+    std::istringstream hs(header), cs(text);
+    for (std::string c; std::getline(hs, c, ',');) names.push_back(c);
+    for (std::string c; std::getline(cs, c, ',');) cells.push_back(c);
+    return cells.at(static_cast<std::size_t>(std::find(names.begin(), names.end(), name) - names.begin()) + 1);
+  };
+  EXPECT_EQ(std::stod(cell(row1, "probability")), 0.1 + 1e-16) << row1;
+  EXPECT_EQ(cell(row2, "probability"), "") << row2;
+  EXPECT_DOUBLE_EQ(loopJson(known)["probability"].get<double>(), 0.1 + 1e-16);
+  EXPECT_TRUE(loopJson(unknown)["probability"].is_null());
+}
+
 }  // namespace
 }  // namespace sglc::client
