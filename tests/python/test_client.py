@@ -91,6 +91,9 @@ def test_service_flow(client, kitti, reference_pose):
     q = client.query("py", scan_id=a.scan_id, scope="other")
     hit = [x for x in q.candidates if x.scan_id == b.scan_id]
     assert len(hit) == 1 and hit[0].verified
+    assert hit[0].probability is not None and 0.0 <= hit[0].probability <= 1.0 and hit[0].evidence is None
+    q = client.query("py", scan_id=a.scan_id, scope="other", include_evidence=True, include_rejected=True)
+    assert q.candidates and all(isinstance(x.evidence, sglc.Evidence) for x in q.candidates)
     dt, dr = pose_error(hit[0].T, reference_pose)
     assert dt < 0.2 and dr < 1.0
     q = client.query("py", points=p4501, labels=l4501, top_k=5)  # relocalization: a scan not stored
@@ -136,6 +139,9 @@ def test_pose_graph_calls(client, kitti):
     assert loops and all(isinstance(e, sglc.LoopEdge) for e in loops)
     assert {loops[0].query.robot, loops[0].candidate.robot} == {"r1", "r2"}
     assert loops[0].T.shape == (4, 4) and loops[0].information.shape == (6, 6)
+    # The loop model's probability as recorded, or None (unknown) for a loop no model judged: a verified loop at
+    # probability 0 (verification before the model) is recorded as unknown.
+    assert loops[0].probability is None or 0.0 < loops[0].probability <= 1.0
     assert [e.id for e in client.loops("graph", page_size=1)] == [e.id for e in loops]  # paging loses nothing
     assert [e.id for e in client.loops("graph", robot="r2")] == [e.id for e in loops]
     with pytest.raises(sglc.NotFoundError):

@@ -85,6 +85,22 @@ py::dict resultDict(const sglc::LoopResult& r) {
   d["fitness"] = r.fitness;
   d["rmse"] = r.rmse;
   d["reason"] = std::string(r.reason);
+  d["probability"] = r.probability;
+  const auto& e = r.evidence;
+  py::dict ev;
+  ev["source"] = std::string(sglc::poseSourceName(e.source));
+  ev["landmarks"] = e.landmarks;
+  ev["landmark_similarity"] = e.landmark_similarity;
+  ev["field_deg"] = e.field_deg;
+  ev["agreement"] = e.agreement;
+  ev["wide_agreement"] = e.wide_agreement;
+  ev["pin"] = e.pin;
+  ev["plane_overlap"] = e.plane_overlap;
+  ev["plane_rmse_m"] = e.plane_rmse_m;
+  ev["constraint"] = e.constraint;
+  ev["context_similarity"] = e.context_similarity;
+  ev["translation_m"] = e.translation_m;
+  d["evidence"] = ev;
   return d;
 }
 

@@ -20,8 +20,8 @@ from .errors import (AbortedError, AlreadyExistsError, CancelledError, DataLossE
                      UnavailableError, UnimplementedError, UnknownError, error_class)
 from .packing import pack_scan, read_kitti_scan, unpack_labels, unpack_points
 from .pose_graph import MapWatch
-from .results import (Backup, GraphNode, IngestResult, Loop, LoopEdge, LoopEnd, MapEvent, MapInfo, MatchResult,
-                      QueryResult, RobotInfo, ScanInfo, ScanPose, ServerInfo, SessionFrame, SessionInfo, Stats,
+from .results import (Backup, Evidence, GraphNode, IngestResult, Loop, LoopEdge, LoopEnd, MapEvent, MapInfo,
+                      MatchResult, QueryResult, RobotInfo, ScanInfo, ScanPose, ServerInfo, SessionFrame, SessionInfo, Stats,
                       Timing, information, matrix)
 from .stream import IngestSession, ScanInput
 from .version import __version__
@@ -32,8 +32,8 @@ __all__ = [
     "NotFoundError", "AlreadyExistsError", "PermissionDeniedError", "ResourceExhaustedError",
     "FailedPreconditionError", "AbortedError", "OutOfRangeError", "UnimplementedError", "InternalError",
     "UnavailableError", "DataLossError", "UnauthenticatedError",
-    "Backup", "GraphNode", "IngestResult", "Loop", "LoopEdge", "LoopEnd", "MapEvent", "MapInfo", "MatchResult",
-    "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats",
+    "Backup", "Evidence", "GraphNode", "IngestResult", "Loop", "LoopEdge", "LoopEnd", "MapEvent", "MapInfo",
+    "MatchResult", "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats",
     "Timing", "information", "matrix", "pack_scan", "read_kitti_scan", "unpack_points", "unpack_labels",
     "__version__",
 ]

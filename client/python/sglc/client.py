@@ -107,16 +107,18 @@ class Client(AdminCalls, PoseGraphCalls):
     def query_options(self, scope: str = "all", top_k: int = 0, exclude_recent: Optional[int] = None,
                       exclude_seconds: float = 0.0, sessions: Sequence[str] = (), candidates: int = 0,
                       refine: Optional[bool] = None, include_rejected: bool = False, min_score: Optional[float] = None,
-                      verify_scan_ids: Sequence[int] = (), known_loops: bool = False):
+                      verify_scan_ids: Sequence[int] = (), known_loops: bool = False,
+                      include_evidence: bool = False):
         """A QueryOptions message. scope: "all", "same", "other" or "sessions" (with sessions=["robot/session"]).
         exclude_recent None keeps the server's default (50 scans of the same session), as every client does.
         verify_scan_ids: check exactly these stored scans instead of searching; known_loops: they are known to
-        be loops, so a pose is estimated for rejected ones too (see QueryOptions in sglc.proto)."""
+        be loops, so a pose is estimated for rejected ones too (see QueryOptions in sglc.proto). include_evidence:
+        each answer's Loop.evidence holds what the loop model measured (rejected candidates' too)."""
         if scope not in SCOPES:
             raise ValueError(f"unknown scope {scope!r} (expected all, same, other or sessions)")
         o = pb2.QueryOptions(scope=SCOPES[scope], exclude_seconds=float(exclude_seconds), top_k=integer("top_k", top_k),
                              candidates=integer("candidates", candidates), include_rejected=bool(include_rejected),
-                             known_loops=bool(known_loops))
+                             known_loops=bool(known_loops), include_evidence=bool(include_evidence))
         if exclude_recent is not None:
             o.exclude_recent = integer("exclude_recent", exclude_recent)
         o.sessions.extend(sessions)

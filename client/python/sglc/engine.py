@@ -14,7 +14,7 @@ import os
 from typing import Optional, Union
 
 from . import packing
-from .results import MatchResult
+from .results import Evidence, MatchResult
 
 try:
     from . import _engine
@@ -71,4 +71,6 @@ class Engine:
         (is_loop keeps the decision, refined says whether a pose was found)."""
         if not isinstance(a, _engine.Fingerprint) or not isinstance(b, _engine.Fingerprint):
             raise TypeError("match() takes two fingerprints from Engine.fingerprint()")
-        return MatchResult(**self._engine.match(a, b, bool(known_loop)))
+        d = self._engine.match(a, b, bool(known_loop))
+        d["evidence"] = Evidence(**d["evidence"])
+        return MatchResult(**d)

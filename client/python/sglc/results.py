@@ -54,6 +54,40 @@ class Timing:
         return cls(m.fingerprint_ms, m.store_ms, m.search_ms, m.verify_ms, m.refine_ms, m.total_ms)
 
 
+EVIDENCE_SOURCES = {pb2.EVIDENCE_SOURCE_NONE: "none", pb2.EVIDENCE_SOURCE_LANDMARKS: "landmarks",
+                    pb2.EVIDENCE_SOURCE_CONSENSUS: "consensus", pb2.EVIDENCE_SOURCE_WALLS: "walls",
+                    pb2.EVIDENCE_SOURCE_VIEW: "view"}
+
+
+@dataclass
+class Evidence:
+    """What the loop model measured at a candidate's pose (sglc.proto's Evidence; docs/METHOD.md section 7).
+    source: "landmarks", "consensus", "walls", "view" or "none" (where the pose hypothesis came from)."""
+    source: str
+    landmarks: int
+    landmark_similarity: float
+    field_deg: float
+    agreement: float
+    wide_agreement: float
+    pin: float
+    plane_overlap: float
+    plane_rmse_m: float
+    constraint: float
+    context_similarity: float
+    translation_m: float
+
+    @classmethod
+    def from_proto(cls, m) -> "Evidence":
+        return cls(EVIDENCE_SOURCES.get(m.source, str(m.source)), m.landmarks, m.landmark_similarity, m.field_deg,
+                   m.agreement, m.wide_agreement, m.pin, m.plane_overlap, m.plane_rmse_m, m.constraint,
+                   m.context_similarity, m.translation_m)
+
+
+def _probability(m) -> Optional[float]:
+    """The loop model's probability, or None when the message has none (an older server, an older loop)."""
+    return m.probability if m.HasField("probability") else None
+
+
 @dataclass
 class Loop:
     """A loop candidate: a stored scan and the transform that maps its points into the query's frame."""
@@ -70,11 +104,14 @@ class Loop:
     T: np.ndarray                      # 4x4, maps the candidate into the query
     information: Optional[np.ndarray]  # 6x6, or None when not refined
     descriptor_distance: float
+    probability: Optional[float] = None  # the loop model's probability (0..1); None from an older server
+    evidence: Optional[Evidence] = None  # with query_options(include_evidence=True)
 
     @classmethod
     def from_proto(cls, m) -> "Loop":
         return cls(m.scan_id, m.robot, m.session, m.seq, m.score, m.verified, m.refined, m.inliers, m.fitness,
-                   m.rmse, matrix(m.t_query_candidate), information(m.information), m.descriptor_distance)
+                   m.rmse, matrix(m.t_query_candidate), information(m.information), m.descriptor_distance,
+                   _probability(m), Evidence.from_proto(m.evidence) if m.HasField("evidence") else None)
 
 
 @dataclass
@@ -268,11 +305,12 @@ class LoopEdge:
     fitness: float
     rmse: float
     information: Optional[np.ndarray]
+    probability: Optional[float] = None  # None: recorded before the loop model (unknown)
 
     @classmethod
     def from_proto(cls, m) -> "LoopEdge":
         return cls(m.id, LoopEnd.from_proto(m.query), LoopEnd.from_proto(m.candidate), matrix(m.t_query_candidate),
-                   m.score, m.inliers, m.fitness, m.rmse, information(m.information))
+                   m.score, m.inliers, m.fitness, m.rmse, information(m.information), _probability(m))
 
 
 @dataclass
@@ -313,3 +351,5 @@ class MatchResult:
     fitness: float
     rmse: float
     reason: str = ""            # why it is not a loop
+    probability: float = 0.0    # the loop model's probability that this is a true loop
+    evidence: Optional[Evidence] = None  # what it was computed from
