@@ -19,6 +19,9 @@ Table<Options> makeTable() {
   t.add(field<Options>(SGLC_KEY(max_continuations), closed(0, 1000),
                        "solves that go on from an unconverged one without new scans or loops"));
   t.add(field<Options>(SGLC_KEY(loss_scale), above(0), "Cauchy loss scale on whitened loop residuals"));
+  t.add(field<Options>(SGLC_KEY(trusted_probability), closed(0, 1),
+                       "loops less probable than this get a narrower loss (scale^2 x their odds over its odds); 0: "
+                       "the probability is not used"));
   t.add(field<Options>(SGLC_KEY(local_window), closed(0, 100000),
                        "per loop event, free only this many nodes either side of each new loop's ends (0: global)"));
   t.add(field<Options>(SGLC_KEY(global_interval_s), closed(0, 86400),

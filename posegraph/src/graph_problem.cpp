@@ -11,10 +11,12 @@ void GraphProblem::addEdge(std::size_t a, std::size_t b, const RelativePoseError
 }
 
 void GraphProblem::addLoopEdge(std::size_t loop_index, std::size_t a, std::size_t b, const RelativePoseError& e,
-                               double loss_scale) {
+                               double loss_scale, double loss_factor) {
   loop.push_back(loop_index);
   loop_edges.push_back({a, b, e});
-  loop_losses.push_back(new ceres::LossFunctionWrapper(new ceres::CauchyLoss(loss_scale), ceres::TAKE_OWNERSHIP));
+  loop_loss_factors.push_back(loss_factor);
+  loop_losses.push_back(
+      new ceres::LossFunctionWrapper(new ceres::CauchyLoss(loss_scale * loss_factor), ceres::TAKE_OWNERSHIP));
   addEdge(a, b, e, loop_losses.back());
 }
 
@@ -25,7 +27,8 @@ double GraphProblem::maxBoundaryError2() const {
 }
 
 void GraphProblem::setLoopLoss(double scale) {
-  for (auto* loss : loop_losses) loss->Reset(new ceres::CauchyLoss(scale), ceres::TAKE_OWNERSHIP);
+  for (std::size_t k = 0; k < loop_losses.size(); ++k)
+    loop_losses[k]->Reset(new ceres::CauchyLoss(scale * loop_loss_factors[k]), ceres::TAKE_OWNERSHIP);
 }
 
 void GraphProblem::requireFinite(const char* what) const {

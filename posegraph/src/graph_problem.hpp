@@ -29,18 +29,21 @@ struct GraphProblem {
   std::vector<std::size_t> loop;         // loop edge -> index into the graph's loops
   std::vector<Edge> loop_edges;
   std::vector<ceres::LossFunctionWrapper*> loop_losses;  // owned by the problem
+  std::vector<double> loop_loss_factors;                 // per loop edge: its factor on every loss scale
   // Odometry edges between a free and a fixed node (a local solve's boundary): their whitened error tells
   // whether the window could absorb what is new.
   std::vector<Edge> boundary_edges;
 
   void addEdge(std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e, ceres::LossFunction* loss);
+  // The loop's robust loss is a Cauchy loss of scale `loss_scale` x `loss_factor` (loopLossFactor), in the
+  // nominal and the wide solve alike.
   void addLoopEdge(std::size_t loop_index, std::size_t slot_a, std::size_t slot_b, const RelativePoseError& e,
-                   double loss_scale);
+                   double loss_scale, double loss_factor);
   // Whitened error of an edge at the current parameters, squared.
   double error2(const Edge& e) const { return e.error.squaredError(x[e.a].data(), x[e.b].data()); }
   // The largest of the boundary edges' (0 without any).
   double maxBoundaryError2() const;
-  void setLoopLoss(double scale);
+  void setLoopLoss(double scale);  // every loop edge's Cauchy scale to scale x its factor
   // Ceres aborts the process on non-finite parameters: nothing non-finite goes in, and what comes out is checked.
   void requireFinite(const char* what) const;
 };

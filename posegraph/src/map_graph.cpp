@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "graph_problem.hpp"
+#include "loop_weight.hpp"
 #include "relative_pose_error.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/rigid.hpp"
@@ -98,7 +99,8 @@ bool MapGraph::absorb(const std::string& map, const std::vector<storage::LoopRec
     if (!pairs_.insert({l.query_scan, l.candidate_scan}).second)
       loops_.erase(std::find_if(loops_.begin(), loops_.end(),
                                 [&](const auto& o) { return o.a == l.query_scan && o.b == l.candidate_scan; }));
-    loops_.push_back({l.id, l.query_scan, l.candidate_scan, orthonormalised(l.T), l.rmse, l.information});
+    loops_.push_back(
+        {l.id, l.query_scan, l.candidate_scan, orthonormalised(l.T), l.rmse, l.information, l.probability});
     changed = true;
   }
   return changed;
@@ -256,10 +258,10 @@ void MapGraph::buildProblem(GraphProblem& p, const GraphOptimiserOptions& option
     p.addEdge(slot[a], slot[b], edge, nullptr);
     if (isFree(a) != isFree(b)) p.boundary_edges.push_back({slot[a], slot[b], edge});
   }
-  // Loops: a robust loss discounts false ones.
+  // Loops: a robust loss discounts false ones, the sooner the less probable the loop model found them.
   for (const auto k : loops)
     p.addLoopEdge(k, slot[index_[loops_[k].a]], slot[index_[loops_[k].b]], loopEdge(loops_[k], options),
-                  options.loss_scale);
+                  options.loss_scale, loopLossFactor(loops_[k].probability, options.trusted_probability));
   for (std::size_t s = 0; s < p.node.size(); ++s) {
     p.problem.AddParameterBlock(
         p.x[s].data(), 7, new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
@@ -303,7 +305,8 @@ MapGraph::Solution MapGraph::solve(const GraphOptimiserOptions& options, std::in
   bool new_rejected = false;
   for (std::size_t k = 0; k < p.loop.size(); ++k) {
     auto& l = loops_[p.loop[k]];
-    l.rejected = p.error2(p.loop_edges[k]) > limit;
+    // Discounted: beyond the 99.9 % point in its own loss scales.
+    l.rejected = p.error2(p.loop_edges[k]) > limit * p.loop_loss_factors[k] * p.loop_loss_factors[k];
     new_rejected = new_rejected || (l.rejected && l.id > solved_through);
   }
   out.rejected_loops = rejectedLoops();

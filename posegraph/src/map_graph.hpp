@@ -44,7 +44,8 @@ class MapGraph {
     Mat4d T;
     double rmse;
     std::optional<Mat6d> information;
-    bool rejected = false;  // discounted by the robust loss in the last solve that included it
+    std::optional<double> probability;  // the loop model's; unknown for loops recorded before it
+    bool rejected = false;              // discounted by the robust loss in the last solve that included it
   };
   struct Solution {
     bool converged = false;  // ended by convergence, not by its iteration or time bound

@@ -66,6 +66,10 @@ struct GraphOptimiserOptions {
   int max_iterations = 100;
   int max_continuations = 10;  // solves that go on from an unconverged one without new scans or loops
   double loss_scale = 1.0;     // Cauchy loss scale on whitened loop residuals
+  // A loop whose probability of being true (the loop model's) is below this gets a narrower Cauchy loss: its
+  // scale^2 shrinks with the probability's odds relative to this one's (posegraph/src/loop_weight.hpp). Loops
+  // at or above it, and loops recorded without a probability, get loss_scale. 0 turns the probability off.
+  double trusted_probability = 0.95;
   // Bounded cost per loop event: a solve frees only the scans added since the last one and this many nodes on
   // either side (in their session) of each end of every new loop, the rest held fixed (0: every solve is
   // global). A new loop far off the current poses, or a window over half the graph, still solves globally.
