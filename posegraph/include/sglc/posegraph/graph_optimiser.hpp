@@ -69,7 +69,9 @@ struct GraphOptimiserOptions {
   // A loop whose probability of being true (the loop model's) is below this gets a narrower Cauchy loss: its
   // scale^2 shrinks with the probability's odds relative to this one's (posegraph/src/loop_weight.hpp). Loops
   // at or above it, and loops recorded without a probability, get loss_scale. 0 turns the probability off.
-  double trusted_probability = 0.95;
+  // 0.9: with 0.95, true loops drawn from [0.9, 1] lost up to 1.7 % ATE on KITTI 08 for no gain against false
+  // ones (sglc-bench-false-loops, docs/PERFORMANCE.md); to be set anew from the loop model's own distribution.
+  double trusted_probability = 0.9;
   // Bounded cost per loop event: a solve frees only the scans added since the last one and this many nodes on
   // either side (in their session) of each end of every new loop, the rest held fixed (0: every solve is
   // global). A new loop far off the current poses, or a window over half the graph, still solves globally.
