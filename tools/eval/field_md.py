@@ -3,6 +3,7 @@
 
   field_md.py FIELD_DIR                        # the section alone, on stdout
   field_md.py --splice RESULTS.md FIELD_DIR    # RESULTS.md with the section replaced (or put first), on stdout
+  field_md.py --reliability FIELD_DIR          # the loop probability's reliability table, pooled over the runs
 """
 import json
 import os
@@ -153,8 +154,36 @@ def splice(path, root):
     return replace_section(path, section(root), BEGIN, END, first_section)
 
 
+def reliability(root):
+    """Predicted against observed share of true loops in 10 bins of the probability, pooled over every run in
+    root that has a calibration summary, and the pooled ECE."""
+    bins = [[0, 0.0, 0.0] for _ in range(10)]  # answers, sum of predicted, true answers
+    names = []
+    for name, s, _ in runs(root, ""):
+        c = s.get("calibration")
+        if not c:
+            continue
+        names.append(name)
+        for k, b in enumerate(c["bins"]):
+            bins[k][0] += b["answers"]
+            bins[k][1] += b["mean_predicted"] * b["answers"]
+            bins[k][2] += b["observed_true"] * b["answers"]
+    n = sum(b[0] for b in bins)
+    out = [f"Pooled over {len(names)} runs ({', '.join(names)}): {n} answers.", "",
+           "| p | answers | mean predicted | observed share true |", "|---|---|---|---|"]
+    ece = 0.0
+    for k, (m, pred, obs) in enumerate(bins):
+        if m:
+            ece += m / n * abs(pred / m - obs / m)
+        out.append(f"| {k / 10:.1f}-{(k + 1) / 10:.1f} | {m} | {f3(pred / m) if m else '-'} | {f3(obs / m) if m else '-'} |")
+    out += ["", f"ECE {ece:.4f}." if n else "No answers."]
+    return out
+
+
 def main():
-    if len(sys.argv) == 4 and sys.argv[1] == "--splice":
+    if len(sys.argv) == 3 and sys.argv[1] == "--reliability":
+        sys.stdout.write("\n".join(reliability(sys.argv[2])) + "\n")
+    elif len(sys.argv) == 4 and sys.argv[1] == "--splice":
         sys.stdout.write(splice(sys.argv[2], sys.argv[3]))
     elif len(sys.argv) == 2 and os.path.isdir(sys.argv[1]):
         sys.stdout.write("\n".join(section(sys.argv[1])))

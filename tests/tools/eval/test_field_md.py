@@ -96,6 +96,24 @@ def main():
         broken = subprocess.run([sys.executable, FIELD_MD, "--splice", results, root], capture_output=True, text=True)
         check(broken.returncode != 0 and "missing" in broken.stderr, "a file with one marker is refused")
 
+    # The reliability table pools the runs' calibration bins: 10 answers at 0.05 with 1 true and 30 at 0.95 with
+    # 27 true in one run, 10 more at 0.95 with 10 true in another.
+    def calibrated(bins):
+        c = [{"low": k / 10, "answers": 0, "mean_predicted": 0.0, "observed_true": 0.0} for k in range(10)]
+        for k, n, pred, obs in bins:
+            c[k] = {"low": k / 10, "answers": n, "mean_predicted": pred, "observed_true": obs}
+        return {"calibration": {"answers": sum(b[1] for b in bins), "ece": 0.0, "bins": c}}
+
+    with tempfile.TemporaryDirectory() as root:
+        write_run(root, "sequence-07", calibrated([(0, 10, 0.05, 0.1), (9, 30, 0.95, 0.9)]), {})
+        write_run(root, "sequence-09", calibrated([(9, 10, 0.95, 1.0)]), {})
+        write_run(root, "no-calibration", {"queries": 1}, {})
+        table = run("--reliability", root)
+        check("Pooled over 2 runs" in table and "50 answers" in table, f"pools the runs with a calibration: {table!r}")
+        check("| 0.9-1.0 | 40 | 0.950 | 0.925 |" in table, f"pooled bin: {table!r}")
+        # ECE = 10/50 x |0.05 - 0.1| + 40/50 x |0.95 - 0.925| = 0.01 + 0.02
+        check("ECE 0.0300." in table, f"pooled ECE: {table!r}")
+
     for f in failures:
         print("FAIL:", f)
     print(f"field_md: {len(failures)} failure(s)")
