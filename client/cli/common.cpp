@@ -148,6 +148,7 @@ json candidateJson(const v1::Candidate& c) {
   j["T"] = transformJson(c.t_query_candidate());
   if (c.information_size() > 0) j["information"] = std::vector<double>(c.information().begin(), c.information().end());
   if (c.has_evidence()) j["evidence"] = evidenceJson(c.evidence());
+  if (!c.reason().empty()) j["reason"] = c.reason();
   return j;
 }
 
@@ -177,7 +178,8 @@ std::string candidateText(const v1::Candidate& c) {
     ss << c.probability();
   else
     ss << "unknown";
-  ss << ", " << c.inliers() << " inliers" << (c.verified() ? "" : ", NOT verified") << ", "
+  ss << ", " << c.inliers() << " inliers"
+     << (c.verified() ? "" : ", NOT verified" + (c.reason().empty() ? std::string() : " (" + c.reason() + ")")) << ", "
      << poseText(c.t_query_candidate());
   if (c.has_evidence()) ss << "\n      evidence " << evidenceJson(c.evidence()).dump();
   return ss.str();

@@ -52,6 +52,7 @@ void toWire(const std::vector<closing::FoundLoop>& loops, google::protobuf::Repe
     c->set_seq(loop.seq);
     c->set_score(r.score);
     c->set_probability(r.probability);
+    c->set_reason(r.reason);
     if (include_evidence) toWire(r.evidence, c->mutable_evidence());
     c->set_verified(r.is_loop);
     c->set_inliers(r.inliers);

@@ -365,6 +365,8 @@ grpc::Status MapAdminService::GetServerInfo(grpc::ServerContext* ctx, const v1::
     resp->set_max_streams_per_client(limits.streams.max_per_client);
     resp->set_stream_idle_timeout_s(std::chrono::duration<double>(limits.streams.idle_timeout).count());
     resp->set_max_inflight_bytes(static_cast<std::int64_t>(limits.max_inflight_bytes));
+    resp->set_loop_model(state_.pipeline().model().version());
+    resp->set_min_probability(config.verify.min_probability);
   });
 }
 

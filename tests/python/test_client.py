@@ -70,6 +70,7 @@ def test_service_flow(client, kitti, reference_pose):
     info = client.server_info()
     assert info.label_preset == "semantickitti" and info.labeller_mode == "auto" and info.version
     assert info.node_classes == ["vehicle", "trunk", "pole"] and info.label_ids["road"] and info.max_points > 0
+    assert info.loop_model and 0 < info.min_probability <= 1, (info.loop_model, info.min_probability)
     assert client.create_map("py").name == "py"
     client.ensure_map("py")  # idempotent
     assert [m.name for m in client.list_maps()] == ["py"]
@@ -94,6 +95,8 @@ def test_service_flow(client, kitti, reference_pose):
     assert hit[0].probability is not None and 0.0 <= hit[0].probability <= 1.0 and hit[0].evidence is None
     q = client.query("py", scan_id=a.scan_id, scope="other", include_evidence=True, include_rejected=True)
     assert q.candidates and all(isinstance(x.evidence, sglc.Evidence) for x in q.candidates)
+    # A loop has no reason; a rejected candidate says why (the evidence that fell shortest, or no pose).
+    assert all((x.reason == "") == x.verified for x in q.candidates), [(x.verified, x.reason) for x in q.candidates]
     dt, dr = pose_error(hit[0].T, reference_pose)
     assert dt < 0.2 and dr < 1.0
     q = client.query("py", points=p4501, labels=l4501, top_k=5)  # relocalization: a scan not stored

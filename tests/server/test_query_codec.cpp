@@ -15,6 +15,7 @@ closing::FoundLoop found(bool is_loop, double probability) {
   f.session = "s";
   f.seq = 7;
   f.result.is_loop = is_loop;
+  f.result.reason = is_loop ? "" : "loop probability below verify.min_probability; weakest evidence: pin";
   f.result.probability = probability;
   f.result.score = 0.25;
   auto& e = f.result.evidence;
@@ -44,6 +45,9 @@ TEST(QueryCodec, ProbabilityAlwaysEvidenceOnRequest) {
   EXPECT_EQ(plain[1].probability(), 0.125);
   EXPECT_FALSE(plain[0].has_evidence());
   EXPECT_FALSE(plain[1].verified());
+  // The rejected one says why, with or without its evidence; a loop has no reason.
+  EXPECT_EQ(plain[0].reason(), "");
+  EXPECT_EQ(plain[1].reason(), "loop probability below verify.min_probability; weakest evidence: pin");
   for (const auto& c : full) {  // the rejected candidate carries its evidence as the loop does
     ASSERT_TRUE(c.has_evidence());
     const auto& e = c.evidence();

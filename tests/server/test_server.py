@@ -251,6 +251,11 @@ def test_unlabelled_scans(tmp):
         assert info.label_preset == "semantickitti" and info.labeller_mode == "auto", info
         assert [c.name for c in info.node_classes] == ["vehicle", "trunk", "pole"] and list(info.road) == [40]
         assert info.descriptor_dim > 0 and info.max_points > 0 and "labeller:" in info.engine_config
+        # The loop model's version (the built-in file's version line) and the bar it is held to.
+        with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "core", "models",
+                               "loop_model.txt")) as f:
+            version = next(l.split()[1] for l in f if l.startswith("version "))
+        assert info.loop_model == version and "min_probability: " + repr(info.min_probability) in info.engine_config, info
         s.admin.CreateMap(pb.CreateMapRequest(name="m"))
         if HAVE_DATA:
             a, b = load_scan("000052"), load_scan("004501")

@@ -61,7 +61,7 @@ EVIDENCE_SOURCES = {pb2.EVIDENCE_SOURCE_NONE: "none", pb2.EVIDENCE_SOURCE_LANDMA
 
 @dataclass
 class Evidence:
-    """What the loop model measured at a candidate's pose (sglc.proto's Evidence; docs/METHOD.md section 7).
+    """What the loop model measured at a candidate's pose (sglc.proto's Evidence; docs/METHOD.md section 8).
     source: "landmarks", "consensus", "walls", "view" or "none" (where the pose hypothesis came from)."""
     source: str
     landmarks: int
@@ -106,12 +106,13 @@ class Loop:
     descriptor_distance: float
     probability: Optional[float] = None  # the loop model's probability (0..1); None from an older server
     evidence: Optional[Evidence] = None  # with query_options(include_evidence=True)
+    reason: str = ""                     # why a rejected candidate is not a loop (empty for loops)
 
     @classmethod
     def from_proto(cls, m) -> "Loop":
         return cls(m.scan_id, m.robot, m.session, m.seq, m.score, m.verified, m.refined, m.inliers, m.fitness,
                    m.rmse, matrix(m.t_query_candidate), information(m.information), m.descriptor_distance,
-                   _probability(m), Evidence.from_proto(m.evidence) if m.HasField("evidence") else None)
+                   _probability(m), Evidence.from_proto(m.evidence) if m.HasField("evidence") else None, m.reason)
 
 
 @dataclass
@@ -242,6 +243,8 @@ class ServerInfo:
     max_streams_per_client: int
     stream_idle_timeout_s: float
     max_inflight_bytes: int
+    loop_model: str           # the loop model's version
+    min_probability: float    # the probability a loop needs
 
     @classmethod
     def from_proto(cls, m) -> "ServerInfo":
@@ -250,7 +253,7 @@ class ServerInfo:
             ids[role] = list(getattr(m, role))
         return cls(m.version, m.label_preset, [c.name for c in m.node_classes], ids, m.labeller_mode,
                    m.engine_config, m.descriptor_dim, m.max_points, m.max_message_bytes, m.max_streams_per_client,
-                   m.stream_idle_timeout_s, m.max_inflight_bytes)
+                   m.stream_idle_timeout_s, m.max_inflight_bytes, m.loop_model, m.min_probability)
 
 
 @dataclass
