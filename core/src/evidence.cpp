@@ -1,4 +1,4 @@
-// The evidence record (docs/METHOD.md, section 7): every measure at a pose, one definition each.
+// The evidence record (docs/METHOD.md, section 8): every measure at a pose, one definition each.
 #include "sglc/evidence.hpp"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// Where pose hypotheses come from (docs/METHOD.md, section 7): the landmarks (RANSAC over descriptor matches, or
+// Where pose hypotheses come from (docs/METHOD.md, section 8): the landmarks (RANSAC over descriptor matches, or
 // over pairs found by geometric consensus in small graphs) and the background (bird's-eye overlays at the
 // walls' headings, or at a narrow view's context heading). Private to verification.cpp.
 #pragma once

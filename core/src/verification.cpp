@@ -1,5 +1,5 @@
 // Pipeline::verify: pose hypotheses from their sources, each refined by one guarded plane fit, the evidence at
-// each, and one decision: the loop model's probability (docs/METHOD.md, section 7).
+// each, and one decision: the loop model's probability (docs/METHOD.md, section 8).
 #include <algorithm>
 #include <cmath>
 #include <string>

@@ -1,4 +1,4 @@
-// The evidence for a loop, measured the same way for every pose hypothesis (docs/METHOD.md, section 7): what
+// The evidence for a loop, measured the same way for every pose hypothesis (docs/METHOD.md, section 8): what
 // the landmarks, the background's bird's-eye view, its planes and the view context say about a candidate pose
 // T_q_c. The loop decision is one model over this record (sglc/loop_model.hpp); nothing else decides.
 #pragma once

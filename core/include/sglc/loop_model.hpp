@@ -1,4 +1,4 @@
-// The loop decision (docs/METHOD.md, section 7): one model maps the evidence for a pose (sglc/evidence.hpp) to
+// The loop decision (docs/METHOD.md, section 8): one model maps the evidence for a pose (sglc/evidence.hpp) to
 // the probability that the loop is true, a logistic regression over fixed transforms of the record. The
 // weights are fitted from simulated training worlds by tools/calibrate (reproducibly, from a command) and
 // shipped as a small text file, core/models/loop_model.txt, built into the engine; verify.model names another.
