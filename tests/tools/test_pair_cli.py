@@ -51,6 +51,9 @@ for key, kind in [("is_loop", bool), ("score", float), ("inliers", int), ("T_a_b
 check(len(out["T_a_b"]) == 16 and out["T_a_b"][12:] == [0, 0, 0, 1], "T_a_b is a row-major 4x4 rigid transform")
 check(set(out["timings_ms"]) == {"fingerprint_a", "fingerprint_b", "verify", "refine"}, "timings_ms has the four stages")
 check(out["is_loop"] is True, "52-4501 is a loop")
+check(isinstance(out.get("probability"), float) and out["probability"] == out["score"], "the score is the probability")
+check(out.get("evidence", {}).get("source") == "landmarks" and out["evidence"]["landmarks"] >= 3,
+      f"the evidence names its source and landmarks: {out.get('evidence')}")
 out_loop = out
 if ref:
     T = out["T_a_b"]

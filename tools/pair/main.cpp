@@ -22,6 +22,7 @@ nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fi
                                   const sglc::ScanReport& report_b, const std::array<double, 4>& ms) {
   nlohmann::ordered_json out;
   out["is_loop"] = result.is_loop;
+  out["probability"] = result.probability;
   out["score"] = result.score;
   out["inliers"] = result.inliers;
   std::vector<double> T(16);
@@ -34,6 +35,20 @@ nlohmann::ordered_json resultJson(const sglc::LoopResult& result, const sglc::Fi
   out["fitness"] = result.fitness;
   out["rmse"] = result.rmse;
   if (!result.is_loop) out["reason"] = std::string(result.reason);
+  // What the probability came from (sglc/evidence.hpp), at verification's pose.
+  const auto& e = result.evidence;
+  out["evidence"] = {{"source", sglc::poseSourceName(e.source)},
+                     {"landmarks", e.landmarks},
+                     {"landmark_similarity", e.landmark_similarity},
+                     {"field_deg", e.field_deg},
+                     {"agreement", e.agreement},
+                     {"wide_agreement", e.wide_agreement},
+                     {"pin", e.pin},
+                     {"plane_overlap", e.plane_overlap},
+                     {"plane_rmse_m", e.plane_rmse_m},
+                     {"constraint", e.constraint},
+                     {"context_similarity", e.context_similarity},
+                     {"translation_m", e.translation_m}};
   auto source = [](const sglc::ScanReport& r) {
     return r.label_source == sglc::ScanReport::LabelSource::kComputed    ? "computed"
            : r.label_source == sglc::ScanReport::LabelSource::kCompleted ? "completed"
