@@ -66,13 +66,12 @@ mkdir -p "$abl"
 declare -A NOISY=(
   [default]=""
   [no-prune-fallback]="match: {prune_min_kept: 0}"
-  [no-plane-confirm]="verify: {confirm_below_inliers: 0}"
+  [no-plane-fit]="verify: {fit_max_shift_m: 0}"
   [keep-fragments]="graph: {min_extent_m: 0}"
-  [bev-50m]="verify: {bev_radius_m: 50}"
-  [no-proximity]="verify: {score_distance_m: 0}"
+  [no-background-sources]="verify: {background_max_nodes: 0}"
   [anchor-everywhere]="refine: {min_information: 1000000000}"
 )
-for name in default no-prune-fallback no-plane-confirm keep-fragments bev-50m no-proximity anchor-everywhere; do
+for name in default no-prune-fallback no-plane-fit keep-fragments no-background-sources anchor-everywhere; do
   echo "== ablation at 5 % noise: $name" >&2
   printf '%s\n' "${NOISY[$name]}" > "$abl/$name.yaml"
   "$EVAL" --protocol sequence --sim --frames ::3 --label-noise 0.05 --config "$abl/$name.yaml" \

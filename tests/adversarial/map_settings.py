@@ -5,7 +5,7 @@ Part 1 (a SQLite map): a server with the default settings creates map m and stor
 another label preset, then with another labeller setting, it answers Ingest, IngestStream and Query (by scan and
 by scan id) FAILED_PRECONDITION naming the first differing key with the map's value and its own, stores nothing,
 and still serves GetStats, ListMaps and ListRobots, and a new map of its own; restarted with another
-verification setting only (engine.verify.t_g) it ingests and queries m as before.
+verification setting only (engine.verify.min_probability) it ingests and queries m as before.
 
 Part 2 (two replicas on the storage tests' PostgreSQL cluster, when there is one): replica 0 (defaults) creates
 m; replica 1 (nuScenes preset), started before the map was created, and replica 2 (nuScenes), started after,
@@ -33,7 +33,7 @@ import adv_harness as h  # noqa: E402
 
 NUSCENES = ["--set", "engine.labels.preset=nuscenes"]
 CELL = ["--set", "engine.labeller.cell_m=0.3"]
-VERIFY_ONLY = ["--set", "engine.verify.t_g=0.7"]
+VERIFY_ONLY = ["--set", "engine.verify.min_probability=0.7"]
 problems = []
 
 

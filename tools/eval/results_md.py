@@ -299,10 +299,9 @@ def main():
     noisy = [(name, what) for name, what in [
         ("default", "defaults"),
         ("no-prune-fallback", "no fallback when pruning keeps too few matches (`match.prune_min_kept: 0`)"),
-        ("no-plane-confirm", "no plane confirmation of weak loops (`verify.confirm_below_inliers: 0`)"),
+        ("no-plane-fit", "no plane fit of the pose hypotheses (`verify.fit_max_shift_m: 0`)"),
         ("keep-fragments", "fragments kept as nodes (`graph.min_extent_m: 0`)"),
-        ("bev-50m", "background agreement out to 50 m (`verify.bev_radius_m: 50`)"),
-        ("no-proximity", "no proximity factor in the score (`verify.score_distance_m: 0`)"),
+        ("no-background-sources", "no pose hypotheses from the background (`verify.background_max_nodes: 0`)"),
         ("anchor-everywhere", "instance pairs anchor every direction (`refine.min_information: 1e9`)")]
         if load(os.path.join(root, "ablation-noise", name, "summary.json"))]
     if noisy:
