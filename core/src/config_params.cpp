@@ -7,7 +7,7 @@ namespace {
 
 using namespace params;
 
-// "verify.t_g" and an accessor of config.verify.t_g, from one spelling of the path.
+// "verify.min_probability" and an accessor of config.verify.min_probability, from one spelling of the path.
 #define SGLC_KEY(path) \
 #path, [](auto& c) -> auto& { return c.path; }
 

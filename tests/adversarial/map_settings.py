@@ -126,7 +126,8 @@ def part_older_map(tmp):
     ingest(s, 0)
     s.stop()
     con = sqlite3.connect(db)
-    con.executescript("DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash; PRAGMA user_version=6;")
+    con.executescript("DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash; "
+                      "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=6;")
     con.close()
     s = h.Server(db, CELL)
     check("older_map.recorded_and_logged", logged(s, "map_settings_recorded", map="m"), h.short(s.log_tail(3), 300))

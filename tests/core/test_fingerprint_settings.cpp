@@ -26,7 +26,8 @@ TEST(FingerprintSettings, ListsEveryShapingKeyOfTheRegistryAndNoOther) {
         << key;
   }
   EXPECT_EQ(s.values.front(), (Setting{"labels.preset", "semantickitti"}));
-  for (const char* key : {"verify.t_g", "match.max_distance_m", "ransac.seed", "refine.max_iterations", "path"})
+  for (const char* key :
+       {"verify.min_probability", "match.max_distance_m", "ransac.seed", "refine.max_iterations", "path"})
     EXPECT_FALSE(shapesFingerprints(key)) << key;
   EXPECT_FALSE(shapesFingerprints("labelsx.preset"));
   EXPECT_FALSE(shapesFingerprints("labels"));
@@ -67,8 +68,10 @@ TEST(FingerprintSettings, AShapingChangeChangesTheHashAndIsNamed) {
 
 TEST(FingerprintSettings, VerificationSettingsDoNotCount) {
   const auto base = fingerprintSettings(Config{});
-  for (const auto& [key, value] : std::vector<std::pair<std::string, params::Value>>{
-           {"verify.t_g", 0.7}, {"ransac.seed", std::uint64_t{7}}, {"refine.max_iterations", std::int64_t{3}}}) {
+  for (const auto& [key, value] :
+       std::vector<std::pair<std::string, params::Value>>{{"verify.min_probability", 0.7},
+                                                          {"ransac.seed", std::uint64_t{7}},
+                                                          {"refine.max_iterations", std::int64_t{3}}}) {
     const auto other = fingerprintSettings(with(key, value));
     EXPECT_EQ(other, base) << key;
     EXPECT_FALSE(firstDifference(base, other)) << key;

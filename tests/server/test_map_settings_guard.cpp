@@ -58,7 +58,7 @@ TEST(MapSettingsGuard, RefusesAMapOfOtherSettingsNamingTheKeyAndBothValues) {
   EXPECT_EQ(verdictOf(guard, *store, "n").first, "OK");
   // A server with the map's settings, verification settings apart, may use it.
   EXPECT_EQ(verdictOf(MapSettingsGuard(kDefaults), *store, "m").first, "OK");
-  EXPECT_EQ(verdictOf(MapSettingsGuard(settingsWith("verify.t_g", 0.7)), *store, "m").first, "OK");
+  EXPECT_EQ(verdictOf(MapSettingsGuard(settingsWith("verify.min_probability", 0.7)), *store, "m").first, "OK");
 }
 
 TEST(MapSettingsGuard, AMapWithoutSettingsGetsThisServersOnFirstUse) {

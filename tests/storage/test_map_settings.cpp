@@ -121,9 +121,12 @@ TEST_P(MapSettingsStore, MigrationLeavesOlderMapsForTheFirstRecorder) {
     store->createMap("old", static_cast<int>(fp.descriptor.size()));
     store->addScan({.map = "old", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
   }
+  // Schema 6 (PostgreSQL 2) had neither the settings nor the loops' probability (schema 8 / 4).
   exec(db().postgres() ? "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
+                         " ALTER TABLE loops DROP COLUMN probability;"
                          " UPDATE sglc_meta SET value = '2' WHERE key = 'schema_version'"
-                       : "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash; PRAGMA user_version=6;");
+                       : "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
+                         " ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=6;");
   auto store = open(kNuscenes);
   EXPECT_EQ(store->mapSettings("old"), std::nullopt);
   EXPECT_EQ(store->recordSettings(), std::vector<std::string>{"old"});

@@ -149,7 +149,7 @@ void Table<Root>::nestInto(Table<Outer>& outer, const std::string& prefix, At at
 }
 
 // ---- Declaring a setting: the field's type gives its kind. `at` is a generic lambda returning the field,
-// `[](auto& c) -> auto& { return c.verify.t_g; }`, so one accessor serves reading and writing.
+// `[](auto& c) -> auto& { return c.verify.min_probability; }`, so one accessor serves reading and writing.
 
 template <class T>
 struct KindOf;
