@@ -1,6 +1,7 @@
 #include "sglc/loop_model.hpp"
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 
@@ -115,12 +116,18 @@ LoopModel LoopModel::parse(const std::string& text, const std::string& origin) {
 
 LoopModel LoopModel::load(const std::string& path) {
   if (path.empty()) return builtIn();
+  // A regular file, read no further than the limit: a device, a pipe or a huge file is refused, never read whole.
+  constexpr std::size_t kMaxBytes = 65536;
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw InputError("loop model " + path + " is not a regular file" + (ec ? " (" + ec.message() + ")" : ""));
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError("cannot read the loop model " + path);
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (text.str().size() > 65536) throw InputError("loop model " + path + " is larger than 64 KiB");
-  return parse(text.str(), path);
+  std::string text(kMaxBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxBytes) throw InputError("loop model " + path + " is larger than 64 KiB");
+  return parse(text, path);
 }
 
 double LoopModel::probability(const Evidence& e) const {

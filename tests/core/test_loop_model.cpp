@@ -121,6 +121,19 @@ TEST(LoopModel, LoadsAFileAndTheEngineUsesIt) {
   EXPECT_EQ(LoopModel::load("").version(), LoopModel::builtIn().version());
   EXPECT_EQ(LoopModel::load(dir.file("m.txt")).version(), "t-1");
   EXPECT_THROW(LoopModel::load(dir.file("absent.txt")), InputError);
+  // Not a regular file, or too large: refused without reading it whole.
+  EXPECT_THROW(LoopModel::load(dir.path().string()), InputError);
+  EXPECT_THROW(LoopModel::load("/dev/zero"), InputError);
+  {
+    std::ofstream out(dir.file("big.txt"));
+    out << modelText(0.0) << std::string(70000, '#') << "\n";
+  }
+  try {
+    LoopModel::load(dir.file("big.txt"));
+    ADD_FAILURE() << "a 70 KB model file was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("larger than 64 KiB"), std::string::npos) << e.what();
+  }
   Config c;
   c.verify.model = dir.file("m.txt");
   const Pipeline p(c);
