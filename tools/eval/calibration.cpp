@@ -22,24 +22,37 @@ void CalibrationLog::add(int query, const Candidate& c, const Mat4d* gt) {
   bool chosen_done = false;
   for (const auto& h : c.considered) {
     const auto err = poseError(h.T, *gt);
-    const bool is_true = err.rte_m < kTrueRteM && err.rre_deg < kTrueRreDeg;
     // The answer: the first hypothesis with the candidate's probability.
     const bool chosen = !chosen_done && h.probability == c.probability;
     chosen_done = chosen_done || chosen;
-    const auto& e = h.evidence;
-    csv_ << query << "," << c.frame << "," << poseSourceName(e.source) << "," << int(chosen) << "," << h.probability
-         << "," << int(is_true) << "," << err.rte_m << "," << err.rre_deg << "," << e.landmarks << ","
-         << e.landmark_similarity << "," << e.field_deg << "," << e.agreement << "," << e.wide_agreement << "," << e.pin
-         << "," << e.plane_overlap << "," << e.plane_rmse_m << "," << e.constraint << "," << e.context_similarity << ","
-         << e.translation_m << "," << int(e.narrow);
-    for (const double x : featureValues(e)) csv_ << "," << x;
-    csv_ << "\n";
-    if (!chosen) continue;
-    auto& b = bins_[std::min(9, static_cast<int>(h.probability * 10.0))];
-    ++b.n;
-    b.positives += is_true;
-    b.predicted += h.probability;
+    row(query, c, h, chosen, err.rte_m < kTrueRteM && err.rre_deg < kTrueRreDeg, err.rte_m, err.rre_deg);
   }
+}
+
+void CalibrationLog::addFalse(int query, const Candidate& c) {
+  bool chosen_done = false;
+  for (const auto& h : c.considered) {
+    const bool chosen = !chosen_done && h.probability == c.probability;
+    chosen_done = chosen_done || chosen;
+    row(query, c, h, chosen, false, std::nan(""), std::nan(""));
+  }
+}
+
+void CalibrationLog::row(int query, const Candidate& c, const LoopResult::Judged& h, bool chosen, bool is_true,
+                         double rte_m, double rre_deg) {
+  const auto& e = h.evidence;
+  csv_ << query << "," << c.frame << "," << poseSourceName(e.source) << "," << int(chosen) << "," << h.probability
+       << "," << int(is_true) << "," << rte_m << "," << rre_deg << "," << e.landmarks << "," << e.landmark_similarity
+       << "," << e.field_deg << "," << e.agreement << "," << e.wide_agreement << "," << e.pin << "," << e.plane_overlap
+       << "," << e.plane_rmse_m << "," << e.constraint << "," << e.context_similarity << "," << e.translation_m << ","
+       << int(e.narrow);
+  for (const double x : featureValues(e)) csv_ << "," << x;
+  csv_ << "\n";
+  if (!chosen) return;
+  auto& b = bins_[std::min(9, static_cast<int>(h.probability * 10.0))];
+  ++b.n;
+  b.positives += is_true;
+  b.predicted += h.probability;
 }
 
 void CalibrationLog::summarise(ordered_json& summary) const {

@@ -23,6 +23,8 @@ class CalibrationLog {
   explicit CalibrationLog(const std::string& evidence_csv);
   // One candidate of query frame `query`; ground_truth is its T_q_c (null: unknown, not counted).
   void add(int query, const Candidate& candidate, const Mat4d* ground_truth);
+  // A candidate known to be no loop (a listed negative pair): every hypothesis is false.
+  void addFalse(int query, const Candidate& candidate);
   // "calibration": answers, true answers, ECE and the 10 bins; also writes calibration.csv beside evidence.csv.
   void summarise(ordered_json& summary) const;
 
@@ -31,6 +33,8 @@ class CalibrationLog {
     std::size_t n = 0, positives = 0;
     double predicted = 0;
   };
+  void row(int query, const Candidate& c, const LoopResult::Judged& h, bool chosen, bool is_true, double rte_m,
+           double rre_deg);
   std::string dir_;
   std::ofstream csv_;
   Bin bins_[10];

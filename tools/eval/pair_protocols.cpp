@@ -3,6 +3,7 @@
 #include <iomanip>
 #include <map>
 
+#include "calibration.hpp"
 #include "progress.hpp"
 #include "protocols.hpp"
 
@@ -67,6 +68,7 @@ void pairProtocol(Run& run, const std::vector<PairRow>& file_rows) {
   Progress bar("verify", rows.size());
   std::size_t n = 0;
   Timings verify_times;
+  CalibrationLog log(run.out + "/evidence.csv");
   for (const auto& [q, ks] : by_query) {
     std::vector<int> cands;
     for (auto k : ks) cands.push_back(rows[k].j);
@@ -78,6 +80,13 @@ void pairProtocol(Run& run, const std::vector<PairRow>& file_rows) {
     for (auto k : ks) {
       const auto& c = by_frame.at(rows[k].j);
       decisions[k] = {c.verified ? c.score : 0.0, rows[k].label == 1, rows[k].label == 1};
+      // A listed negative is no loop at any pose; a positive's poses are judged where its ground truth is known.
+      if (rows[k].label != 1)
+        log.addFalse(q, c);
+      else if (rows[k].T || (run.source.hasPose(rows[k].i) && run.source.hasPose(rows[k].j))) {
+        const Mat4d gt = groundTruth(run, rows[k], false);
+        log.add(q, c, &gt);
+      }
     }
     bar.step(n += ks.size());
   }
@@ -89,6 +98,7 @@ void pairProtocol(Run& run, const std::vector<PairRow>& file_rows) {
   run.summary["positives"] = pos;
   run.summary["negatives"] = decisions.size() - pos;
   run.summary["verify_timings"] = verify_times.json();
+  log.summarise(run.summary);
 }
 
 void poseProtocol(Run& run, const std::vector<PairRow>& file_rows, bool gt_from_file) {
@@ -102,6 +112,7 @@ void poseProtocol(Run& run, const std::vector<PairRow>& file_rows, bool gt_from_
   csv << "i,j,registered,verified,rte_m,rre_deg\n" << std::setprecision(9);
   Progress bar("register", rows.size());
   Timings reg_times;
+  CalibrationLog log(run.out + "/evidence.csv");
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const auto& r = rows[k];
     const Mat4d gt = groundTruth(run, r, gt_from_file);
@@ -110,6 +121,7 @@ void poseProtocol(Run& run, const std::vector<PairRow>& file_rows, bool gt_from_
     // paper's protocol registers every listed pair); `verified` keeps the loop decision.
     const auto c = run.backend.verify(r.i, {r.j}, Refine::known_loops, &t).at(0);
     reg_times.add(t);
+    log.add(r.i, c, &gt);
     RegistrationResult res;
     res.registered = c.refined;
     res.verified = c.verified;
@@ -122,6 +134,7 @@ void poseProtocol(Run& run, const std::vector<PairRow>& file_rows, bool gt_from_
   registrationSummary(run.summary, results);
   run.summary["pose_gt"] = gt_from_file ? "pair file" : "poses";
   run.summary["register_timings"] = reg_times.json();
+  log.summarise(run.summary);
 }
 
 }  // namespace sglc::eval
