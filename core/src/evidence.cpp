@@ -31,8 +31,7 @@ double pinAlong(const Fingerprint& query, const Fingerprint& candidate, const Pa
     Mat4d M = Mat4d::Identity();
     M.topLeftCorner<3, 3>() = Eigen::AngleAxisd(s * turn, Vec3d::UnitZ()).toRotationMatrix();
     M.topRightCorner<2, 1>() = s * shift;
-    smallest =
-        std::min(smallest, here - fieldAgreement(query, candidate, view, Mat4d(M * T), kNearCellM, kNearRadiusM));
+    smallest = std::min(smallest, here - nearAgreement(query, candidate, view, Mat4d(M * T)));
   }
   return smallest;
 }
@@ -83,6 +82,10 @@ double fieldAgreement(const Fingerprint& query, const Fingerprint& candidate, co
                       classes, field);
 }
 
+double nearAgreement(const Fingerprint& query, const Fingerprint& candidate, const PairView& view, const Mat4d& T_q_c) {
+  return fieldAgreement(query, candidate, view, T_q_c, kNearCellM, kNearRadiusM);
+}
+
 double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const Mat4d& T, double max_z,
                    const RefineConfig& config) {
   std::size_t in_query = 0, in_candidate = 0, explained = 0;
@@ -95,7 +98,8 @@ double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const
     ++in_candidate;
     const int q = query.plane_index.nearest(query.planes, R * p.centroid + t, R * p.normal, config.max_corr_m,
                                             config.min_normal_cosine);
-    if (q < 0) continue;
+    // Only the band's planes count on either side: the share stays within [0, 1].
+    if (q < 0 || query.planes[static_cast<std::size_t>(q)].centroid.z() > max_z) continue;
     ++explained;
     reached[static_cast<std::size_t>(q)] = true;
   }
@@ -146,7 +150,7 @@ Evidence measureEvidence(const Fingerprint& query, const Fingerprint& candidate,
   double mean = 0.0;
   e.landmarks = landmarksAt(query, candidate, T, config.ransac.inlier_threshold, &mean);
   e.landmark_similarity = e.landmarks ? std::exp(-mean) : 0.0;
-  e.agreement = fieldAgreement(query, candidate, view, T, kNearCellM, kNearRadiusM);
+  e.agreement = nearAgreement(query, candidate, view, T);
   e.wide_agreement = fieldAgreement(query, candidate, view, T, kWideCellM, kWideRadiusM);
   e.context_similarity = view.narrow ? view.context.similarity : 0.0;
   if (!planes || planes->iterations == 0) return e;

@@ -1,8 +1,10 @@
 #include "sglc/loop_model.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace sglc {
@@ -56,61 +58,108 @@ LoopModel LoopModel::builtIn() {
   return model;
 }
 
+double FeatureCurve::operator()(double x) const {
+  if (knots.empty()) return slope * x;
+  if (x <= knots.front().first) return knots.front().second;
+  if (x >= knots.back().first) return knots.back().second;
+  const auto hi = std::upper_bound(knots.begin(), knots.end(), x,
+                                   [](double v, const std::pair<double, double>& k) { return v < k.first; });
+  const auto lo = hi - 1;
+  return lo->second + (hi->second - lo->second) * (x - lo->first) / (hi->first - lo->first);
+}
+
+namespace {
+
+// A finite number filling the whole word, else nullopt.
+std::optional<double> number(const std::string& word) {
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(word, &used);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+  if (used != word.size() || !std::isfinite(v)) return std::nullopt;
+  return v;
+}
+
+}  // namespace
+
 LoopModel LoopModel::parse(const std::string& text, const std::string& origin) {
   const auto& features = modelFeatures();
   LoopModel m;
-  m.weights_.assign(features.size(), std::nan(""));
+  m.curves_.assign(features.size(), {});
+  std::vector<bool> given(features.size(), false);
   bool bias = false, header = false;
   std::istringstream in(text);
   std::string line;
-  int number = 0;
+  int number_of_line = 0;
   auto fail = [&](const std::string& what) {
-    throw InputError(origin + ", line " + std::to_string(number) + ": " + what);
+    throw InputError(origin + ", line " + std::to_string(number_of_line) + ": " + what);
   };
   while (std::getline(in, line)) {
-    ++number;
+    ++number_of_line;
     if (line.empty() || line[0] == '#') continue;
     std::istringstream words(line);
-    std::string key, value, extra;
-    words >> key >> value;
-    if (value.empty() || (words >> extra)) fail("expected 'NAME VALUE', got '" + line + "'");
+    std::string key, word;
+    std::vector<std::string> values;
+    words >> key;
+    while (words >> word) values.push_back(word);
     if (!header) {
-      if (key != "sglc-loop-model" || value != "1") fail("not an sglc loop model, version 1 ('sglc-loop-model 1')");
+      if (key != "sglc-loop-model" || values.size() != 1 || (values[0] != "1" && values[0] != "2"))
+        fail("not an sglc loop model, version 1 or 2 ('sglc-loop-model 2')");
       header = true;
       continue;
     }
-    if (key == "version") {
-      m.version_ = value;
-      continue;
-    }
-    std::size_t used = 0;
-    double w = 0;
-    try {
-      w = std::stod(value, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != value.size() || !std::isfinite(w)) fail("weight of " + key + " is not a finite number: " + value);
-    if (key == "bias") {
+    if (values.empty()) fail("expected 'NAME VALUE' or 'NAME X1:T1 X2:T2 ...', got '" + line + "'");
+    if (key == "version" || key == "bias") {
+      if (values.size() != 1) fail("expected '" + key + " VALUE', got '" + line + "'");
+      if (key == "version") {
+        m.version_ = values[0];
+        continue;
+      }
+      const auto b = number(values[0]);
+      if (!b) fail("bias is not a finite number: " + values[0]);
       if (bias) fail("bias given twice");
-      m.bias_ = w;
+      m.bias_ = *b;
       bias = true;
       continue;
     }
     std::size_t k = 0;
     while (k < features.size() && key != features[k].name) ++k;
     if (k == features.size()) fail("unknown feature '" + key + "'");
-    if (!std::isnan(m.weights_[k])) fail("feature " + key + " given twice");
-    if (w * features[k].sign < 0)
-      fail("weight of " + key + " must be " + (features[k].sign > 0 ? ">= 0" : "<= 0") +
-           " (more of it cannot make a loop " + (features[k].sign > 0 ? "less" : "more") + " likely)");
-    m.weights_[k] = w;
+    if (given[k]) fail("feature " + key + " given twice");
+    given[k] = true;
+    const int sign = features[k].sign;
+    const std::string direction =
+        sign > 0 ? "more of it cannot make a loop less likely" : "more of it cannot make a loop more likely";
+    auto& curve = m.curves_[k];
+    if (values.size() == 1 && values[0].find(':') == std::string::npos) {
+      const auto w = number(values[0]);
+      if (!w) fail("weight of " + key + " is not a finite number: " + values[0]);
+      if (*w * sign < 0) fail("weight of " + key + " must be " + (sign > 0 ? ">= 0" : "<= 0") + " (" + direction + ")");
+      curve.slope = *w;
+      continue;
+    }
+    if (values.size() < 2) fail("curve of " + key + " needs at least 2 knots X:T");
+    for (const auto& v : values) {
+      const auto colon = v.find(':');
+      const auto x = colon == std::string::npos ? std::nullopt : number(v.substr(0, colon));
+      const auto t = colon == std::string::npos ? std::nullopt : number(v.substr(colon + 1));
+      if (!x || !t) fail("knot of " + key + " is not X:T with finite numbers: " + v);
+      if (!curve.knots.empty() && *x <= curve.knots.back().first)
+        fail("knots of " + key + " must have increasing X: " + v);
+      if (!curve.knots.empty() && (*t - curve.knots.back().second) * sign < 0)
+        fail("curve of " + key + " must be " + (sign > 0 ? "non-decreasing" : "non-increasing") + " (" + direction +
+             "): " + v);
+      curve.knots.emplace_back(*x, *t);
+    }
   }
-  if (!header) fail("empty: expected 'sglc-loop-model 1'");
+  if (!header) fail("empty: expected 'sglc-loop-model 2'");
   if (m.version_.empty()) fail("no 'version' line");
   if (!bias) fail("no 'bias' line");
   for (std::size_t k = 0; k < features.size(); ++k)
-    if (std::isnan(m.weights_[k])) fail(std::string("feature ") + features[k].name + " has no weight");
+    if (!given[k]) fail(std::string("feature ") + features[k].name + " has no weight or curve");
   return m;
 }
 
@@ -134,7 +183,7 @@ double LoopModel::probability(const Evidence& e) const {
   if (e.source == PoseSource::kNone) return 0.0;
   const auto x = featureValues(e);
   double z = bias_;
-  for (std::size_t k = 0; k < x.size(); ++k) z += weights_[k] * x[k];
+  for (std::size_t k = 0; k < x.size(); ++k) z += curves_[k](x[k]);
   return 1.0 / (1.0 + std::exp(-z));
 }
 

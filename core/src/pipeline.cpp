@@ -161,7 +161,7 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
   const PairView view = pairView(query, candidate, c);
   auto evidence = [&](const Mat4d& T, double fitness, double rmse) {
     const double u = rmse / c.refine.cauchy_m;
-    return fitness * fieldAgreement(query, candidate, view, T, 2.0, 25.0) / (1.0 + u * u);
+    return fitness * nearAgreement(query, candidate, view, T) / (1.0 + u * u);
   };
   // Compared as (evidence, fitness, -rmse): ties (disjoint views agree 0) go to more planes, then the tighter
   // fit, then the earlier contender.

@@ -23,7 +23,7 @@ bool sameGeometry(const Fingerprint& a, const Fingerprint& b) {
 constexpr double kFitMinAgreement = 0.25;
 
 // The rejection reason naming the evidence that fell shortest: of the features that raise p, the one whose
-// weight x (best value - value) is largest.
+// term would gain most at its best value.
 const char* shortfall(const LoopModel& model, const Evidence& e) {
   static const std::vector<std::string> reasons = [] {
     std::vector<std::string> r;
@@ -40,7 +40,7 @@ const char* shortfall(const LoopModel& model, const Evidence& e) {
     const double best = std::string_view(features[k].name) == "constraint" ? std::log1p(100.0)
                         : std::string_view(features[k].name) == "pin"      ? 0.2
                                                                            : 1.0;
-    const double g = model.weights()[k] * (best - x[k]);
+    const double g = model.curves()[k](best) - model.curves()[k](x[k]);
     if (g > gap) {
       gap = g;
       worst = k;
@@ -58,7 +58,7 @@ void Pipeline::judge(const Fingerprint& query, const Fingerprint& candidate, con
   RefineResult planes;
   bool fitted = false;
   if (c.verify.fit_max_shift_m > 0 && c.refine.enabled &&
-      fieldAgreement(query, candidate, view, T0, 2.0, 25.0) >= kFitMinAgreement) {
+      nearAgreement(query, candidate, view, T0) >= kFitMinAgreement) {
     planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, T0, c.refine);
     fitted =
         planes.iterations > 0 && detail::movedWithin(T0, planes.T, c.verify.fit_max_shift_m, c.verify.fit_max_turn_deg);

@@ -34,7 +34,7 @@ std::string errorOf(const std::string& text) {
 TEST(LoopModel, BuiltInModelParsesAndHasAVersion) {
   const LoopModel m = LoopModel::builtIn();
   EXPECT_FALSE(m.version().empty());
-  EXPECT_EQ(m.weights().size(), modelFeatures().size());
+  EXPECT_EQ(m.curves().size(), modelFeatures().size());
   EXPECT_EQ(featureValues(Evidence{}).size(), modelFeatures().size());
 }
 
@@ -49,7 +49,7 @@ TEST(LoopModel, ParsesAndComputesTheLogistic) {
   e.translation_m = 4.0;
   double z = -3.0;
   const auto x = featureValues(e);
-  for (std::size_t k = 0; k < x.size(); ++k) z += m.weights()[k] * x[k];
+  for (std::size_t k = 0; k < x.size(); ++k) z += m.curves()[k].slope * x[k];
   EXPECT_NEAR(m.probability(e), 1.0 / (1.0 + std::exp(-z)), 1e-15);
   // No hypothesis: no probability.
   EXPECT_EQ(m.probability(Evidence{}), 0.0);
@@ -87,7 +87,7 @@ TEST(LoopModel, MoreEvidenceNeverLowersTheProbability) {
 
 TEST(LoopModel, BadFilesAreRefusedWithTheLineAndTheReason) {
   EXPECT_NE(errorOf("").find("empty"), std::string::npos);
-  EXPECT_NE(errorOf("sglc-loop-model 2\n").find("line 1: not an sglc loop model"), std::string::npos);
+  EXPECT_NE(errorOf("sglc-loop-model 3\n").find("line 1: not an sglc loop model"), std::string::npos);
   EXPECT_NE(errorOf(modelText(1.0, "wings 3\n")).find("unknown feature 'wings'"), std::string::npos);
   EXPECT_NE(errorOf(modelText(1.0, "agreement 3\n")).find("feature agreement given twice"), std::string::npos);
   EXPECT_NE(errorOf(modelText(1.0, "bias 1\n")).find("bias given twice"), std::string::npos);
@@ -109,7 +109,47 @@ TEST(LoopModel, BadFilesAreRefusedWithTheLineAndTheReason) {
   text = modelText();
   text.erase(text.find("version t-1\n"), 12);
   EXPECT_NE(errorOf(text).find("no 'version' line"), std::string::npos);
-  EXPECT_NE(errorOf(modelText(1.0, "pin 1 2\n")).find("expected 'NAME VALUE'"), std::string::npos);
+  EXPECT_NE(errorOf(modelText(1.0, "pin\n")).find("expected 'NAME VALUE'"), std::string::npos);
+  EXPECT_NE(errorOf(modelText(1.0, "bias 1 2\n")).find("expected 'bias VALUE'"), std::string::npos);
+}
+
+// A curve: linear between its knots, constant beyond them; its direction must follow the feature's sign.
+TEST(LoopModel, PiecewiseLinearCurves) {
+  std::string text = modelText();
+  text.replace(text.find("agreement 1\n"), 12, "agreement 0.2:0 0.4:1 0.6:4\n");
+  const LoopModel m = LoopModel::parse(text, "m.txt");
+  std::size_t k = 0;
+  while (std::string_view(modelFeatures()[k].name) != "agreement") ++k;
+  const auto& c = m.curves()[k];
+  EXPECT_EQ(c(0.0), 0.0);
+  EXPECT_EQ(c(0.2), 0.0);
+  EXPECT_NEAR(c(0.3), 0.5, 1e-12);
+  EXPECT_NEAR(c(0.5), 2.5, 1e-12);
+  EXPECT_EQ(c(0.6), 4.0);
+  EXPECT_EQ(c(7.0), 4.0);
+  // The model adds the curve's term: agreement 0.5 instead of 0.2 raises the log-odds by 2.5.
+  Evidence e;
+  e.source = PoseSource::kWallHeadings;
+  e.agreement = 0.2;
+  const double p0 = m.probability(e);
+  e.agreement = 0.5;
+  const double p1 = m.probability(e);
+  EXPECT_NEAR(std::log(p1 / (1 - p1)) - std::log(p0 / (1 - p0)), 2.5, 1e-9);
+
+  auto with = [&](const std::string& curve) {
+    std::string t = modelText();
+    t.replace(t.find("agreement 1\n"), 12, "agreement " + curve + "\n");
+    return errorOf(t);
+  };
+  EXPECT_NE(with("0.2:0 0.4:1 0.3:2").find("increasing X"), std::string::npos);
+  EXPECT_NE(with("0.2:0 0.2:1").find("increasing X"), std::string::npos);
+  EXPECT_NE(with("0.2:0 0.4:2 0.6:1").find("must be non-decreasing"), std::string::npos) << with("0.2:0 0.4:2 0.6:1");
+  EXPECT_NE(with("0.2:0").find("at least 2 knots"), std::string::npos);
+  EXPECT_NE(with("0.2:0 0.4").find("not X:T"), std::string::npos);
+  EXPECT_NE(with("0.2:0 0.4:inf").find("not X:T"), std::string::npos);
+  std::string t = modelText();
+  t.replace(t.find("translation -1\n"), 15, "translation 0:0 1:1\n");
+  EXPECT_NE(errorOf(t).find("curve of translation must be non-increasing"), std::string::npos) << errorOf(t);
 }
 
 TEST(LoopModel, LoadsAFileAndTheEngineUsesIt) {
@@ -169,6 +209,35 @@ TEST(Evidence, IsStrongerAtTheTruePose) {
   EXPECT_EQ(away.plane_overlap, 0.0);  // no plane fit: no plane evidence
   EXPECT_NEAR(at.translation_m, (T.topRightCorner<3, 1>().norm()), 0.05);
   EXPECT_STREQ(poseSourceName(at.source), "landmarks");
+}
+
+// Band-plane overlap is a share in [0, 1]: only planes in the band (centroid at most max_z above the sensor)
+// count on either side, so a candidate's band planes matched to query planes above the band explain nothing.
+TEST(Evidence, BandOverlapCountsTheBandOnBothSides) {
+  Fingerprint query, candidate;
+  auto wall = [](float x, float y, float z) {
+    Plane p;
+    p.centroid = Vec3f(x, y, z);
+    p.normal = Vec3f::UnitX();
+    return p;
+  };
+  // The query: one band plane at y = 0 and three above the band; the candidate: four band planes at the places
+  // of all four (its sensor stood 3 m lower).
+  query.planes = {wall(5, 0, 0), wall(5, 4, 3.5), wall(5, 8, 3.5), wall(5, 12, 3.5)};
+  candidate.planes = {wall(5, 0, 0), wall(5, 4, 0.5), wall(5, 8, 0.5), wall(5, 12, 0.5)};
+  query.plane_index = PlaneIndex(query.planes, 1.0);
+  candidate.plane_index = PlaneIndex(candidate.planes, 1.0);
+  RefineConfig rc;
+  rc.max_corr_m = 4.0;
+  Mat4d up = Mat4d::Identity();
+  up(2, 3) = 3.0;                                                     // the candidate's planes at the query's heights
+  EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, up, 1.0, rc), 1.0);  // the one band plane of the query, explained
+  // Without the lift only the plane at y = 0 meets a query band plane; the others reach planes above the band.
+  EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, Mat4d::Identity(), 1.0, rc), 1.0);
+  query.planes[0].centroid.y() = 30;  // the query's band plane elsewhere: nothing in the band is explained
+  query.plane_index = PlaneIndex(query.planes, 1.0);
+  EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, Mat4d::Identity(), 1.0, rc), 0.0);
+  EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, up, 1.0, rc), 0.0);
 }
 
 }  // namespace

@@ -3,9 +3,13 @@
 
 Each row of an evidence.csv is one pose hypothesis verification judged, with its model features (columns
 x+NAME, x-NAME, x~NAME: the sign says the weight must be >= 0, <= 0, or either) and whether its pose is true
-(column `true`). The fit is a logistic regression by Newton's method with a small L2 penalty (not on the bias);
-a weight whose sign breaks its feature's monotonicity is held at 0 and the rest refitted, until none does
-(an active set). Deterministic: the same files give the same model.
+(column `true`). The model is additive: each monotone feature's term is a piecewise-linear curve through knots
+at quantiles of its values (--knots segments over the true rows, plus the median, 90th and 99th percentile of
+all rows), written as a sum of ramps (0 below a segment, 1 above it) whose weights take the feature's sign, so
+the curve is monotone; a feature of either sign, or one with two values, keeps one weight. The fit is a
+logistic regression by Newton's method with a small L2 penalty (not on the bias); a weight whose sign breaks
+its feature's monotonicity is held at 0 and the rest refitted, until none does (an active set). Deterministic:
+the same files give the same model.
 
     tools/calibrate/fit.py --version NAME --out core/models/loop_model.txt RUN_DIR/*/evidence.csv
 
@@ -71,6 +75,44 @@ def fit(X, y, signs, l2):
         free[worst] = False
 
 
+def knots_of(X, y, signs, segments):
+    """Each feature's knots (None: one linear weight)."""
+    knots = []
+    for j in range(X.shape[1]):
+        v = X[:, j]
+        if segments == 0 or signs[j] == 0 or len(np.unique(v)) <= 2:
+            knots.append(None)
+            continue
+        qs = np.concatenate([np.percentile(v[y > 0], np.linspace(0, 100, segments + 1)), np.percentile(v, [50, 90, 99])])
+        k = np.unique(np.round(qs, 4))
+        knots.append(k if len(k) >= 2 else None)
+    return knots
+
+
+def expand(X, knots):
+    """The basis: a feature's value where it is linear, else one ramp per segment between its knots."""
+    cols, owner = [], []
+    for j, k in enumerate(knots):
+        if k is None:
+            cols.append(X[:, j])
+            owner.append(j)
+            continue
+        for a, b in zip(k[:-1], k[1:]):
+            cols.append(np.clip((X[:, j] - a) / (b - a), 0.0, 1.0))
+            owner.append(j)
+    return np.array(cols).T, np.array(owner)
+
+
+def curve_text(name, knots, w):
+    """A feature's model line: its weight, or its curve's knots X:T (T: the term at X)."""
+    if knots is None:
+        return f"{name} {0.0 if w[0] == 0 else w[0]:.6g}"
+    terms = np.concatenate([[0.0], np.cumsum(w)])
+    # Knots inside a flat stretch say nothing: keep the ends of every stretch.
+    keep = [i for i in range(len(knots)) if i in (0, len(knots) - 1) or not (terms[i - 1] == terms[i] == terms[i + 1])]
+    return name + " " + " ".join(f"{knots[i]:.6g}:{0.0 if terms[i] == 0 else terms[i]:.6g}" for i in keep)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("evidence", nargs="+")
@@ -78,10 +120,13 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--l2", type=float, default=1.0)
     ap.add_argument("--precision", type=float, default=0.99)
+    ap.add_argument("--knots", type=int, default=4, help="segments per monotone feature's curve (0: linear)")
     a = ap.parse_args()
     names, signs, X, y, groups, chosen = read(a.evidence)
-    w = fit(X, y, signs, a.l2)
-    p = 1.0 / (1.0 + np.exp(-(w[0] + X @ w[1:])))
+    knots = knots_of(X, y, signs, a.knots)
+    B, owner = expand(X, knots)
+    w = fit(B, y, signs[owner], a.l2)
+    p = 1.0 / (1.0 + np.exp(-(w[0] + B @ w[1:])))
     loss = -np.mean(y * np.log(np.maximum(p, 1e-12)) + (1 - y) * np.log(np.maximum(1 - p, 1e-12)))
     print(f"{len(y)} hypotheses, {int(y.sum())} true; log loss {loss:.4f}")
     # Each query's top-1 answer under the fitted model: the hypothesis of highest probability.
@@ -115,15 +160,17 @@ def main():
         s = top[top_file == k]
         print(f"  {a.evidence[k]}: {len(s)} queries with a hypothesis, {true_per_file[k]} with a true one")
     with open(a.out, "w") as f:
-        f.write("# The loop model (sglc/loop_model.hpp): p(true loop) = 1 / (1 + exp(-(bias + sum of weight x feature))).\n")
-        f.write("# Fitted by tools/calibrate/fit.py (logistic regression, L2 %.3g, monotone signs) from %d hypotheses\n"
-                % (a.l2, len(y)))
+        f.write("# The loop model (sglc/loop_model.hpp): p(true loop) = 1 / (1 + exp(-(bias + sum of each feature's\n")
+        f.write("# term))); a term is weight x value, or linear between knots X:T and constant beyond them.\n")
+        shape = f"{a.knots} segments per curve" if a.knots else "one weight per feature"
+        f.write("# Fitted by tools/calibrate/fit.py (logistic, %s, L2 %.3g, monotone) from %d hypotheses\n"
+                % (shape, a.l2, len(y)))
         f.write("# (%d with a true pose) in %d evidence.csv files: scripts/calibrate.sh.\n" % (int(y.sum()), len(a.evidence)))
-        f.write("sglc-loop-model 1\n")
+        f.write("sglc-loop-model 2\n")
         f.write(f"version {a.version}\n")
         f.write(f"bias {w[0]:.6g}\n")
-        for name, wj in zip(names, w[1:]):
-            f.write(f"{name} {0.0 if wj == 0 else wj:.6g}\n")
+        for j, name in enumerate(names):
+            f.write(curve_text(name, knots[j], w[1:][owner == j]) + "\n")
 
 
 if __name__ == "__main__":

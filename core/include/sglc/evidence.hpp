@@ -70,6 +70,8 @@ PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const 
 // `radius`, judged in the frame of the scan that saw less.
 double fieldAgreement(const Fingerprint& query, const Fingerprint& candidate, const PairView& view, const Mat4d& T_q_c,
                       double cell, double radius);
+// The record's `agreement`: fieldAgreement on 2 m cells within +-25 m.
+double nearAgreement(const Fingerprint& query, const Fingerprint& candidate, const PairView& view, const Mat4d& T_q_c);
 
 // The evidence at T_q_c. `planes` is the plane fit the pose came from (its T equal to T_q_c), or null when no
 // fit was made: then the plane terms stay 0.
