@@ -232,15 +232,12 @@ void addRefinement(Table<Config>& t) {
       field<Config>(SGLC_KEY(bev_search.min_correspondences), atLeast(3), "BEV search: plane pairs an overlay needs"));
   t.add(field<Config>(SGLC_KEY(view_search.enabled), {},
                       "narrow views: candidates ranked by the view context, overlays at its heading"));
-  t.add(field<Config>(SGLC_KEY(view_search.rings), closed(2, 200), "view context: rings"));
   t.add(field<Config>(SGLC_KEY(view_search.max_range_m), closed(10, 100),
                       "view context and view agreement: structure used (m)"));
   t.add(field<Config>(SGLC_KEY(view_search.max_scans), closed(1, 10000),
                       "view context: scans a narrow query is compared with (nearest by descriptor)"));
   t.add(field<Config>(SGLC_KEY(view_search.background_candidates), closed(0, 200),
                       "a narrow query's first candidates that may get background hypotheses"));
-  t.add(field<Config>(SGLC_KEY(view_search.shifts_per_heading), closed(1, 10),
-                      "narrow view's overlay search: best shifts kept at each heading step"));
 }
 
 #undef SGLC_KEY

@@ -24,7 +24,7 @@ struct LandmarkPose {
 LandmarkPose landmarkPose(const Fingerprint& query, const Fingerprint& candidate, const Config& config);
 
 // Overlay poses of the background views, best first: at the walls' headings (full views), or at the view
-// context's heading with config.view_search.shifts_per_heading shifts per heading step (narrow pairs). Empty
+// context's heading with ViewSearchConfig::shifts_per_heading (3) shifts per heading step (narrow pairs). Empty
 // when the views share no structure or heading.
 std::vector<Mat4d> overlayPoses(const Fingerprint& query, const Fingerprint& candidate, const PairView& view,
                                 const Config& config);

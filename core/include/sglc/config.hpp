@@ -206,16 +206,18 @@ struct BevSearchConfig {
 struct ViewSearchConfig {
   bool enabled = true;
   // 30 rings to 45 m (1.5 m each): single rosette frames against an HDL-64 map with the true place first, 498 of
-  // 568 on seed 11 and 476 on seed 12, against 367 and 348 with 20 rings to 30 m (120 sectors in both).
+  // 568 on seed 11 and 476 on seed 12, against 367 and 348 with 20 rings to 30 m (120 sectors in both). Part of
+  // the view context's definition: no configuration key sets it.
   int rings = 30;
   double max_range_m = 45.0;
   // The map's search returns at most 10,000 scans. Each one compared costs a fingerprint read (from the store's
   // cache when it holds it) and about 54 us of CPU; a map larger than this compares only its nearest by descriptor.
   int max_scans = 10000;
   // A narrow query's candidates that get background hypotheses (the context ranks the true place within the
-  // first 10 for 0.98 of rosette queries), and the shifts kept at each heading step of its overlay search
-  // (walls along a street overlay alike all along it).
+  // first 10 for 0.98 of rosette queries).
   int background_candidates = 10;
+  // The shifts kept at each heading step of a narrow view's overlay search (walls along a street overlay alike
+  // all along it): part of the `view` source's definition: no configuration key sets it.
   int shifts_per_heading = 3;
 };
 
