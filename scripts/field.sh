@@ -9,6 +9,7 @@
 #   RELOC_SEQ=09 scripts/field.sh            # the relocalization map and queries on another path (default 00)
 #   CONFIG=engine.yaml SPLICE=0 scripts/field.sh  # another engine configuration; leave docs/RESULTS.md alone
 #   NO_LABELS=1                              # the sequence parts without labels (the engine's labeller)
+#   SEQ_SENSOR=hdl32                         # the sequence parts with another sensor preset (default hdl64)
 # Simulated scans go to a fresh directory under $WORK (default /tmp), deleted after each run and at exit; about
 # 2 MB per frame while it lasts. A part that runs replaces its own results in $OUT; the others stay, and the
 # tables name each run's seed.
@@ -69,8 +70,10 @@ relocalize() {
 
 if want sequence; then
   for seq in $SEQS; do
-    simulate "sequence-$seq" "$seq" "::$STEP" --realistic
-    sequence "sequence-$seq"
+    name=sequence-$seq
+    [ -n "${SEQ_SENSOR:-}" ] && name=sequence-$seq-$SEQ_SENSOR
+    simulate "$name" "$seq" "::$STEP" --realistic ${SEQ_SENSOR:+--sensor "$SEQ_SENSOR"}
+    sequence "$name"
   done
 fi
 if want iid; then  # the ablation: yesterday's independent label noise, static world, ideal sensor
