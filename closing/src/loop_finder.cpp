@@ -12,6 +12,9 @@ namespace {
 
 using storage::StorageError;
 
+// A loop probability to a thousandth (0-999): the resolution at which candidates are ranked by it.
+int probabilityRank(double p) { return std::clamp(static_cast<int>(std::floor(p * 1000.0)), 0, 999); }
+
 constexpr std::uint32_t kMaxTopK = 100;
 constexpr std::uint32_t kMaxCandidates = 200;
 
@@ -196,9 +199,17 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   for (auto& v : verified)
     if (v) results.push_back(std::move(*v));
   timing->verify_ms = msSince(t0);
+  // Loops first, by probability to a thousandth; the model cannot tell 0.9995 from 0.9999 apart in any
+  // meaningful way, so among candidates it is that sure of the nearer pose ranks first (the revisit that shares
+  // most with the query, its loop the shortest lever); then the scan id.
   std::stable_sort(results.begin(), results.end(), [](const Verified& a, const Verified& b) {
-    if (a.loop.result.is_loop != b.loop.result.is_loop) return a.loop.result.is_loop;
-    if (a.loop.result.score != b.loop.result.score) return a.loop.result.score > b.loop.result.score;
+    const auto& ra = a.loop.result;
+    const auto& rb = b.loop.result;
+    if (ra.is_loop != rb.is_loop) return ra.is_loop;
+    const int ka = probabilityRank(ra.score), kb = probabilityRank(rb.score);
+    if (ka != kb) return ka > kb;
+    const double ta = ra.T.topRightCorner<3, 1>().norm(), tb = rb.T.topRightCorner<3, 1>().norm();
+    if (ta != tb) return ta < tb;
     return a.loop.scan_id < b.loop.scan_id;
   });
   if (ranking.min_score)

@@ -139,10 +139,10 @@ def main():
         print(f"sequence: F1max {s['f1max']:.3f} EP {s['ep']:.3f} R@1 {s['recall_at_1']:.3f} RR {s['rr']:.3f} "
               f"RTE {s['rte_mean']:.3f} m RRE {s['rre_mean']:.3f} deg ({s['registered']} poses)")
         assert s["queries"] == 319 and s["queries_with_true_loop"] > 100, s
-        # Floors below today's figures: 0.887 / 0.899 F1max / EP with the loop model of 2026-11-28 (0.975 / 0.976
-        # with the bars before it): the model, fitted on worlds along KITTI paths, is under-confident on this
-        # route's (docs/RESULTS.md, changelog), so fewer of its true loops reach the probability they need.
-        assert s["f1max"] >= 0.85 and s["ep"] >= 0.85, s
+        # Floors below today's figures: 0.996 / 0.997 F1max / EP with the loop model of 2026-11-28, whose loops
+        # rank by probability to a thousandth and then the nearer pose (by probability alone, candidates 3.7 m
+        # away that the model was as sure of ranked first, and F1max was 0.81).
+        assert s["f1max"] >= 0.95 and s["ep"] >= 0.95, s
         assert s["precision_all_verified"] >= 0.99, s
         assert s["at_f1max"]["false_loops"] == 0, s
         # Every verified top-1 detection, whatever its score, is a true loop (today: precision 1.0 at the lowest
