@@ -557,3 +557,31 @@ def garbage_for(msg_cls, count=4, seed=7):
         except Exception:  # noqa: BLE001
             out.append(data)
     return out
+
+
+# PostgreSQL (the test cluster ctest starts; SGLC_TEST_PG names a file holding its URL).
+def pg_url():
+    """The test cluster's URL, or "" when there is none."""
+    url_file = os.environ.get("SGLC_TEST_PG", "")
+    return open(url_file).read().strip() if url_file and os.path.exists(url_file) else ""
+
+
+def psql(url, sql):
+    out = subprocess.run(["psql", url, "-XAtqc", sql], capture_output=True, text=True, timeout=60)
+    if out.returncode != 0:
+        raise RuntimeError(f"psql: {out.stderr.strip()}")
+    return out.stdout.strip()
+
+
+def fresh_database(base_url, db):
+    """Creates database `db` anew on the cluster of base_url; its URL."""
+    psql(base_url, f"DROP DATABASE IF EXISTS {db}")
+    psql(base_url, f"CREATE DATABASE {db}")
+    return base_url.rsplit("/", 1)[0] + "/" + db
+
+
+def drop_database(base_url, db):
+    try:
+        psql(base_url, f"DROP DATABASE IF EXISTS {db} WITH (FORCE)")
+    except Exception as e:  # noqa: BLE001
+        note(f"could not drop {db}: {e}")

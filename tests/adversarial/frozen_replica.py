@@ -17,7 +17,6 @@ import os
 import random
 import shlex
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -42,11 +41,6 @@ LOCK_HOLDER = ("SELECT a.application_name FROM pg_locks l JOIN pg_stat_activity 
                "AND l.granted AND l.database = (SELECT oid FROM pg_database WHERE datname = current_database())")
 
 
-def psql(url, sql):
-    out = subprocess.run(["psql", url, "-XAtqc", sql], capture_output=True, text=True, timeout=60)
-    if out.returncode != 0:
-        raise RuntimeError(f"psql: {out.stderr.strip()}")
-    return out.stdout.strip()
 
 
 class Client(threading.Thread):
@@ -96,7 +90,7 @@ def freeze_holder(victim, url, app):
     for attempt in range(300):
         t = time.monotonic()
         os.kill(victim.proc.pid, signal.SIGSTOP)
-        if psql(url, LOCK_HOLDER) == app:
+        if h.psql(url, LOCK_HOLDER) == app:
             h.note(f"replica 0 stopped holding the write lock (attempt {attempt + 1})")
             return t
         os.kill(victim.proc.pid, signal.SIGCONT)
@@ -107,9 +101,7 @@ def freeze_holder(victim, url, app):
 def run(freeze_s, tmp, base_url):
     db = f"sglc_frozen_{os.getpid()}"
     admin_url = base_url
-    psql(admin_url, f"DROP DATABASE IF EXISTS {db}")
-    psql(admin_url, f"CREATE DATABASE {db}")
-    url = base_url.rsplit("/", 1)[0] + "/" + db
+    url = h.fresh_database(admin_url, db)
     flags = shlex.split(os.environ.get("SGLC_FROZEN_FLAGS", ""))
     servers, clients, victim = [], [], None
     try:
@@ -157,7 +149,7 @@ def run(freeze_s, tmp, base_url):
 
         # Every acknowledged (robot, seq) stored exactly once, under the id it was acknowledged with, nothing else.
         acked = {(c.robot, seq): sid for c in clients for _, seq, sid in c.acks}
-        rows = psql(url, "SELECT rb.name || ' ' || s.seq || ' ' || s.id FROM scans s JOIN robots rb ON "
+        rows = h.psql(url, "SELECT rb.name || ' ' || s.seq || ' ' || s.id FROM scans s JOIN robots rb ON "
                          "rb.id = s.robot_id").splitlines()
         stored = collections.Counter()
         ids = {}
@@ -204,10 +196,7 @@ def run(freeze_s, tmp, base_url):
             c.halt.set()
         for s in servers:
             s.stop()
-        try:
-            psql(admin_url, f"DROP DATABASE IF EXISTS {db} WITH (FORCE)")
-        except Exception as e:  # noqa: BLE001
-            h.note(f"could not drop {db}: {e}")
+        h.drop_database(admin_url, db)
 
 
 def main():
@@ -216,8 +205,7 @@ def main():
         sys.exit(2)
     h.setup(sys.argv[1], sys.argv[2], "", "")
     freeze_s = float(sys.argv[3]) if len(sys.argv) > 3 else 20.0
-    url_file = os.environ.get("SGLC_TEST_PG", "")
-    base_url = open(url_file).read().strip() if url_file and os.path.exists(url_file) else ""
+    base_url = h.pg_url()
     if not base_url:
         print("SKIP: no PostgreSQL test cluster (run through ctest, or set SGLC_TEST_PG to a file holding a URL)")
         sys.exit(77)

@@ -15,7 +15,6 @@ Usage: map_settings.py SERVER_BINARY PYTHON_STUB_DIR; SGLC_TEST_PG names a file 
 (CTest's pg_cluster fixture; part 2 is skipped without it). Exit 0 pass, 1 fail, 77 skipped (no grpc/numpy).
 """
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -141,18 +140,11 @@ def part_older_map(tmp):
     s.stop()
 
 
-def psql(url, sql):
-    out = subprocess.run(["psql", url, "-XAtqc", sql], capture_output=True, text=True, timeout=60)
-    if out.returncode != 0:
-        raise RuntimeError(f"psql: {out.stderr.strip()}")
-    return out.stdout.strip()
 
 
 def part_replicas(tmp, base_url):
     db = f"sglc_settings_{os.getpid()}"
-    psql(base_url, f"DROP DATABASE IF EXISTS {db}")
-    psql(base_url, f"CREATE DATABASE {db}")
-    url = base_url.rsplit("/", 1)[0] + "/" + db
+    url = h.fresh_database(base_url, db)
     servers = []
     try:
         servers.append(h.Server(url, log_path=os.path.join(tmp, "r0.log")))
@@ -174,15 +166,12 @@ def part_replicas(tmp, base_url):
             check(f"replica{i}.query_refused", code == "FAILED_PRECONDITION", f"{code}: {h.short(details)}")
         code, details = code_of(lambda: ingest(servers[0], 1))
         check("replica0.ingests", code == "OK", f"{code}: {h.short(details)}")
-        stored = int(psql(url, "SELECT count(*) FROM scans"))
+        stored = int(h.psql(url, "SELECT count(*) FROM scans"))
         check("replicas.stored_only_replica0s", stored == 2, f"{stored} scans stored")
     finally:
         for s in servers:
             s.stop()
-        try:
-            psql(base_url, f"DROP DATABASE IF EXISTS {db} WITH (FORCE)")
-        except Exception as e:  # noqa: BLE001
-            h.note(f"could not drop {db}: {e}")
+        h.drop_database(base_url, db)
 
 
 def main():
@@ -190,8 +179,7 @@ def main():
         print(__doc__)
         sys.exit(2)
     h.setup(sys.argv[1], sys.argv[2], "", "")
-    url_file = os.environ.get("SGLC_TEST_PG", "")
-    base_url = open(url_file).read().strip() if url_file and os.path.exists(url_file) else ""
+    base_url = h.pg_url()
     try:
         with tempfile.TemporaryDirectory(prefix="sglc-settings-") as tmp:
             part_sqlite(tmp)

@@ -22,8 +22,8 @@
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
-#include <random>
 
+#include "bench/graph_fixture.hpp"
 #include "bench/kitti_path.hpp"
 #include "sglc/descriptors.hpp"
 #include "sglc/elapsed.hpp"
@@ -38,43 +38,6 @@ namespace {
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
 using namespace sglc;
-
-// Positions' RMSE after the best rigid alignment.
-double ate(const std::vector<Mat4d>& est, const std::vector<Mat4d>& gt) {
-  Eigen::Matrix3Xd a(3, est.size()), b(3, gt.size());
-  for (std::size_t i = 0; i < est.size(); ++i) {
-    a.col(static_cast<Eigen::Index>(i)) = est[i].block<3, 1>(0, 3);
-    b.col(static_cast<Eigen::Index>(i)) = gt[i].block<3, 1>(0, 3);
-  }
-  const Mat4d T = Eigen::umeyama(a, b, false);
-  return std::sqrt(((T.block<3, 3>(0, 0) * a).colwise() + T.block<3, 1>(0, 3) - b).colwise().squaredNorm().mean());
-}
-
-// A valid fingerprint with a random scan descriptor: the pose graph needs scans, not their content.
-Fingerprint placeholder(std::mt19937_64& rng) {
-  Fingerprint fp;
-  fp.layout = DescriptorLayout{};
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  fp.descriptor.resize(static_cast<std::size_t>(fp.layout.scanDim()));
-  double norm = 0;
-  for (auto& v : fp.descriptor) {
-    v = u(rng);
-    norm += double(v) * v;
-  }
-  for (auto& v : fp.descriptor) v = static_cast<float>(v / std::sqrt(norm));
-  fp.instance_offsets.assign(1, 0);
-  fp.finalize();
-  return fp;
-}
-
-Mat4d disturbed(const Mat4d& T, std::mt19937_64& rng, double sigma_m, double sigma_rad) {
-  std::normal_distribution<double> t(0.0, sigma_m), r(0.0, sigma_rad);
-  const Eigen::Vector3d w(r(rng), r(rng), r(rng));
-  Mat4d E = Mat4d::Identity();
-  if (w.norm() > 0) E.block<3, 3>(0, 0) = Eigen::AngleAxisd(w.norm(), w.normalized()).toRotationMatrix();
-  E.block<3, 1>(0, 3) = Eigen::Vector3d(t(rng), t(rng), t(rng));
-  return T * E;
-}
 
 // Loops' relative poses are disturbed by this much, and their information matrix says so.
 constexpr double kSigmaM = 0.01, kSigmaRad = 0.02 * 3.14159265358979 / 180.0;
@@ -131,38 +94,8 @@ std::vector<Robot> makeRobots(const sim::Trajectory& traj, int scans, int robots
   return out;
 }
 
-std::unique_ptr<storage::MapStore> openStore(const std::string& dir) {
-  storage::StoreOptions so;
-  so.path = dir + "/graph.db";
-  so.sync = storage::StoreOptions::Sync::kNormal;
-  auto store = storage::MapStore::open(so);
-  store->createMap("m", DescriptorLayout{}.scanDim());
-  return store;
-}
-
-// Adds the first `count` odometry poses of `robot` as scans with placeholder fingerprints; their ids.
-std::vector<std::int64_t> addScans(storage::MapStore& store, const std::string& robot,
-                                   const std::vector<Mat4d>& odometry, int count, std::mt19937_64& rng) {
-  std::vector<std::int64_t> ids;
-  for (int i = 0; i < count; ++i) {
-    const auto fp = placeholder(rng);
-    ids.push_back(store.addScan({.map = "m",
-                                 .robot = robot,
-                                 .session = "s",
-                                 .seq = i,
-                                 .odometry_pose = odometry[static_cast<std::size_t>(i)],
-                                 .fingerprint = &fp}));
-  }
-  return ids;
-}
-
 storage::LoopRecord loopRecord(std::int64_t query, std::int64_t candidate, const Mat4d& T) {
-  storage::LoopRecord r{0, query, candidate, T, 0.5, 0.9, kSigmaM, 20};
-  Mat6d info = Mat6d::Zero();
-  info.diagonal() << 1 / (kSigmaM * kSigmaM), 1 / (kSigmaM * kSigmaM), 1 / (kSigmaM * kSigmaM),
-      1 / (kSigmaRad * kSigmaRad), 1 / (kSigmaRad * kSigmaRad), 1 / (kSigmaRad * kSigmaRad);
-  r.information = info;
-  return r;
+  return bench::loopRecord(query, candidate, T, kSigmaM, kSigmaRad);
 }
 
 using LoopGroups = std::vector<std::vector<storage::LoopRecord>>;
@@ -170,7 +103,7 @@ using LoopGroups = std::vector<std::vector<storage::LoopRecord>>;
 // Loops grouped by the query frame that finds them, in the order they would arrive: r0's own loops (at most
 // 3 per query frame, the nearest), then each later robot's frame with the r0 frame it repeats.
 LoopGroups loopGroups(const std::vector<Robot>& robots, const std::vector<std::vector<std::int64_t>>& ids,
-                      std::mt19937_64& rng) {
+                      sim::Rng& rng) {
   LoopGroups groups;
   const auto& id0 = ids[0];
   std::map<int, std::vector<sim::LoopPose>> by_query;
@@ -183,12 +116,12 @@ LoopGroups loopGroups(const std::vector<Robot>& robots, const std::vector<std::v
     for (std::size_t k = 0; k < std::min<std::size_t>(3, ls.size()); ++k)
       // loopPoses' T maps `first` (earlier, the candidate) into `second` (the query).
       g.push_back(loopRecord(id0[static_cast<std::size_t>(q)], id0[static_cast<std::size_t>(ls[k].first)],
-                             disturbed(ls[k].T, rng, kSigmaM, kSigmaRad)));
+                             bench::disturbed(ls[k].T, rng, kSigmaM, kSigmaRad)));
     groups.push_back(std::move(g));
   }
   for (std::size_t k = 1; k < robots.size(); ++k)
     for (std::size_t i = 0; i < ids[k].size(); ++i)  // frame i of robot k is where r0's frame i was
-      groups.push_back({loopRecord(ids[k][i], id0[i], disturbed(Mat4d::Identity(), rng, kSigmaM, kSigmaRad))});
+      groups.push_back({loopRecord(ids[k][i], id0[i], bench::disturbed(Mat4d::Identity(), rng, kSigmaM, kSigmaRad))});
   return groups;
 }
 
@@ -199,7 +132,7 @@ double ateOptimised(const storage::MapStore& store, const Robot& r0, const std::
     opt[p.scan_id] = p.pose;
   std::vector<Mat4d> est;
   for (const auto id : id0) est.push_back(opt.at(id));
-  return ate(est, r0.gt);
+  return bench::ate(est, r0.gt);
 }
 
 struct Timings {
@@ -245,12 +178,12 @@ Timings optimise(storage::MapStore& store, const LoopGroups& groups, const Optio
 // Fills the map, times the optimisations and returns the report.
 nlohmann::ordered_json run(const sim::Trajectory& traj, const std::vector<Robot>& robots, storage::MapStore& store,
                            const Options& options) {
-  std::mt19937_64 rng(7);
+  sim::Rng rng(7);
   const auto t_fill = Clock::now();
   std::vector<std::vector<std::int64_t>> ids;
   int scans = 0;
   for (std::size_t k = 0; k < robots.size(); ++k) {
-    ids.push_back(addScans(store, "r" + std::to_string(k), robots[k].odom, robots[k].size(), rng));
+    ids.push_back(bench::addScans(store, "r" + std::to_string(k), robots[k].odom, robots[k].size(), rng));
     scans += robots[k].size();
   }
   const double fill_s = std::chrono::duration<double>(Clock::now() - t_fill).count();
@@ -270,7 +203,7 @@ nlohmann::ordered_json run(const sim::Trajectory& traj, const std::vector<Robot>
                           {"global", t.global_events},
                           {"free_nodes_median", percentile(t.free_nodes, 0.5)}};
   out["global_settle_ms"] = t.settle_ms;
-  out["ate_odometry_r0_m"] = ate(robots[0].odom, robots[0].gt);
+  out["ate_odometry_r0_m"] = bench::ate(robots[0].odom, robots[0].gt);
   out["ate_after_events_r0_m"] = t.ate_events;
   out["ate_optimised_r0_m"] = t.ate_settled;
   return out;
@@ -292,7 +225,8 @@ int main(int argc, char** argv) {
   const sim::Trajectory traj = bench::kitti00OrLoopRoute(options.data);
   const auto robots = makeRobots(traj, options.scans, options.robots);
   {
-    const auto store = openStore(options.dir);  // closed before its directory goes (it writes an index snapshot)
+    const auto store =
+        bench::openGraphStore(options.dir);  // closed before its directory goes (it writes an index snapshot)
     std::cout << run(traj, robots, *store, options).dump(2) << std::endl;
   }
   fs::remove_all(options.dir);
