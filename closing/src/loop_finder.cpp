@@ -105,8 +105,8 @@ std::vector<storage::SearchHit> LoopFinder::listed(const Fingerprint& query, con
 }
 
 std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query, const QueryOrigin& who,
-                                                       const QueryOptions& opt, std::uint32_t k,
-                                                       const Execution& exec) const {
+                                                       const QueryOptions& opt, std::uint32_t k, const Execution& exec,
+                                                       const ViewRanking& view) const {
   storage::SearchRequest req;
   req.map = who.map;
   req.descriptor = query.descriptor;
@@ -120,13 +120,12 @@ std::vector<storage::SearchHit> LoopFinder::candidates(const Fingerprint& query,
   if (who.self_scan) req.exclude_scan_ids.push_back(who.self_scan);
   applyScope(opt, who, &req);  // checked even when the candidates are listed
   if (!opt.verify_scan_ids.empty()) return listed(query, who.map, opt.verify_scan_ids);
-  return viewRanked(query, std::move(req), exec);
+  return viewRanked(view, std::move(req), exec);
 }
 
-std::vector<storage::SearchHit> LoopFinder::viewRanked(const Fingerprint& query, storage::SearchRequest req,
+std::vector<storage::SearchHit> LoopFinder::viewRanked(const ViewRanking& ranking, storage::SearchRequest req,
                                                        const Execution& exec) const {
   // Full views, and narrow ones without structure in view: the descriptor's order (spare the reads).
-  const auto ranking = pipeline_.viewRanking(query);
   if (!ranking.active()) return store_.search(req);
   const auto k = static_cast<std::size_t>(req.k);
   req.k = std::max(req.k, pipeline_.config().view_search.max_scans);
@@ -158,9 +157,10 @@ std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOri
   // A NaN stamp would quietly turn exclude_seconds off.
   if (origin.stamp && !std::isfinite(*origin.stamp)) throw InputError("stamp is not finite");
   const auto t0 = Clock::now();
-  const auto hits = candidates(query, origin, options, n_candidates, exec);
+  const auto view = pipeline_.viewRanking(query);  // the query's view, computed once
+  const auto hits = candidates(query, origin, options, n_candidates, exec, view);
   timing->search_ms = msSince(t0);
-  auto found = verify(query, hits, ranking, exec, timing);
+  auto found = verify(query, hits, ranking, exec, timing, &view);
   for (auto& f : found)
     if (const auto info = store_.scanInfo(f.scan_id)) {
       f.robot = info->robot;
@@ -171,7 +171,8 @@ std::vector<FoundLoop> LoopFinder::find(const Fingerprint& query, const QueryOri
 }
 
 std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::vector<storage::SearchHit>& hits,
-                                          const Ranking& ranking, const Execution& exec, QueryTiming* timing) const {
+                                          const Ranking& ranking, const Execution& exec, QueryTiming* timing,
+                                          const ViewRanking* view) const {
   struct Verified {
     FoundLoop loop;
     std::shared_ptr<const Fingerprint> fp;
@@ -186,7 +187,7 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
     exec.checkAlive();
     auto fp = store_.fingerprint(hits[i].scan_id);
     if (!fp) return;  // deleted meanwhile
-    auto r = pipeline_.verify(query, *fp, i < background);
+    auto r = pipeline_.verify(query, *fp, i < background, view);
     if (!r.is_loop && !(ranking.include_rejected || ranking.known_loops)) return;
     Verified v;
     v.loop.scan_id = hits[i].scan_id;

@@ -54,20 +54,33 @@ const char* poseSourceName(PoseSource source) {
   return "none";
 }
 
-PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config) {
+PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config,
+                  const QueryView& known) {
   PairView v;
-  const double q = viewSpanDeg(query.background, query.background_cell);
+  const double q = known.span_deg >= 0 ? known.span_deg : viewSpanDeg(query.background, query.background_cell);
   const double c = viewSpanDeg(candidate.background, candidate.background_cell);
   v.query_saw_less = q <= c;
   v.field_deg = std::min(q, c);
   v.narrow = v.field_deg < config.verify.background_min_view_deg;
   if (!v.narrow) return v;
-  const Fingerprint& narrow = v.query_saw_less ? query : candidate;
-  const Fingerprint& other = v.query_saw_less ? candidate : query;
-  const auto n = viewContext(narrow.background, narrow.background_cell, config.view_search, narrow.labeller_structure);
-  const auto o = viewContext(other.background, other.background_cell, config.view_search, other.labeller_structure);
-  v.context = matchViews(n, o);
-  v.field = n.field();
+  const auto contextOf = [&](const Fingerprint& fp) {
+    return viewContext(fp.background, fp.background_cell, config.view_search, fp.labeller_structure);
+  };
+  ViewContext own;
+  const ViewContext* query_context = known.context;
+  if (!query_context) {
+    own = contextOf(query);
+    query_context = &own;
+  }
+  if (v.query_saw_less) {
+    const auto other = contextOf(candidate);
+    v.context = known.matcher ? known.matcher->match(other) : matchViews(*query_context, other);
+    v.field = query_context->field();
+  } else {
+    const auto narrow = contextOf(candidate);
+    v.context = matchViews(narrow, *query_context);
+    v.field = narrow.field();
+  }
   return v;
 }
 

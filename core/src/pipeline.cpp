@@ -230,7 +230,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
 }
 
 double ViewRanking::similarity(const Fingerprint& fp) const {
-  if (!matcher_) return 0.0;
+  if (!active_) return 0.0;
   return matcher_->match(viewContext(fp.background, fp.background_cell, *config_, fp.labeller_structure)).similarity;
 }
 
@@ -240,12 +240,13 @@ bool Pipeline::isNarrow(const Fingerprint& scan) const {
 
 ViewRanking Pipeline::viewRanking(const Fingerprint& query) const {
   ViewRanking r;
-  if (!config_.view_search.enabled || !isNarrow(query)) return r;
-  const auto context =
-      viewContext(query.background, query.background_cell, config_.view_search, query.labeller_structure);
-  if (!context.seesStructure()) return r;
-  r.matcher_ = std::make_shared<const ViewMatcher>(context);
+  r.span_deg_ = viewSpanDeg(query.background, query.background_cell);
+  if (r.span_deg_ >= config_.verify.background_min_view_deg) return r;  // a full view
+  r.context_ = std::make_shared<const ViewContext>(
+      viewContext(query.background, query.background_cell, config_.view_search, query.labeller_structure));
+  r.matcher_ = std::make_shared<const ViewMatcher>(*r.context_);
   r.config_ = &config_.view_search;
+  r.active_ = config_.view_search.enabled && r.context_->seesStructure();
   return r;
 }
 

@@ -74,12 +74,13 @@ void Pipeline::judge(const Fingerprint& query, const Fingerprint& candidate, con
   }
 }
 
-LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candidate, bool background) const {
+LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candidate, bool background,
+                            const ViewRanking* query_view) const {
   if (!sameGeometry(query, candidate))
     throw InputError("fingerprints were built with different descriptor or voxel parameters");
   const auto& c = config_;
   const auto& v = c.verify;
-  const PairView view = pairView(query, candidate, c);
+  const PairView view = pairView(query, candidate, c, query_view ? query_view->queryView() : QueryView{});
   LoopResult r;
   std::vector<LoopResult::Judged> considered;
   auto landmarks = detail::landmarkPose(query, candidate, c);

@@ -64,7 +64,16 @@ struct PairView {
   std::vector<bool> field;  // empty: the whole field
   ViewMatch context;        // the narrow scan's context over the other's (narrow pairs only)
 };
-PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config);
+// What a pair's view needs of the query, computed once per query (Pipeline::viewRanking) rather than once per
+// candidate: how much of the horizon it saw (negative: not known), and for a narrow query its view context and
+// that context turned to every heading. Absent parts are computed from the fingerprint.
+struct QueryView {
+  double span_deg = -1.0;
+  const ViewContext* context = nullptr;
+  const ViewMatcher* matcher = nullptr;
+};
+PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config,
+                  const QueryView& known = {});
 
 // Background agreement (bevAgreement) at T_q_c over the pair's field, on a grid of `cell` metres out to
 // `radius`, judged in the frame of the scan that saw less.

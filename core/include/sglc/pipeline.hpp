@@ -64,13 +64,18 @@ class ViewRanking {
  public:
   // Whether the ranking applies: the query is a narrow view, view_search is on, and its context sees structure
   // (without, every similarity would be 0 and the descriptor's order stands).
-  bool active() const { return matcher_ != nullptr; }
+  bool active() const { return active_; }
   // The view-context similarity of a stored scan to the query, in [0, 1]; 0 when not active.
   double similarity(const Fingerprint& stored) const;
+  // The query's own view, for every candidate's verification: its span, and its context when it is narrow.
+  QueryView queryView() const { return {span_deg_, context_.get(), matcher_.get()}; }
 
  private:
   friend class Pipeline;
-  std::shared_ptr<const ViewMatcher> matcher_;
+  bool active_ = false;
+  double span_deg_ = -1.0;
+  std::shared_ptr<const ViewContext> context_;  // narrow queries only
+  std::shared_ptr<const ViewMatcher> matcher_;  // the context turned to every heading
   const ViewSearchConfig* config_ = nullptr;
 };
 
@@ -87,8 +92,10 @@ class Pipeline {
   // labels. `report` (optional) says which happened and warns about scans that cannot close loops.
   Fingerprint fingerprint(const LabelledScan& scan, ScanReport* report = nullptr) const;
   // Pose hypotheses and the loop decision. When the landmarks give no loop, `background` allows hypotheses from
-  // the background alone (config.verify.background_*: scans with few nodes only).
-  LoopResult verify(const Fingerprint& query, const Fingerprint& candidate, bool background = true) const;
+  // the background alone (config.verify.background_*: scans with few nodes only). `query_view`, the query's
+  // viewRanking, spares recomputing its view for every candidate (the same answer without it).
+  LoopResult verify(const Fingerprint& query, const Fingerprint& candidate, bool background = true,
+                    const ViewRanking* query_view = nullptr) const;
   // Fine and refine stages on a verified result (no-op for non-loops). With known_loop (the caller already
   // knows the pair is a loop: relocalization at a chosen place, the loop-pose protocol), on any result: from
   // its coarse pose and, when there is none, verification rejected it or the plane stage would leave its
@@ -99,7 +106,7 @@ class Pipeline {
               bool known_loop = false) const;
   // Whether a scan is a narrow view (less than verify.background_min_view_deg of the horizon).
   bool isNarrow(const Fingerprint& scan) const;
-  // The query's ranking by view context (inactive for full views or with view_search off).
+  // The query's ranking by view context (inactive for full views or with view_search off), and its view.
   ViewRanking viewRanking(const Fingerprint& query) const;
   // How many of a query's first candidates may get background hypotheses (verify.background_candidates, or
   // view_search.background_candidates for a narrow query).

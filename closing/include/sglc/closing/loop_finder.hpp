@@ -42,9 +42,11 @@ class LoopFinder {
                               const Execution& exec, QueryTiming* timing) const;
 
   // The steps after the search: verifies `hits` (in parallel when exec allows; a scan deleted meanwhile is
-  // skipped), orders, trims and refines as `ranking` says. Answers carry no robot, session or seq.
+  // skipped), orders, trims and refines as `ranking` says. Answers carry no robot, session or seq. `view`, the
+  // query's Pipeline::viewRanking when the caller has it, is not computed again.
   std::vector<FoundLoop> verify(const Fingerprint& query, const std::vector<storage::SearchHit>& hits,
-                                const Ranking& ranking, const Execution& exec, QueryTiming* timing) const;
+                                const Ranking& ranking, const Execution& exec, QueryTiming* timing,
+                                const ViewRanking* view = nullptr) const;
 
   // Listed scans as candidates, with their descriptor distances: InputError for more than `max` or a repeated
   // id or another descriptor layout, StorageError kNotFound for a scan `map` does not have.
@@ -55,12 +57,13 @@ class LoopFinder {
   // The search's candidates, or the listed scans. A narrow view (less than verify.background_min_view_deg of
   // the horizon, viewSpanDeg) with view_search on gets viewRanked's instead of the descriptor's.
   std::vector<storage::SearchHit> candidates(const Fingerprint& query, const QueryOrigin& origin,
-                                             const QueryOptions& options, std::uint32_t k, const Execution& exec) const;
+                                             const QueryOptions& options, std::uint32_t k, const Execution& exec,
+                                             const ViewRanking& view) const;
   // The request's k scans whose view context is most like the query's (sglc/view_context.hpp), ties by
   // descriptor distance then scan id, from the view_search.max_scans (at least k) nearest by descriptor that the
   // request's filters allow. Each hit keeps its descriptor distance. A query whose context sees no structure gets
   // the descriptor search's k (the same order, without reading the scans).
-  std::vector<storage::SearchHit> viewRanked(const Fingerprint& query, storage::SearchRequest request,
+  std::vector<storage::SearchHit> viewRanked(const ViewRanking& view, storage::SearchRequest request,
                                              const Execution& exec) const;
 
   const Pipeline& pipeline_;
