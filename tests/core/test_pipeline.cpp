@@ -9,6 +9,7 @@
 #include <numbers>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include "dense_registration.hpp"
 #include "sglc/background.hpp"
@@ -253,6 +254,17 @@ TEST_F(RealPipeline, NarrowViewGetsBackgroundOnlyLoopsAtItsViewHeadingOnly) {
   ASSERT_TRUE(reverse.is_loop) << reverse.reason;
   expectPoseWithin(reverse.T, loopRow().T_a_b.inverse(), 0.10, 1.0, "narrow_view_reverse_error");
   EXPECT_FALSE(pipeline_->match(full, left).is_loop);
+  // The query's view made once (Pipeline::viewRanking, as a LoopFinder hands it to every candidate) gives the
+  // same answers as computing it per pair, whichever scan is the narrow one.
+  for (const auto& [query, candidate] : {std::pair{&right, &full}, std::pair{&full, &right}, std::pair{&full, &left}}) {
+    const auto view = pipeline_->viewRanking(*query);
+    const LoopResult alone = pipeline_->verify(*query, *candidate);
+    const LoopResult given = pipeline_->verify(*query, *candidate, true, &view);
+    EXPECT_EQ(alone.is_loop, given.is_loop);
+    EXPECT_EQ(alone.probability, given.probability);
+    EXPECT_TRUE(alone.T == given.T);
+    EXPECT_EQ(alone.evidence.context_similarity, given.evidence.context_similarity);
+  }
 
   Config off = pipeline_->config();
   off.view_search.enabled = false;
