@@ -60,7 +60,7 @@ LoopModel LoopModel::builtIn() {
 
 double FeatureCurve::operator()(double x) const {
   if (knots.empty()) return slope * x;
-  if (x <= knots.front().first) return knots.front().second;
+  if (!(x > knots.front().first)) return knots.front().second;  // NaN too: never past the knots
   if (x >= knots.back().first) return knots.back().second;
   const auto hi = std::upper_bound(knots.begin(), knots.end(), x,
                                    [](double v, const std::pair<double, double>& k) { return v < k.first; });

@@ -127,6 +127,7 @@ TEST(LoopModel, PiecewiseLinearCurves) {
   EXPECT_NEAR(c(0.5), 2.5, 1e-12);
   EXPECT_EQ(c(0.6), 4.0);
   EXPECT_EQ(c(7.0), 4.0);
+  EXPECT_EQ(c(std::nan("")), 0.0);  // never read past the knots
   // The model adds the curve's term: agreement 0.5 instead of 0.2 raises the log-odds by 2.5.
   Evidence e;
   e.source = PoseSource::kWallHeadings;
