@@ -120,7 +120,7 @@ def main():
     ap.add_argument("--out", required=True)
     ap.add_argument("--l2", type=float, default=1.0)
     ap.add_argument("--precision", type=float, default=0.99)
-    ap.add_argument("--knots", type=int, default=4, help="segments per monotone feature's curve (0: linear)")
+    ap.add_argument("--knots", type=int, default=0, help="segments per monotone feature's curve (0: one weight)")
     a = ap.parse_args()
     names, signs, X, y, groups, chosen = read(a.evidence)
     knots = knots_of(X, y, signs, a.knots)

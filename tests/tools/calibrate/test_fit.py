@@ -59,7 +59,7 @@ def main():
         models = []
         for k in range(2):
             model = os.path.join(root, f"m{k}.txt")
-            out = subprocess.run([sys.executable, FIT, "--version", "test-1", "--out", model, ev],
+            out = subprocess.run([sys.executable, FIT, "--version", "test-1", "--knots", "3", "--out", model, ev],
                                  capture_output=True, text=True)
             if out.returncode != 0:
                 failures.append(f"fit.py failed: {out.stderr}")
