@@ -62,6 +62,7 @@ PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const 
   v.query_saw_less = q <= c;
   v.field_deg = std::min(q, c);
   v.narrow = v.field_deg < config.verify.background_min_view_deg;
+  v.both_narrow = std::max(q, c) < config.verify.background_min_view_deg;
   if (!v.narrow) return v;
   const auto contextOf = [&](const Fingerprint& fp) {
     return viewContext(fp.background, fp.background_cell, config.view_search, fp.labeller_structure);

@@ -103,7 +103,9 @@ LoopResult Pipeline::verify(const Fingerprint& query, const Fingerprint& candida
       background && few_nodes && r.probability < v.min_probability && c.bev_search.enabled && c.refine.enabled;
   if (wanted && view.narrow && !c.view_search.enabled && landmarks.source == PoseSource::kNone)
     r.reason = "no landmark pose, and a narrow view gets no background hypotheses without view_search";
-  if (wanted && (!view.narrow || c.view_search.enabled))
+  if (wanted && view.both_narrow && landmarks.source == PoseSource::kNone)
+    r.reason = "no landmark pose, and two narrow views get no background hypotheses";
+  if (wanted && (!view.narrow || c.view_search.enabled) && !view.both_narrow)
     for (const auto& T0 : detail::overlayPoses(query, candidate, view, c)) {
       LoopResult h;
       judge(query, candidate, view, view.narrow ? PoseSource::kViewHeadings : PoseSource::kWallHeadings, T0, h);

@@ -254,6 +254,11 @@ TEST_F(RealPipeline, NarrowViewGetsBackgroundOnlyLoopsAtItsViewHeadingOnly) {
   ASSERT_TRUE(reverse.is_loop) << reverse.reason;
   expectPoseWithin(reverse.T, loopRow().T_a_b.inverse(), 0.10, 1.0, "narrow_view_reverse_error");
   EXPECT_FALSE(pipeline_->match(full, left).is_loop);
+  // Two wedges of one scan (both narrow views) get no background hypotheses, however much they share: the
+  // model was fitted on narrow scans against full ones, and rosette scans against rosette scans gave false loops.
+  const LoopResult wedges = pipeline_->verify(right, wedge(-40.0));
+  EXPECT_FALSE(wedges.is_loop);
+  EXPECT_NE(std::string(wedges.reason).find("two narrow views"), std::string::npos) << wedges.reason;
   // The query's view made once (Pipeline::viewRanking, as a LoopFinder hands it to every candidate) gives the
   // same answers as computing it per pair, whichever scan is the narrow one.
   for (const auto& [query, candidate] : {std::pair{&right, &full}, std::pair{&full, &right}, std::pair{&full, &left}}) {

@@ -59,6 +59,9 @@ struct Evidence {
 // narrow one is its view context's field (ViewContext::field), and its context is compared with the other's.
 struct PairView {
   bool narrow = false;
+  // Both scans are narrow views: a view context is then matched against another wedge, not a full turn, and the
+  // `view` source gives no hypotheses (the model was fitted on narrow scans against full ones only).
+  bool both_narrow = false;
   bool query_saw_less = true;  // else the candidate saw less: its frame is where the field lies
   double field_deg = 360.0;
   std::vector<bool> field;  // empty: the whole field
