@@ -55,7 +55,8 @@ const char* poseSourceName(PoseSource source) {
 }
 
 PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const Config& config,
-                  const QueryView& known) {
+                  const QueryView& given) {
+  const QueryView known = given.of == &query ? given : QueryView{};
   PairView v;
   const double q = known.span_deg >= 0 ? known.span_deg : viewSpanDeg(query.background, query.background_cell);
   const double c = viewSpanDeg(candidate.background, candidate.background_cell);

@@ -240,6 +240,7 @@ bool Pipeline::isNarrow(const Fingerprint& scan) const {
 
 ViewRanking Pipeline::viewRanking(const Fingerprint& query) const {
   ViewRanking r;
+  r.query_ = &query;
   r.span_deg_ = viewSpanDeg(query.background, query.background_cell);
   if (r.span_deg_ >= config_.verify.background_min_view_deg) return r;  // a full view
   r.context_ = std::make_shared<const ViewContext>(

@@ -270,6 +270,12 @@ TEST_F(RealPipeline, NarrowViewGetsBackgroundOnlyLoopsAtItsViewHeadingOnly) {
     EXPECT_TRUE(alone.T == given.T);
     EXPECT_EQ(alone.evidence.context_similarity, given.evidence.context_similarity);
   }
+  // A view made for another scan is ignored, not trusted: the answer is the one computed from the query itself.
+  const auto others = pipeline_->viewRanking(left);
+  const LoopResult own = pipeline_->verify(right, full);
+  const LoopResult misled = pipeline_->verify(right, full, true, &others);
+  EXPECT_EQ(own.probability, misled.probability);
+  EXPECT_TRUE(own.T == misled.T);
 
   Config off = pipeline_->config();
   off.view_search.enabled = false;

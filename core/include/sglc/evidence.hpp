@@ -69,8 +69,10 @@ struct PairView {
 };
 // What a pair's view needs of the query, computed once per query (Pipeline::viewRanking) rather than once per
 // candidate: how much of the horizon it saw (negative: not known), and for a narrow query its view context and
-// that context turned to every heading. Absent parts are computed from the fingerprint.
+// that context turned to every heading. Absent parts are computed from the fingerprint, and so is everything
+// when `of` is not the query given (a view made for another scan is never used).
 struct QueryView {
+  const Fingerprint* of = nullptr;
   double span_deg = -1.0;
   const ViewContext* context = nullptr;
   const ViewMatcher* matcher = nullptr;

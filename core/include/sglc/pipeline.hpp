@@ -68,11 +68,12 @@ class ViewRanking {
   // The view-context similarity of a stored scan to the query, in [0, 1]; 0 when not active.
   double similarity(const Fingerprint& stored) const;
   // The query's own view, for every candidate's verification: its span, and its context when it is narrow.
-  QueryView queryView() const { return {span_deg_, context_.get(), matcher_.get()}; }
+  QueryView queryView() const { return {query_, span_deg_, context_.get(), matcher_.get()}; }
 
  private:
   friend class Pipeline;
   bool active_ = false;
+  const Fingerprint* query_ = nullptr;  // the scan it was made for
   double span_deg_ = -1.0;
   std::shared_ptr<const ViewContext> context_;  // narrow queries only
   std::shared_ptr<const ViewMatcher> matcher_;  // the context turned to every heading
