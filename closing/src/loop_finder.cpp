@@ -13,7 +13,10 @@ namespace {
 using storage::StorageError;
 
 // A loop probability to a thousandth (0-999): the resolution at which candidates are ranked by it.
-int probabilityRank(double p) { return std::clamp(static_cast<int>(std::floor(p * 1000.0)), 0, 999); }
+int probabilityRank(double p) {
+  if (!(p > 0.0)) return 0;  // NaN too
+  return std::min(999, static_cast<int>(std::floor(std::min(p, 1.0) * 1000.0)));
+}
 
 constexpr std::uint32_t kMaxTopK = 100;
 constexpr std::uint32_t kMaxCandidates = 200;

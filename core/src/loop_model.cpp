@@ -70,7 +70,8 @@ double FeatureCurve::operator()(double x) const {
 
 namespace {
 
-// A finite number filling the whole word, else nullopt.
+// A number filling the whole word, at most 1e6 in size (a larger weight, knot or term is no model of evidence in
+// [0, 10], and sums of such numbers could overflow), else nullopt.
 std::optional<double> number(const std::string& word) {
   std::size_t used = 0;
   double v = 0;
@@ -79,7 +80,7 @@ std::optional<double> number(const std::string& word) {
   } catch (const std::exception&) {
     return std::nullopt;
   }
-  if (used != word.size() || !std::isfinite(v)) return std::nullopt;
+  if (used != word.size() || !std::isfinite(v) || std::abs(v) > 1e6) return std::nullopt;
   return v;
 }
 
@@ -119,7 +120,7 @@ LoopModel LoopModel::parse(const std::string& text, const std::string& origin) {
         continue;
       }
       const auto b = number(values[0]);
-      if (!b) fail("bias is not a finite number: " + values[0]);
+      if (!b) fail("bias is not a number within +-1e6: " + values[0]);
       if (bias) fail("bias given twice");
       m.bias_ = *b;
       bias = true;
@@ -136,7 +137,7 @@ LoopModel LoopModel::parse(const std::string& text, const std::string& origin) {
     auto& curve = m.curves_[k];
     if (values.size() == 1 && values[0].find(':') == std::string::npos) {
       const auto w = number(values[0]);
-      if (!w) fail("weight of " + key + " is not a finite number: " + values[0]);
+      if (!w) fail("weight of " + key + " is not a number within +-1e6: " + values[0]);
       if (*w * sign < 0) fail("weight of " + key + " must be " + (sign > 0 ? ">= 0" : "<= 0") + " (" + direction + ")");
       curve.slope = *w;
       continue;
@@ -146,7 +147,7 @@ LoopModel LoopModel::parse(const std::string& text, const std::string& origin) {
       const auto colon = v.find(':');
       const auto x = colon == std::string::npos ? std::nullopt : number(v.substr(0, colon));
       const auto t = colon == std::string::npos ? std::nullopt : number(v.substr(colon + 1));
-      if (!x || !t) fail("knot of " + key + " is not X:T with finite numbers: " + v);
+      if (!x || !t) fail("knot of " + key + " is not X:T with numbers within +-1e6: " + v);
       if (!curve.knots.empty() && *x <= curve.knots.back().first)
         fail("knots of " + key + " must have increasing X: " + v);
       if (!curve.knots.empty() && (*t - curve.knots.back().second) * sign < 0)
@@ -184,6 +185,7 @@ double LoopModel::probability(const Evidence& e) const {
   const auto x = featureValues(e);
   double z = bias_;
   for (std::size_t k = 0; k < x.size(); ++k) z += curves_[k](x[k]);
+  if (std::isnan(z)) return 0.0;  // evidence that is not a number speaks for nothing
   return 1.0 / (1.0 + std::exp(-z));
 }
 

@@ -51,8 +51,10 @@ TEST(LoopModel, ParsesAndComputesTheLogistic) {
   const auto x = featureValues(e);
   for (std::size_t k = 0; k < x.size(); ++k) z += m.curves()[k].slope * x[k];
   EXPECT_NEAR(m.probability(e), 1.0 / (1.0 + std::exp(-z)), 1e-15);
-  // No hypothesis: no probability.
+  // No hypothesis: no probability; evidence that is not a number gives none either, never NaN.
   EXPECT_EQ(m.probability(Evidence{}), 0.0);
+  e.translation_m = std::nan("");
+  EXPECT_EQ(m.probability(e), 0.0);
 }
 
 // The weights' signs make p monotone: more of what speaks for a loop never lowers it, a longer translation never
@@ -99,10 +101,13 @@ TEST(LoopModel, BadFilesAreRefusedWithTheLineAndTheReason) {
   EXPECT_NE(errorOf(text).find("weight of translation must be <= 0"), std::string::npos);
   text = modelText();
   text.replace(text.find("pin 1"), 5, "pin nan");
-  EXPECT_NE(errorOf(text).find("not a finite number"), std::string::npos);
+  EXPECT_NE(errorOf(text).find("not a number within +-1e6"), std::string::npos);
   text = modelText();
   text.replace(text.find("pin 1"), 5, "pin 1x");
-  EXPECT_NE(errorOf(text).find("not a finite number"), std::string::npos);
+  EXPECT_NE(errorOf(text).find("not a number within +-1e6"), std::string::npos);
+  text = modelText();
+  text.replace(text.find("pin 1"), 5, "pin 2e6");
+  EXPECT_NE(errorOf(text).find("not a number within +-1e6"), std::string::npos);
   text = modelText();
   text.erase(text.find("pin 1\n"), 6);
   EXPECT_NE(errorOf(text).find("feature pin has no weight"), std::string::npos);
@@ -148,6 +153,7 @@ TEST(LoopModel, PiecewiseLinearCurves) {
   EXPECT_NE(with("0.2:0").find("at least 2 knots"), std::string::npos);
   EXPECT_NE(with("0.2:0 0.4").find("not X:T"), std::string::npos);
   EXPECT_NE(with("0.2:0 0.4:inf").find("not X:T"), std::string::npos);
+  EXPECT_NE(with("0.2:0 1e300:1").find("within +-1e6"), std::string::npos);
   std::string t = modelText();
   t.replace(t.find("translation -1\n"), 15, "translation 0:0 1:1\n");
   EXPECT_NE(errorOf(t).find("curve of translation must be non-increasing"), std::string::npos) << errorOf(t);
