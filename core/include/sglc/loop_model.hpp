@@ -40,8 +40,8 @@ class LoopModel {
   // The built-in model (core/models/loop_model.txt at build time).
   static LoopModel builtIn();
   // Parses a model file's text; throws InputError naming the line and what is wrong (unknown or missing
-  // feature, a number that is not finite, knots out of order, or a curve whose direction breaks the feature's
-  // monotonicity). A feature's line is "NAME WEIGHT" or "NAME X1:T1 X2:T2 ..." (at least 2 knots).
+  // feature, a number that is not finite or beyond +-1e6, knots out of order, or a curve whose direction breaks the
+  // feature's monotonicity). A feature's line is "NAME WEIGHT" or "NAME X1:T1 X2:T2 ..." (at least 2 knots).
   static LoopModel parse(const std::string& text, const std::string& origin);
   // builtIn() for an empty path, else the file's model.
   static LoopModel load(const std::string& path);
