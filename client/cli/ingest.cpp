@@ -59,6 +59,7 @@ class Progress {
 struct IngestArgs {
   std::string map, robot, session, dir, frames;
   std::string label_field = "label";
+  std::string poses, poses_frame = "auto";
   int every = 1;
   bool query = false;
   bool store_raw = false;
@@ -211,7 +212,12 @@ int runIngest(const Common& common, const IngestArgs& a) {
   if (a.window < 1) throw UsageError("--window must be at least 1");
   if (a.retries < 0 || a.retries > 100) throw UsageError("--retries must be between 0 and 100");
   if (!(a.chunk_mb >= 0.001 && a.chunk_mb <= 2000)) throw UsageError("--chunk-mb must be between 0.001 and 2000");
-  const sglc::Sequence seq = sglc::openSequence(a.dir, sglc::FrameSelection::parse(a.frames), a.every);
+  const sglc::Sequence seq = sglc::openSequence(a.dir, sglc::FrameSelection::parse(a.frames), a.every,
+                                                {a.poses, sglc::parsePosesFrame(a.poses_frame)});
+  if (seq.poses_from_camera)
+    std::cerr << "sglc ingest: " << seq.poses_path
+              << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
+  for (const auto& w : seq.warnings) std::cerr << "sglc ingest: warning: " << w << "\n";
   const std::string session = a.session.empty() ? seq.name : a.session;
   if (session.empty()) throw UsageError("cannot name the session after " + a.dir + ": give --session");
   Feeder(common, a, seq, session).run();
@@ -231,6 +237,14 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
                 "Frame numbers: a, a:b (b exclusive; a: and :b open-ended), a:b:s, or a comma-separated list");
   c->add_option("--every", a->every, "Ingest every N-th frame")->capture_default_str();
   c->add_option("--label-field", a->label_field, "Label field of PCD/PLY scans")->capture_default_str();
+  c->add_option("--poses", a->poses,
+                "Odometry file (KITTI 3x4 or TUM) instead of DIR/poses.txt: a line per frame number or per scan");
+  c->add_option(
+       "--poses-frame", a->poses_frame,
+       "auto: a KITTI poses file next to a calib.txt holds camera poses (turned into LiDAR poses with its Tr), "
+       "anything else LiDAR poses; lidar: as they are; camera: apply calib.txt's Tr")
+      ->check(CLI::IsMember({"auto", "lidar", "camera"}))
+      ->capture_default_str();
   c->add_flag("--query", a->query, "Look for loops before each scan is stored and report them");
   c->add_flag("--store-raw", a->store_raw, "Also keep the raw clouds on the server");
   c->add_flag("--progress", a->progress, "Show the progress bar even when stderr is not a terminal");
@@ -248,7 +262,7 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
   addQueryFlags(c, a->q, false);
   c->add_option("DIR", a->dir,
                 "Sequence directory: velodyne/NNNNNN.{bin,pcd,ply,npy}, optional labels/ (.label or .npy), "
-                "poses.txt (KITTI or TUM), times.txt")
+                "poses.txt (KITTI or TUM), times.txt, calib.txt")
       ->required();
   out.push_back({c, [&common, a] { return runIngest(common, *a); }});
 }

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "poses_frame.hpp"
 #include "sglc/io.hpp"
 
 namespace sglc {
@@ -41,15 +42,19 @@ std::string labelFileOf(const fs::path& root, const std::string& name) {
   return (!fs::exists(label, ec) && fs::exists(npy, ec)) ? npy.string() : label.string();
 }
 
-// poses.txt (KITTI 12 columns or TUM 8 columns, told apart by the first line) and times.txt. A TUM file's
-// stamps serve as the frames' stamps when there is no times.txt.
-void attachPoses(const fs::path& root, std::vector<SequenceFrame>& all, Sequence& seq) {
+// The poses file (DIR/poses.txt or the one given: KITTI 12 columns or TUM 8, told apart by the first line) and
+// times.txt. A TUM file's stamps serve as the frames' stamps when there is no times.txt. KITTI camera poses are
+// turned into LiDAR poses per sglc/sequence.hpp.
+void attachPoses(const fs::path& root, std::vector<SequenceFrame>& all, Sequence& seq, const PoseOptions& opt) {
   std::error_code ec;
   const std::int64_t max_frame = all.back().number;
   auto index = [&](Indexing how, std::size_t i) { return how == Indexing::kByNumber ? std::size_t(all[i].number) : i; };
-  const fs::path poses_path = root / "poses.txt";
+  const fs::path poses_path = opt.file.empty() ? root / "poses.txt" : fs::path(opt.file);
+  if (!opt.file.empty() && !fs::is_regular_file(poses_path, ec))
+    throw InputError(opt.file + ": no such poses file (--poses)");
+  int columns = -1;
   if (fs::exists(poses_path, ec)) {
-    const int columns = posesColumns(poses_path.string());
+    columns = posesColumns(poses_path.string());
     if (columns == 8) {
       const auto poses = readTumPoses(poses_path.string());
       const auto how = chooseIndexing(poses_path.string(), poses.size(), max_frame, all.size());
@@ -67,6 +72,37 @@ void attachPoses(const fs::path& root, std::vector<SequenceFrame>& all, Sequence
                        " numbers per line; expected 12 (KITTI 3x4) or 8 (TUM t tx ty tz qx qy qz qw)");
     }
     seq.has_poses = true;
+    seq.poses_path = poses_path.string();
+  } else if (opt.frame == PosesFrame::kCamera) {
+    throw InputError(root.string() + ": --poses-frame camera, but there is no poses.txt (give --poses FILE)");
+  }
+  if (seq.has_poses) {
+    const fs::path calib = root / "calib.txt";
+    const bool kitti = columns == 12 || columns == 0;
+    const bool camera =
+        opt.frame == PosesFrame::kCamera || (opt.frame == PosesFrame::kAuto && kitti && fs::exists(calib, ec));
+    if (camera) {
+      if (!fs::exists(calib, ec))
+        throw InputError(calib.string() + ": missing; --poses-frame camera needs KITTI's calib.txt (its Tr line)");
+      Mat4d Tr;
+      try {
+        Tr = readCalibTr(calib.string());
+      } catch (const InputError& e) {
+        throw InputError(std::string(e.what()) + " (the poses are taken as KITTI camera poses because calib.txt is " +
+                         "there; give --poses-frame lidar to take them as LiDAR poses)");
+      }
+      const Eigen::Matrix3d R = Tr.topLeftCorner<3, 3>();
+      if (!((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() < 1e-3 && R.determinant() > 0))
+        throw InputError(calib.string() + ": its Tr is not a rotation and a shift (R^T R differs from I by " +
+                         std::to_string((R.transpose() * R - Eigen::Matrix3d::Identity()).norm()) + ")");
+      std::vector<Mat4d*> poses;
+      for (auto& f : all) poses.push_back(&*f.pose);
+      cameraToLidarPoses(poses, Tr);
+      seq.poses_from_camera = true;
+    }
+    std::vector<const Mat4d*> poses;
+    for (const auto& f : all) poses.push_back(&*f.pose);
+    if (auto w = zMotionWarning(poses, poses_path.string())) seq.warnings.push_back(*w);
   }
   const fs::path times_path = root / "times.txt";
   if (fs::exists(times_path, ec)) {
@@ -79,7 +115,14 @@ void attachPoses(const fs::path& root, std::vector<SequenceFrame>& all, Sequence
 
 }  // namespace
 
-Sequence openSequence(const std::string& dir, const FrameSelection& selection, int every) {
+PosesFrame parsePosesFrame(const std::string& text) {
+  if (text == "auto") return PosesFrame::kAuto;
+  if (text == "lidar") return PosesFrame::kLidar;
+  if (text == "camera") return PosesFrame::kCamera;
+  throw InputError("--poses-frame '" + text + "': expected auto, lidar or camera");
+}
+
+Sequence openSequence(const std::string& dir, const FrameSelection& selection, int every, const PoseOptions& poses) {
   if (every < 1) throw InputError("--every must be at least 1 (got " + std::to_string(every) + ")");
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw InputError(dir + ": not a directory");
@@ -122,7 +165,7 @@ Sequence openSequence(const std::string& dir, const FrameSelection& selection, i
   seq.frames_in_dir = all.size();
   const std::int64_t max_frame = all.back().number;
 
-  attachPoses(root, all, seq);
+  attachPoses(root, all, seq, poses);
   std::size_t in_range = 0;
   for (auto& f : all) {
     if (!selection.contains(f.number)) continue;

@@ -79,6 +79,9 @@ TEST(CliErrors, BadIngestInput) {
   expectOneLineError({"ingest", "--map", "", "--robot", "r", dir}, "--map");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--chunk-mb", "0", dir}, "--chunk-mb");
   expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--window", "0", dir}, "--window");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--poses", tmp / "odom.txt", dir}, "odom.txt");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--poses-frame", "imu", dir}, "imu");
+  expectOneLineError({"ingest", "--map", "m", "--robot", "r", "--poses-frame", "camera", dir}, "poses");
   // Labels all present or all absent (velodyne/ only is an unlabelled sequence): one missing is an error.
   sglc::writeKittiBin(dir + "/velodyne/000001.bin", {{1, 2, 3}}, {0.5f});
   sglc::writeLabels(dir + "/labels/000001.label", {40});

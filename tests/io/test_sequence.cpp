@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 
 #include "sglc/io.hpp"
 #include "sglc/sequence.hpp"
@@ -198,4 +199,98 @@ TEST(Sequence, TumPosesWriteAndReadBack) {
   ASSERT_EQ(back.size(), 1u);
   EXPECT_NEAR(back[0].stamp, 1234567890.123456, 1e-6);
   EXPECT_TRUE(back[0].pose.isApprox(T, 1e-8));
+}
+
+namespace {
+
+// KITTI 00's calib.txt Tr (velodyne -> left camera).
+const char* const kKittiTr =
+    "Tr: 4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-02 -7.210626507497e-03 "
+    "8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 9.999738645903e-01 4.859485810390e-04 "
+    "-7.206933692422e-03 -2.921968648686e-01\n";
+
+// A camera driving forward (its z) 2 m per frame, as KITTI's poses.txt gives it.
+std::string cameraPoses(int n) {
+  std::string out;
+  for (int i = 0; i < n; ++i) out += "1 0 0 0 0 1 0 0 0 0 1 " + std::to_string(2.0 * i) + "\n";
+  return out;
+}
+
+std::string messageOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const sglc::InputError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+}  // namespace
+
+TEST(Sequence, KittiCameraPosesNextToCalibBecomeLidarPoses) {
+  TempDir tmp;
+  const std::string dir = makeSequence(tmp, "kitti", {0, 1, 2, 3}, false);
+  writeFile(dir + "/poses.txt", cameraPoses(4));
+  writeFile(dir + "/calib.txt", std::string("P0: 1 0 0 0 0 1 0 0 0 0 1 0\n") + kKittiTr);
+  const sglc::Sequence s = sglc::openSequence(dir);
+  ASSERT_TRUE(s.has_poses);
+  EXPECT_TRUE(s.poses_from_camera);
+  EXPECT_TRUE(s.warnings.empty()) << s.warnings.front();
+  // The LiDAR drives along its own x: 6 m after three frames, within the calibration's small tilt.
+  const Eigen::Vector3d t = s.frames[3].pose->topRightCorner<3, 1>();
+  EXPECT_NEAR(t.x(), 6.0, 0.01);
+  EXPECT_NEAR(t.y(), 0.0, 0.1);
+  EXPECT_NEAR(t.z(), 0.0, 0.1);
+  EXPECT_TRUE(s.frames[0].pose->isApprox(sglc::Mat4d::Identity(), 1e-9));
+
+  // Told they are LiDAR poses, they pass unchanged, and the motion along z is pointed out.
+  const sglc::Sequence as_is = sglc::openSequence(dir, {}, 1, {"", sglc::PosesFrame::kLidar});
+  EXPECT_FALSE(as_is.poses_from_camera);
+  EXPECT_NEAR((*as_is.frames[3].pose)(2, 3), 6.0, 1e-12);
+  ASSERT_EQ(as_is.warnings.size(), 1u);
+  EXPECT_NE(as_is.warnings[0].find("along the sensor's z"), std::string::npos) << as_is.warnings[0];
+  EXPECT_NE(as_is.warnings[0].find("poses.txt"), std::string::npos) << as_is.warnings[0];
+}
+
+TEST(Sequence, PosesFrameErrorsNameWhatIsMissing) {
+  TempDir tmp;
+  const std::string dir = makeSequence(tmp, "k", {0, 1}, false);
+  writeFile(dir + "/poses.txt", cameraPoses(2));
+  // Camera poses asked for, no calib.txt.
+  EXPECT_NE(messageOf([&] {
+              sglc::openSequence(dir, {}, 1, {"", sglc::PosesFrame::kCamera});
+            }).find("calib.txt"),
+            std::string::npos);
+  // A calib.txt without Tr: named, with the way out.
+  writeFile(dir + "/calib.txt", "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+  const std::string msg = messageOf([&] { sglc::openSequence(dir); });
+  EXPECT_NE(msg.find("no 'Tr:' line"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("--poses-frame lidar"), std::string::npos) << msg;
+  EXPECT_NO_THROW(sglc::openSequence(dir, {}, 1, {"", sglc::PosesFrame::kLidar}));
+  // A Tr that is no rotation.
+  writeFile(dir + "/calib.txt", "Tr: 2 0 0 0 0 1 0 0 0 0 1 0\n");
+  EXPECT_NE(messageOf([&] { sglc::openSequence(dir); }).find("not a rotation"), std::string::npos);
+  EXPECT_THROW(sglc::parsePosesFrame("velodyne"), sglc::InputError);
+  EXPECT_EQ(sglc::parsePosesFrame("camera"), sglc::PosesFrame::kCamera);
+}
+
+TEST(Sequence, PosesFileOption) {
+  TempDir tmp;
+  const std::string dir = makeSequence(tmp, "p", {0, 1, 2}, false);
+  writeFile(dir + "/poses.txt", poseLine(0) + poseLine(1) + poseLine(2));
+  // A TUM file elsewhere, with its stamps; TUM poses are LiDAR poses even next to a calib.txt.
+  writeFile(dir + "/calib.txt", kKittiTr);
+  writeFile(tmp.file("odom.tum"), "10 0 0 0 0 0 0 1\n10.1 5 0 0 0 0 0 1\n10.2 10 0 0 0 0 0 1\n");
+  const sglc::Sequence s = sglc::openSequence(dir, {}, 1, {tmp.file("odom.tum"), sglc::PosesFrame::kAuto});
+  EXPECT_EQ(s.poses_path, tmp.file("odom.tum"));
+  EXPECT_FALSE(s.poses_from_camera);
+  EXPECT_NEAR((*s.frames[2].pose)(0, 3), 10.0, 1e-12);
+  EXPECT_DOUBLE_EQ(*s.frames[1].stamp, 10.1);
+  EXPECT_TRUE(s.warnings.empty());
+  // A missing file is named.
+  const std::string msg = messageOf([&] { sglc::openSequence(dir, {}, 1, {tmp.file("nope.txt"), {}}); });
+  EXPECT_NE(msg.find("nope.txt"), std::string::npos) << msg;
+  // A file with the wrong number of lines: the same rule as poses.txt.
+  writeFile(tmp.file("short.txt"), poseLine(0));
+  EXPECT_THROW(sglc::openSequence(dir, {}, 1, {tmp.file("short.txt"), sglc::PosesFrame::kLidar}), sglc::InputError);
 }

@@ -1,6 +1,7 @@
 #include "source.hpp"
 
 #include <filesystem>
+#include <iostream>
 #include <map>
 #include <sstream>
 
@@ -52,16 +53,14 @@ class DirSource final : public FrameSource {
  public:
   DirSource(const std::string& dir, const std::string& spec) : dir_(dir) {
     // Every frame's files and pose (pair files may name frames outside the selection), the selected ones in order.
+    // KITTI camera poses come as LiDAR poses (calib.txt's Tr; sglc/sequence.hpp).
     const auto seq = openSequence(dir);
+    for (const auto& w : seq.warnings) std::cerr << "warning: " << w << "\n";
     const auto selection = FrameSelection::parse(spec);
-    Mat4d Tr = Mat4d::Identity();
-    const auto calib = fs::path(dir) / "calib.txt";
-    if (fs::exists(calib)) Tr = readCalibTr(calib.string());
-    const Mat4d Tr_inv = Tr.inverse();
     for (const auto& f : seq.frames) {
       const int number = static_cast<int>(f.number);
       files_[number] = {f.scan_path, f.label_path};
-      if (f.pose) poses_[number] = Tr_inv * *f.pose * Tr;
+      if (f.pose) poses_[number] = *f.pose;
       if (selection.contains(f.number)) frames_.push_back(number);
     }
     if (frames_.empty()) throw InputError(dir + ": no frame matches --frames '" + spec + "'");
