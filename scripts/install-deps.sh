@@ -33,7 +33,26 @@ PACKAGES=(
   python3-yaml
   # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)
   python3-scipy
+  # bags: MCAP chunks (zstd, lz4); the lz4 tool compresses the test bags' chunks (tests/interop/write_bag.mjs)
+  libzstd-dev liblz4-dev lz4
 )
+
+# Node.js and npm run the test bags' writers (tests/interop). A machine with its own Node.js keeps it; without
+# one, Debian's is installed.
+command -v node >/dev/null || PACKAGES+=(nodejs)
+command -v npm >/dev/null || PACKAGES+=(npm)
+
+# The npm packages of tests/interop (pinned by its package-lock.json), installed again when the lockfile changed.
+npm_packages() {
+  local dir=tests/interop stamp=tests/interop/node_modules/.sglc-lock.sha256
+  local want
+  want=$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)
+  if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    echo "install-deps: npm ci in $dir"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    echo "$want" >"$stamp"
+  fi
+}
 
 missing=()
 for p in "${PACKAGES[@]}"; do
@@ -41,6 +60,7 @@ for p in "${PACKAGES[@]}"; do
 done
 if [ ${#missing[@]} -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
+  cd "$(dirname "$0")/.." && npm_packages
   exit 0
 fi
 
@@ -58,3 +78,4 @@ $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
 if [[ " ${missing[*]} " == *" prometheus "* ]] && [ -d /run/systemd/system ]; then
   $SUDO systemctl disable --now prometheus.service >/dev/null 2>&1 || true
 fi
+cd "$(dirname "$0")/.." && npm_packages

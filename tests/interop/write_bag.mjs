@@ -1,0 +1,196 @@
+// Writes a bag from a JSON description with writers nobody in this project wrote: @mcap/core (MCAP),
+// @foxglove/rosmsg + @foxglove/rosmsg2-serialization (ROS 2 CDR), @foxglove/wasm-zstd and Debian's lz4 tool
+// (chunk compression), Python's sqlite3 (tests/interop/make_db3.py) for rosbag2 .db3 files. Used by the bag
+// tests (tests/io/test_bags.cpp): the C++ readers must take what these produce.
+//
+//   node write_bag.mjs SPEC.json OUT      (OUT: an .mcap file, or a rosbag2 directory when storage is db3)
+//
+// SPEC: {"storage": "mcap" | "db3", "compression": "zstd" | "lz4" | "", "chunk_size": bytes,
+//        "messages": [{"topic", "type": "pointcloud2" | "odometry" | "tf", "log_time_ns", ...the message}]}
+// A pointcloud2 message: stamp_ns, frame_id, height, width, is_bigendian, point_step, fields [{name, offset,
+// datatype, count}], points [[one value per field, in field order]] (null for NaN); the data is packed here.
+import { McapWriter, TempBuffer } from "@mcap/core";
+import { parse } from "@foxglove/rosmsg";
+import { MessageWriter } from "@foxglove/rosmsg2-serialization";
+import * as zstd from "@foxglove/wasm-zstd";
+import { execFileSync } from "node:child_process";
+import { readFileSync, writeFileSync, mkdirSync } from "node:fs";
+import { dirname, join } from "node:path";
+import { fileURLToPath } from "node:url";
+
+const HEADER = `
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec`;
+const DEFINITIONS = {
+  pointcloud2: ["sensor_msgs/msg/PointCloud2", `std_msgs/Header header
+uint32 height
+uint32 width
+PointField[] fields
+bool is_bigendian
+uint32 point_step
+uint32 row_step
+uint8[] data
+bool is_dense
+================================================================================
+MSG: sensor_msgs/PointField
+string name
+uint32 offset
+uint8 datatype
+uint32 count
+================================================================================${HEADER}`],
+  odometry: ["nav_msgs/msg/Odometry", `std_msgs/Header header
+string child_frame_id
+geometry_msgs/PoseWithCovariance pose
+geometry_msgs/TwistWithCovariance twist
+================================================================================
+MSG: geometry_msgs/PoseWithCovariance
+Pose pose
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Pose
+Point position
+Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x
+float64 y
+float64 z
+float64 w
+================================================================================
+MSG: geometry_msgs/TwistWithCovariance
+Twist twist
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Twist
+Vector3 linear
+Vector3 angular
+================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z
+================================================================================${HEADER}`],
+  tf: ["tf2_msgs/msg/TFMessage", `geometry_msgs/TransformStamped[] transforms
+================================================================================
+MSG: geometry_msgs/TransformStamped
+std_msgs/Header header
+string child_frame_id
+Transform transform
+================================================================================
+MSG: geometry_msgs/Transform
+Vector3 translation
+Quaternion rotation
+================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x
+float64 y
+float64 z
+float64 w
+================================================================================${HEADER}`],
+};
+
+const SIZES = [0, 1, 1, 2, 2, 4, 4, 4, 8];
+const stamp = (ns) => ({ sec: Number(BigInt(ns) / 1000000000n), nanosec: Number(BigInt(ns) % 1000000000n) });
+
+function packCloud(m) {
+  const n = m.width * m.height;
+  const data = new Uint8Array(n * m.point_step);
+  const view = new DataView(data.buffer);
+  const le = !m.is_bigendian;
+  m.points.forEach((p, i) => {
+    m.fields.forEach((f, k) => {
+      const at = i * m.point_step + f.offset;
+      const v = p[k] === null ? NaN : p[k];
+      switch (f.datatype) {
+        case 1: view.setInt8(at, v); break;
+        case 2: view.setUint8(at, v); break;
+        case 3: view.setInt16(at, v, le); break;
+        case 4: view.setUint16(at, v, le); break;
+        case 5: view.setInt32(at, v, le); break;
+        case 6: view.setUint32(at, v, le); break;
+        case 7: view.setFloat32(at, v, le); break;
+        case 8: view.setFloat64(at, v, le); break;
+        default: throw new Error(`datatype ${f.datatype}`);
+      }
+    });
+  });
+  return {
+    header: { stamp: stamp(m.stamp_ns), frame_id: m.frame_id },
+    height: m.height, width: m.width, fields: m.fields, is_bigendian: m.is_bigendian,
+    point_step: m.point_step, row_step: m.width * m.point_step, data, is_dense: false,
+  };
+}
+
+const pose = (p, q) => ({ position: { x: p[0], y: p[1], z: p[2] }, orientation: { x: q[0], y: q[1], z: q[2], w: q[3] } });
+
+function message(m) {
+  if (m.type === "pointcloud2") return packCloud(m);
+  if (m.type === "odometry")
+    return {
+      header: { stamp: stamp(m.stamp_ns), frame_id: m.frame_id }, child_frame_id: m.child_frame_id,
+      pose: { pose: pose(m.position, m.orientation), covariance: new Array(36).fill(0) },
+      twist: { twist: { linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } }, covariance: new Array(36).fill(0) },
+    };
+  return {
+    transforms: m.transforms.map((t) => ({
+      header: { stamp: stamp(t.stamp_ns), frame_id: t.frame_id }, child_frame_id: t.child_frame_id,
+      transform: { translation: { x: t.position[0], y: t.position[1], z: t.position[2] },
+                   rotation: { x: t.orientation[0], y: t.orientation[1], z: t.orientation[2], w: t.orientation[3] } },
+    })),
+  };
+}
+
+function compressor(name) {
+  if (name === "zstd") return (data) => ({ compression: "zstd", compressedData: zstd.compress(data, 3) });
+  if (name === "lz4")
+    return (data) => ({ compression: "lz4", compressedData: new Uint8Array(execFileSync("lz4", ["-c", "-q"], { input: data })) });
+  return undefined;
+}
+
+const [specPath, out] = process.argv.slice(2);
+const spec = JSON.parse(readFileSync(specPath, "utf8"));
+await zstd.isLoaded;
+const writers = {};
+const encoded = spec.messages.map((m) => {
+  const [type, text] = DEFINITIONS[m.type];
+  writers[m.type] ??= new MessageWriter(parse(text, { ros2: true }));
+  return { topic: m.topic, type, text, log_time_ns: BigInt(m.log_time_ns), data: writers[m.type].writeMessage(message(m)) };
+});
+
+if (spec.storage === "db3") {
+  // make_db3.py reads the messages as JSON lines (data in base64) and writes OUT/OUT-name_0.db3 + metadata.yaml.
+  mkdirSync(out, { recursive: true });
+  const lines = encoded.map((e) => JSON.stringify({ topic: e.topic, type: e.type, log_time_ns: e.log_time_ns.toString(),
+                                                     data: Buffer.from(e.data).toString("base64") })).join("\n");
+  execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { input: lines });
+} else {
+  const buffer = new TempBuffer();
+  const writer = new McapWriter({ writable: buffer, useChunks: spec.compression !== "nochunks",
+                                  chunkSize: spec.chunk_size ?? 1024 * 1024, compressChunk: compressor(spec.compression) });
+  await writer.start({ profile: "ros2", library: "sglc tests via @mcap/core" });
+  const channels = {};
+  for (const e of encoded) {
+    if (!(e.topic in channels)) {
+      const schemaId = await writer.registerSchema({ name: e.type, encoding: "ros2msg", data: new TextEncoder().encode(e.text) });
+      channels[e.topic] = await writer.registerChannel({ topic: e.topic, schemaId, messageEncoding: "cdr", metadata: new Map() });
+    }
+    await writer.addMessage({ channelId: channels[e.topic], sequence: 0, logTime: e.log_time_ns, publishTime: e.log_time_ns, data: e.data });
+  }
+  await writer.end();
+  writeFileSync(out, buffer.get());
+}
