@@ -1,4 +1,4 @@
-// `sglc ingest DIR`: a sequence directory streamed to the server as one robot session.
+// `sglc ingest DIR|BAG`: a sequence directory, or a bag's drive, streamed to the server as one robot session.
 #include <unistd.h>
 
 #include <chrono>
@@ -9,9 +9,8 @@
 #include <thread>
 
 #include "common.hpp"
+#include "ingest_source.hpp"
 #include "sglc/client/packing.hpp"
-#include "sglc/io.hpp"
-#include "sglc/sequence.hpp"
 
 namespace sglc::cli {
 namespace {
@@ -57,10 +56,8 @@ class Progress {
 // Subcommands
 
 struct IngestArgs {
-  std::string map, robot, session, dir, frames;
-  std::string label_field = "label";
-  std::string poses, poses_frame = "auto";
-  int every = 1;
+  std::string map, robot, session;
+  SourceOptions source;
   bool query = false;
   bool store_raw = false;
   bool progress = false, no_progress = false;
@@ -82,13 +79,13 @@ bool retryable(const sc::RpcError& e) {
 // stored before the break is answered as stored, not stored twice.
 class Feeder {
  public:
-  Feeder(const Common& common, const IngestArgs& a, const sglc::Sequence& seq, std::string session)
+  Feeder(const Common& common, const IngestArgs& a, IngestSource& source, std::string session)
       : common_(common),
         a_(a),
-        seq_(seq),
+        source_(source),
         session_(std::move(session)),
         client_(connectClient(common, static_cast<std::size_t>(a.chunk_mb * 1e6))),
-        progress_(a.progress || (::isatty(STDERR_FILENO) == 1 && !a.no_progress), seq.frames.size()) {
+        progress_(a.progress || (::isatty(STDERR_FILENO) == 1 && !a.no_progress), source.frames().size()) {
     options_.store_raw = a.store_raw;
     options_.query = a.query;
     options_.query_options = toQueryOptions(a.q);
@@ -117,7 +114,7 @@ class Feeder {
     }
     progress_.done();
     if (!common_.json)
-      std::cout << "ingested " << done_ << " scans from " << a_.dir << " into map " << a_.map << " (robot " << a_.robot
+      std::cout << "ingested " << done_ << " scans from " << a_.source.path << " into map " << a_.map << " (robot " << a_.robot
                 << ", session " << session_ << ")" << (a_.query ? ", " + std::to_string(loops_) + " loops" : "")
                 << "\n";
   }
@@ -130,7 +127,7 @@ class Feeder {
     std::size_t resent = 0;
     try {
       for (; resent < pending_.size(); ++resent) send(stream, pending_[resent]);
-      while (next_ < seq_.frames.size()) {
+      while (next_ < source_.frames().size()) {
         const std::size_t i = next_++;  // counted as sent before anything can throw: a break resends it once
         pending_.push_back(i);
         send(stream, i);
@@ -158,8 +155,8 @@ class Feeder {
   }
 
   void send(sc::IngestSession& stream, std::size_t i) {
-    const auto& f = seq_.frames[i];
-    const sglc::LabelledScan scan = sglc::readScan(f.scan_path, f.label_path, a_.label_field);
+    const auto& f = source_.frames()[i];
+    const sglc::LabelledScan scan = source_.scan(i);
     auto o = options_;
     o.stamp = f.stamp;
     o.odometry_pose = f.pose;
@@ -167,7 +164,7 @@ class Feeder {
   }
 
   void handle(const v1::IngestResponse& r) {
-    const std::string frame = seq_.frames[pending_.front()].name;
+    const std::string frame = source_.frames()[pending_.front()].name;
     pending_.pop_front();
     ++done_;
     loops_ += r.loops_size();
@@ -190,13 +187,13 @@ class Feeder {
 
   [[noreturn]] void fail(const std::string& why) {
     progress_.clear();
-    throw std::runtime_error(why + " (after " + std::to_string(done_) + " of " + std::to_string(seq_.frames.size()) +
+    throw std::runtime_error(why + " (after " + std::to_string(done_) + " of " + std::to_string(source_.frames().size()) +
                              " scans were stored)");
   }
 
   const Common& common_;
   const IngestArgs& a_;
-  const sglc::Sequence& seq_;
+  IngestSource& source_;
   const std::string session_;
   const sc::Client client_;
   Progress progress_;
@@ -212,15 +209,10 @@ int runIngest(const Common& common, const IngestArgs& a) {
   if (a.window < 1) throw UsageError("--window must be at least 1");
   if (a.retries < 0 || a.retries > 100) throw UsageError("--retries must be between 0 and 100");
   if (!(a.chunk_mb >= 0.001 && a.chunk_mb <= 2000)) throw UsageError("--chunk-mb must be between 0.001 and 2000");
-  const sglc::Sequence seq = sglc::openSequence(a.dir, sglc::FrameSelection::parse(a.frames), a.every,
-                                                {a.poses, sglc::parsePosesFrame(a.poses_frame)});
-  if (seq.poses_from_camera)
-    std::cerr << "sglc ingest: " << seq.poses_path
-              << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
-  for (const auto& w : seq.warnings) std::cerr << "sglc ingest: warning: " << w << "\n";
-  const std::string session = a.session.empty() ? seq.name : a.session;
-  if (session.empty()) throw UsageError("cannot name the session after " + a.dir + ": give --session");
-  Feeder(common, a, seq, session).run();
+  const auto source = openSource(a.source);
+  const std::string session = a.session.empty() ? source->name() : a.session;
+  if (session.empty()) throw UsageError("cannot name the session after " + a.source.path + ": give --session");
+  Feeder(common, a, *source, session).run();
   return 0;
 }
 
@@ -228,19 +220,21 @@ int runIngest(const Common& common, const IngestArgs& a) {
 
 void addIngest(CLI::App& app, Common& common, Commands& out) {
   auto a = std::make_shared<IngestArgs>();
-  auto* c = app.add_subcommand("ingest", "Store a sequence directory (any one scan format) as one robot session");
+  auto* c = app.add_subcommand(
+      "ingest", "Store a sequence directory (any one scan format) or a bag's drive (MCAP, rosbag2) as one robot session");
   addCommon(c, common);
   c->add_option("--map", a->map, "Map name (created if missing)")->required();
   c->add_option("--robot", a->robot, "Robot name")->required();
-  c->add_option("--session", a->session, "Session name (default: the directory's base name)");
-  c->add_option("--frames", a->frames,
-                "Frame numbers: a, a:b (b exclusive; a: and :b open-ended), a:b:s, or a comma-separated list");
-  c->add_option("--every", a->every, "Ingest every N-th frame")->capture_default_str();
-  c->add_option("--label-field", a->label_field, "Label field of PCD/PLY scans")->capture_default_str();
-  c->add_option("--poses", a->poses,
+  c->add_option("--session", a->session, "Session name (default: the directory's or bag's base name)");
+  c->add_option("--frames", a->source.frames,
+                "Frame numbers (a bag's: each cloud's index on its topic): a, a:b (b exclusive; a: and :b "
+                "open-ended), a:b:s, or a comma-separated list");
+  c->add_option("--every", a->source.every, "Ingest every N-th frame")->capture_default_str();
+  c->add_option("--label-field", a->source.label_field, "Label field of PCD/PLY scans")->capture_default_str();
+  c->add_option("--poses", a->source.poses,
                 "Odometry file (KITTI 3x4 or TUM) instead of DIR/poses.txt: a line per frame number or per scan");
   c->add_option(
-       "--poses-frame", a->poses_frame,
+       "--poses-frame", a->source.poses_frame,
        "auto: a KITTI poses file next to a calib.txt holds camera poses (turned into LiDAR poses with its Tr), "
        "anything else LiDAR poses; lidar: as they are; camera: apply calib.txt's Tr")
       ->check(CLI::IsMember({"auto", "lidar", "camera"}))
@@ -260,9 +254,19 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
                 "Scans larger than this (packed) go through IngestChunked in pieces this size")
       ->capture_default_str();
   addQueryFlags(c, a->q, false);
-  c->add_option("DIR", a->dir,
-                "Sequence directory: velodyne/NNNNNN.{bin,pcd,ply,npy}, optional labels/ (.label or .npy), "
-                "poses.txt (KITTI or TUM), times.txt, calib.txt")
+  c->add_option("--points-topic", a->source.points_topic, "A bag's sensor_msgs/PointCloud2 topic");
+  c->add_option("--odom-topic", a->source.odom_topic,
+                "A bag's nav_msgs/Odometry topic (the sensor's extrinsic from /tf_static)");
+  c->add_option("--tf", a->source.tf_frame, "Or: the fixed frame (odom, map) to look the cloud's frame up in, over /tf");
+  c->add_option("--keyframe-m", a->source.keyframe_m,
+                "With poses, a bag's cloud is sent when the sensor moved this far since the last one sent")
+      ->capture_default_str();
+  c->add_option("--keyframe-deg", a->source.keyframe_deg, "... or turned this much (both 0: every cloud)")
+      ->capture_default_str();
+  c->add_option("DIR", a->source.path,
+                "Sequence directory (velodyne/NNNNNN.{bin,pcd,ply,npy}, optional labels/ (.label or .npy), "
+                "poses.txt (KITTI or TUM), times.txt, calib.txt), or a bag: an MCAP file, a rosbag2 .db3 file or "
+                "directory")
       ->required();
   out.push_back({c, [&common, a] { return runIngest(common, *a); }});
 }

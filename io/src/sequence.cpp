@@ -95,10 +95,13 @@ void attachPoses(const fs::path& root, std::vector<SequenceFrame>& all, Sequence
       if (!((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() < 1e-3 && R.determinant() > 0))
         throw InputError(calib.string() + ": its Tr is not a rotation and a shift (R^T R differs from I by " +
                          std::to_string((R.transpose() * R - Eigen::Matrix3d::Identity()).norm()) + ")");
-      std::vector<Mat4d*> poses;
-      for (auto& f : all) poses.push_back(&*f.pose);
-      cameraToLidarPoses(poses, Tr);
-      seq.poses_from_camera = true;
+      // An identity Tr (the simulator's) says the camera frame is the LiDAR's: nothing to turn.
+      if (!Tr.isApprox(Mat4d::Identity(), 1e-12)) {
+        std::vector<Mat4d*> poses;
+        for (auto& f : all) poses.push_back(&*f.pose);
+        cameraToLidarPoses(poses, Tr);
+        seq.poses_from_camera = true;
+      }
     }
     std::vector<const Mat4d*> poses;
     for (const auto& f : all) poses.push_back(&*f.pose);

@@ -7,14 +7,17 @@
 //
 // SPEC: {"storage": "mcap" | "db3", "compression": "zstd" | "lz4" | "", "chunk_size": bytes,
 //        "messages": [{"topic", "type": "pointcloud2" | "odometry" | "tf", "log_time_ns", ...the message}]}
+// Or SPEC {"from_sequence": DIR, "points_topic", "odom_topic", "t0_ns", "storage", "compression"}: a
+// simulated sequence directory (velodyne/NNNNNN.bin, poses.txt in the LiDAR frame, times.txt) as a drive: a
+// PointCloud2 (x y z intensity, float32) per scan and a nav_msgs/Odometry at each scan's stamp.
 // A pointcloud2 message: stamp_ns, frame_id, height, width, is_bigendian, point_step, fields [{name, offset,
 // datatype, count}], points [[one value per field, in field order]] (null for NaN); the data is packed here.
-import { McapWriter, TempBuffer } from "@mcap/core";
+import { McapWriter } from "@mcap/core";
 import { parse } from "@foxglove/rosmsg";
 import { MessageWriter } from "@foxglove/rosmsg2-serialization";
 import * as zstd from "@foxglove/wasm-zstd";
 import { execFileSync } from "node:child_process";
-import { readFileSync, writeFileSync, mkdirSync } from "node:fs";
+import { readFileSync, mkdirSync, readdirSync, openSync, writeSync, closeSync } from "node:fs";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
 
@@ -109,6 +112,9 @@ const stamp = (ns) => ({ sec: Number(BigInt(ns) / 1000000000n), nanosec: Number(
 
 function packCloud(m) {
   const n = m.width * m.height;
+  if (m.data) // already packed (a KITTI .bin is x y z intensity float32, little-endian: PointCloud2's layout)
+    return { header: { stamp: stamp(m.stamp_ns), frame_id: m.frame_id }, height: m.height, width: m.width, fields: m.fields,
+             is_bigendian: false, point_step: m.point_step, row_step: m.width * m.point_step, data: m.data, is_dense: true };
   const data = new Uint8Array(n * m.point_step);
   const view = new DataView(data.buffer);
   const le = !m.is_bigendian;
@@ -162,8 +168,52 @@ function compressor(name) {
   return undefined;
 }
 
+// Rotation matrix (row-major 3x3 in a KITTI 3x4 line) to a quaternion [x, y, z, w].
+function quaternion(m) {
+  const [r00, r01, r02, , r10, r11, r12, , r20, r21, r22] = m;
+  const tr = r00 + r11 + r22;
+  let x, y, z, w;
+  if (tr > 0) {
+    const s = Math.sqrt(tr + 1) * 2;
+    w = s / 4; x = (r21 - r12) / s; y = (r02 - r20) / s; z = (r10 - r01) / s;
+  } else if (r00 > r11 && r00 > r22) {
+    const s = Math.sqrt(1 + r00 - r11 - r22) * 2;
+    w = (r21 - r12) / s; x = s / 4; y = (r01 + r10) / s; z = (r02 + r20) / s;
+  } else if (r11 > r22) {
+    const s = Math.sqrt(1 + r11 - r00 - r22) * 2;
+    w = (r02 - r20) / s; x = (r01 + r10) / s; y = s / 4; z = (r12 + r21) / s;
+  } else {
+    const s = Math.sqrt(1 + r22 - r00 - r11) * 2;
+    w = (r10 - r01) / s; x = (r02 + r20) / s; y = (r12 + r21) / s; z = s / 4;
+  }
+  const n = Math.hypot(x, y, z, w);
+  return [x / n, y / n, z / n, w / n];
+}
+
+function sequenceMessages(spec) {
+  const dir = spec.from_sequence;
+  const lines = (name) => readFileSync(join(dir, name), "utf8").split("\n").filter((l) => l.trim() && !l.startsWith("#"));
+  const poses = lines("poses.txt").map((l) => l.trim().split(/\s+/).map(Number));
+  const times = lines("times.txt").map(Number);
+  const scans = readdirSync(join(dir, "velodyne")).filter((f) => f.endsWith(".bin")).sort();
+  const t0 = BigInt(spec.t0_ns ?? "1700000000000000000");
+  const out = [];
+  scans.forEach((file, k) => {
+    const stamp = t0 + BigInt(Math.round(times[k] * 1e9));
+    const data = new Uint8Array(readFileSync(join(dir, "velodyne", file)));
+    const xyzi = ["x", "y", "z", "intensity"].map((name, j) => ({ name, offset: 4 * j, datatype: 7, count: 1 }));
+    out.push({ topic: spec.points_topic, type: "pointcloud2", log_time_ns: (stamp + 5000000n).toString(), stamp_ns: stamp.toString(),
+               frame_id: "velodyne", height: 1, width: data.length / 16, is_bigendian: false, point_step: 16, fields: xyzi, data });
+    const m = poses[k];
+    out.push({ topic: spec.odom_topic, type: "odometry", log_time_ns: stamp.toString(), stamp_ns: stamp.toString(), frame_id: "odom",
+               child_frame_id: "velodyne", position: [m[3], m[7], m[11]], orientation: quaternion([m[0], m[1], m[2], 0, m[4], m[5], m[6], 0, m[8], m[9], m[10]]) });
+  });
+  return out;
+}
+
 const [specPath, out] = process.argv.slice(2);
 const spec = JSON.parse(readFileSync(specPath, "utf8"));
+if (spec.from_sequence) spec.messages = sequenceMessages(spec);
 await zstd.isLoaded;
 const writers = {};
 const encoded = spec.messages.map((m) => {
@@ -179,8 +229,11 @@ if (spec.storage === "db3") {
                                                      data: Buffer.from(e.data).toString("base64") })).join("\n");
   execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { input: lines });
 } else {
-  const buffer = new TempBuffer();
-  const writer = new McapWriter({ writable: buffer, useChunks: spec.compression !== "nochunks",
+  // Written straight to the file (an in-memory buffer of a long drive grows by copying).
+  const fd = openSync(out, "w");
+  let position = 0n;
+  const writable = { position: () => position, write: async (data) => { writeSync(fd, data); position += BigInt(data.byteLength); } };
+  const writer = new McapWriter({ writable, useChunks: spec.compression !== "nochunks",
                                   chunkSize: spec.chunk_size ?? 1024 * 1024, compressChunk: compressor(spec.compression) });
   await writer.start({ profile: "ros2", library: "sglc tests via @mcap/core" });
   const channels = {};
@@ -192,5 +245,5 @@ if (spec.storage === "db3") {
     await writer.addMessage({ channelId: channels[e.topic], sequence: 0, logTime: e.log_time_ns, publishTime: e.log_time_ns, data: e.data });
   }
   await writer.end();
-  writeFileSync(out, buffer.get());
+  closeSync(fd);
 }

@@ -1,0 +1,95 @@
+#include "ingest_source.hpp"
+
+#include <filesystem>
+#include <iostream>
+
+#include "common.hpp"
+#include "sglc/bag_drive.hpp"
+#include "sglc/frame_selection.hpp"
+#include "sglc/io.hpp"
+#include "sglc/sequence.hpp"
+
+namespace sglc::cli {
+namespace {
+
+class SequenceSource final : public IngestSource {
+ public:
+  explicit SequenceSource(const SourceOptions& o)
+      : seq_(openSequence(o.path, FrameSelection::parse(o.frames), o.every, {o.poses, parsePosesFrame(o.poses_frame)})),
+        label_field_(o.label_field) {
+    if (seq_.poses_from_camera)
+      std::cerr << "sglc ingest: " << seq_.poses_path << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
+    for (const auto& w : seq_.warnings) std::cerr << "sglc ingest: warning: " << w << "\n";
+    for (const auto& f : seq_.frames) frames_.push_back({f.name, f.number, f.stamp, f.pose});
+  }
+  const std::vector<IngestFrame>& frames() const override { return frames_; }
+  LabelledScan scan(std::size_t i) override {
+    const auto& f = seq_.frames.at(i);
+    return readScan(f.scan_path, f.label_path, label_field_);
+  }
+  const std::string& name() const override { return seq_.name; }
+
+ private:
+  Sequence seq_;
+  std::string label_field_;
+  std::vector<IngestFrame> frames_;
+};
+
+class BagSource final : public IngestSource {
+ public:
+  explicit BagSource(const SourceOptions& o) : drive_(o.path, driveOptions(o)) {
+    if (o.poses != "" || o.poses_frame != "auto")
+      throw UsageError("--poses and --poses-frame are for sequence directories; a bag's poses come from "
+                       "--odom-topic or --tf");
+    for (const auto& w : drive_.warnings()) std::cerr << "sglc ingest: warning: " << w << "\n";
+    if (o.every < 1) throw UsageError("--every must be at least 1");
+    const auto selection = FrameSelection::parse(o.frames);
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < drive_.frames().size(); ++i) {
+      const auto& f = drive_.frames()[i];
+      if (!selection.contains(f.number) || kept++ % static_cast<std::size_t>(o.every) != 0) continue;
+      index_.push_back(i);
+      frames_.push_back({std::to_string(f.number), f.number, static_cast<double>(f.stamp_ns) * 1e-9, f.pose});
+    }
+    if (frames_.empty()) throw InputError(o.path + ": no keyframe in frame selection '" + selection.text() + "'");
+    std::cerr << "sglc ingest: " << o.path << ": " << frames_.size() << " keyframes of " << drive_.clouds() << " clouds on "
+              << o.points_topic << "\n";
+    name_ = std::filesystem::path(o.path).lexically_normal().filename().stem().string();
+  }
+  const std::vector<IngestFrame>& frames() const override { return frames_; }
+  LabelledScan scan(std::size_t i) override {
+    RosCloud c = drive_.cloud(index_.at(i));
+    if (c.points.empty()) throw InputError(o_path() + ": cloud " + frames_[i].name + " has no finite point");
+    return {std::move(c.points), {}};
+  }
+  const std::string& name() const override { return name_; }
+
+ private:
+  static BagDriveOptions driveOptions(const SourceOptions& o) {
+    if (o.points_topic.empty()) throw UsageError("a bag needs --points-topic (its PointCloud2 topic)");
+    BagDriveOptions d;
+    d.points_topic = o.points_topic;
+    d.odom_topic = o.odom_topic;
+    d.tf_frame = o.tf_frame;
+    d.keyframe_m = o.keyframe_m;
+    d.keyframe_deg = o.keyframe_deg;
+    return d;
+  }
+  std::string o_path() const { return drive_.bag().path(); }
+  BagDrive drive_;
+  std::vector<std::size_t> index_;
+  std::vector<IngestFrame> frames_;
+  std::string name_;
+};
+
+}  // namespace
+
+std::unique_ptr<IngestSource> openSource(const SourceOptions& o) {
+  if (isBag(o.path)) return std::make_unique<BagSource>(o);
+  if (!o.points_topic.empty() || !o.odom_topic.empty() || !o.tf_frame.empty())
+    throw UsageError(o.path + ": --points-topic, --odom-topic and --tf are for bags, and this is not one (an MCAP file, "
+                     "a .db3 file or a rosbag2 directory with metadata.yaml)");
+  return std::make_unique<SequenceSource>(o);
+}
+
+}  // namespace sglc::cli
