@@ -114,9 +114,9 @@ class Feeder {
     }
     progress_.done();
     if (!common_.json)
-      std::cout << "ingested " << done_ << " scans from " << a_.source.path << " into map " << a_.map << " (robot " << a_.robot
-                << ", session " << session_ << ")" << (a_.query ? ", " + std::to_string(loops_) + " loops" : "")
-                << "\n";
+      std::cout << "ingested " << done_ << " scans from " << a_.source.path << " into map " << a_.map << " (robot "
+                << a_.robot << ", session " << session_ << ")"
+                << (a_.query ? ", " + std::to_string(loops_) + " loops" : "") << "\n";
   }
 
  private:
@@ -187,8 +187,8 @@ class Feeder {
 
   [[noreturn]] void fail(const std::string& why) {
     progress_.clear();
-    throw std::runtime_error(why + " (after " + std::to_string(done_) + " of " + std::to_string(source_.frames().size()) +
-                             " scans were stored)");
+    throw std::runtime_error(why + " (after " + std::to_string(done_) + " of " +
+                             std::to_string(source_.frames().size()) + " scans were stored)");
   }
 
   const Common& common_;
@@ -221,7 +221,8 @@ int runIngest(const Common& common, const IngestArgs& a) {
 void addIngest(CLI::App& app, Common& common, Commands& out) {
   auto a = std::make_shared<IngestArgs>();
   auto* c = app.add_subcommand(
-      "ingest", "Store a sequence directory (any one scan format) or a bag's drive (MCAP, rosbag2) as one robot session");
+      "ingest",
+      "Store a sequence directory (any one scan format) or a bag's drive (MCAP, rosbag2) as one robot session");
   addCommon(c, common);
   c->add_option("--map", a->map, "Map name (created if missing)")->required();
   c->add_option("--robot", a->robot, "Robot name")->required();
@@ -257,7 +258,8 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
   c->add_option("--points-topic", a->source.points_topic, "A bag's sensor_msgs/PointCloud2 topic");
   c->add_option("--odom-topic", a->source.odom_topic,
                 "A bag's nav_msgs/Odometry topic (the sensor's extrinsic from /tf_static)");
-  c->add_option("--tf", a->source.tf_frame, "Or: the fixed frame (odom, map) to look the cloud's frame up in, over /tf");
+  c->add_option("--tf", a->source.tf_frame,
+                "Or: the fixed frame (odom, map) to look the cloud's frame up in, over /tf");
   c->add_option("--keyframe-m", a->source.keyframe_m,
                 "With poses, a bag's cloud is sent when the sensor moved this far since the last one sent")
       ->capture_default_str();

@@ -18,7 +18,8 @@ class SequenceSource final : public IngestSource {
       : seq_(openSequence(o.path, FrameSelection::parse(o.frames), o.every, {o.poses, parsePosesFrame(o.poses_frame)})),
         label_field_(o.label_field) {
     if (seq_.poses_from_camera)
-      std::cerr << "sglc ingest: " << seq_.poses_path << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
+      std::cerr << "sglc ingest: " << seq_.poses_path
+                << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
     for (const auto& w : seq_.warnings) std::cerr << "sglc ingest: warning: " << w << "\n";
     for (const auto& f : seq_.frames) frames_.push_back({f.name, f.number, f.stamp, f.pose});
   }
@@ -39,8 +40,9 @@ class BagSource final : public IngestSource {
  public:
   explicit BagSource(const SourceOptions& o) : drive_(o.path, driveOptions(o)) {
     if (o.poses != "" || o.poses_frame != "auto")
-      throw UsageError("--poses and --poses-frame are for sequence directories; a bag's poses come from "
-                       "--odom-topic or --tf");
+      throw UsageError(
+          "--poses and --poses-frame are for sequence directories; a bag's poses come from "
+          "--odom-topic or --tf");
     for (const auto& w : drive_.warnings()) std::cerr << "sglc ingest: warning: " << w << "\n";
     if (o.every < 1) throw UsageError("--every must be at least 1");
     const auto selection = FrameSelection::parse(o.frames);
@@ -52,8 +54,8 @@ class BagSource final : public IngestSource {
       frames_.push_back({std::to_string(f.number), f.number, static_cast<double>(f.stamp_ns) * 1e-9, f.pose});
     }
     if (frames_.empty()) throw InputError(o.path + ": no keyframe in frame selection '" + selection.text() + "'");
-    std::cerr << "sglc ingest: " << o.path << ": " << frames_.size() << " keyframes of " << drive_.clouds() << " clouds on "
-              << o.points_topic << "\n";
+    std::cerr << "sglc ingest: " << o.path << ": " << frames_.size() << " keyframes of " << drive_.clouds()
+              << " clouds on " << o.points_topic << "\n";
     name_ = std::filesystem::path(o.path).lexically_normal().filename().stem().string();
   }
   const std::vector<IngestFrame>& frames() const override { return frames_; }
@@ -87,7 +89,8 @@ class BagSource final : public IngestSource {
 std::unique_ptr<IngestSource> openSource(const SourceOptions& o) {
   if (isBag(o.path)) return std::make_unique<BagSource>(o);
   if (!o.points_topic.empty() || !o.odom_topic.empty() || !o.tf_frame.empty())
-    throw UsageError(o.path + ": --points-topic, --odom-topic and --tf are for bags, and this is not one (an MCAP file, "
+    throw UsageError(o.path +
+                     ": --points-topic, --odom-topic and --tf are for bags, and this is not one (an MCAP file, "
                      "a .db3 file or a rosbag2 directory with metadata.yaml)");
   return std::make_unique<SequenceSource>(o);
 }

@@ -28,9 +28,9 @@ class IngestSource {
 struct SourceOptions {
   std::string path, frames, label_field = "label";
   int every = 1;
-  std::string poses, poses_frame = "auto";                     // sequence directories
-  std::string points_topic, odom_topic, tf_frame;              // bags
-  double keyframe_m = 1.0, keyframe_deg = 10.0;                // bags with poses
+  std::string poses, poses_frame = "auto";         // sequence directories
+  std::string points_topic, odom_topic, tf_frame;  // bags
+  double keyframe_m = 1.0, keyframe_deg = 10.0;    // bags with poses
 };
 
 // A bag (sglc::isBag) or a sequence directory; prints notes and warnings about the poses to stderr.

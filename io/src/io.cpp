@@ -35,6 +35,25 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities) {
   return points;
 }
 
+std::vector<float> readPointTimes(const std::string& path, std::size_t points) {
+  const detail::RegularFile file(path);
+  if (file.size() != std::uint64_t{points} * 4)
+    throw InputError(path + ": " + std::to_string(file.size()) + " bytes, but its scan has " + std::to_string(points) +
+                     " points (4 bytes, one float32, each)");
+  const auto data = file.readAll();
+  std::vector<float> times(points);
+  std::memcpy(times.data(), data.data(), points * 4);
+  for (std::size_t i = 0; i < points; ++i)
+    if (!std::isfinite(times[i]) || std::abs(times[i]) > 1.0f)
+      throw InputError(path + ": point " + std::to_string(i) + "'s time " + std::to_string(times[i]) +
+                       " s is not within 1 s of the scan's stamp");
+  return times;
+}
+
+void writePointTimes(const std::string& path, const std::vector<float>& times) {
+  writeAll(path, times.data(), times.size() * sizeof(float));
+}
+
 std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points) {
   const detail::RegularFile file(path);
   if (file.size() > std::uint64_t{kMaxScanPoints} * 4)

@@ -156,6 +156,9 @@ Sequence openSequence(const std::string& dir, const FrameSelection& selection, i
     f.number = std::stoll(f.name);
     f.scan_path = p.string();
     f.label_path = labelFileOf(root, f.name);
+    std::error_code absent;  // not `ec`: that one reports the listing's own failure below
+    if (fs::is_regular_file(root / "point_times" / (f.name + ".bin"), absent))
+      f.point_times_path = (root / "point_times" / (f.name + ".bin")).string();
     all.push_back(std::move(f));
   }
   if (ec) throw InputError(velodyne.string() + ": cannot list (" + ec.message() + ")");

@@ -12,12 +12,12 @@ import sys
 
 ROOT = os.path.abspath(sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", ".."))
 
-TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/names.hpp", "sglc/elapsed.hpp", "sglc/params.hpp",
+TYPES_HEADERS = {"sglc/types.hpp", "sglc/rigid.hpp", "sglc/deskew.hpp", "sglc/names.hpp", "sglc/elapsed.hpp", "sglc/params.hpp",
                  "sglc/version.hpp"}  # version.hpp: generated from core/include/sglc/version.hpp.in
 ENGINE_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "core/include/sglc"))} - TYPES_HEADERS
 IO_HEADERS = {"sglc/" + f for f in os.listdir(os.path.join(ROOT, "io/include/sglc"))}
 TYPES_FILES = [f"core/{d}/{n}" for d, ext in (("include/sglc", "hpp"), ("src", "cpp"))
-               for n in (f"types.{ext}", f"rigid.{ext}", f"names.{ext}", f"params.{ext}")]
+               for n in (f"types.{ext}", f"rigid.{ext}", f"deskew.{ext}", f"names.{ext}", f"params.{ext}")]
 
 # Project headers by the module that provides them.
 def provider(header):

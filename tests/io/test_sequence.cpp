@@ -294,3 +294,23 @@ TEST(Sequence, PosesFileOption) {
   writeFile(tmp.file("short.txt"), poseLine(0));
   EXPECT_THROW(sglc::openSequence(dir, {}, 1, {tmp.file("short.txt"), sglc::PosesFrame::kLidar}), sglc::InputError);
 }
+
+TEST(Sequence, PointTimesAreFoundBesideTheScans) {
+  TempDir tmp;
+  const std::string dir = makeSequence(tmp, "timed", {0, 1}, false);
+  // Without point_times/ the frames have none, and the directory opens as before.
+  sglc::Sequence s = sglc::openSequence(dir);
+  EXPECT_TRUE(s.frames[0].point_times_path.empty());
+  std::filesystem::create_directories(dir + "/point_times");
+  writeFile(dir + "/point_times/000001.bin", "");
+  s = sglc::openSequence(dir);
+  EXPECT_TRUE(s.frames[0].point_times_path.empty());
+  EXPECT_EQ(s.frames[1].point_times_path, dir + "/point_times/000001.bin");
+  // Their contents: float32 per point, within 1 s of the stamp.
+  sglc::writePointTimes(tmp.file("t.bin"), {0.0f, 0.05f, 0.099f});
+  EXPECT_EQ(sglc::readPointTimes(tmp.file("t.bin"), 3), (std::vector<float>{0.0f, 0.05f, 0.099f}));
+  EXPECT_NE(messageOf([&] { sglc::readPointTimes(tmp.file("t.bin"), 4); }).find("its scan has 4 points"),
+            std::string::npos);
+  sglc::writePointTimes(tmp.file("bad.bin"), {0.0f, 3.0f});
+  EXPECT_NE(messageOf([&] { sglc::readPointTimes(tmp.file("bad.bin"), 2); }).find("not within 1 s"), std::string::npos);
+}

@@ -45,7 +45,7 @@ constexpr double kSimPoseMaxM = 4.0;
 struct Options {
   std::string protocol, data, map_data, poses, calib, frames, pairs, pose_pairs, server, token, out, config_path,
       gt_list, title;
-  bool sim = false, no_plots = false, gt_from_file = false, no_labels = false, keep_maps = false;
+  bool sim = false, no_plots = false, gt_from_file = false, no_labels = false, keep_maps = false, no_deskew = false;
   int beams = 64;
   std::uint64_t seed = 7;
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
@@ -73,6 +73,8 @@ void addSourceOptions(CLI::App& app, Options& o) {
   app.add_flag("--no-labels", o.no_labels,
                "send points only (labels removed from any source): the engine's labeller labels them");
   app.add_option("--frames", o.frames, "frame selection 'a:b:s,...' (default: all)");
+  app.add_flag("--no-deskew", o.no_deskew,
+               "read scans with point_times/ as they are (default: de-skewed with the motion to the next frame)");
 }
 
 void addProtocolOptions(CLI::App& app, Options& o) {
@@ -139,7 +141,7 @@ void validate(const Options& o) {
 
 std::unique_ptr<FrameSource> makeSource(const Options& o) {
   auto source = o.sim ? simulatedSource({o.poses, o.calib, o.frames, o.seed, o.label_noise, o.beams})
-                      : directorySource(o.data, o.frames);
+                      : directorySource(o.data, o.frames, !o.no_deskew);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }
@@ -147,7 +149,7 @@ std::unique_ptr<FrameSource> makeSource(const Options& o) {
 // The relocalization protocol's map drive (every frame), or none.
 std::unique_ptr<FrameSource> makeMapSource(const Options& o) {
   if (o.map_data.empty()) return nullptr;
-  auto source = directorySource(o.map_data, "");
+  auto source = directorySource(o.map_data, "", !o.no_deskew);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }

@@ -1,10 +1,12 @@
 #include "source.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 #include <map>
 #include <sstream>
 
+#include "sglc/deskew.hpp"
 #include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
 #include "sglc/sequence.hpp"
@@ -51,7 +53,7 @@ class SimSource final : public FrameSource {
 
 class DirSource final : public FrameSource {
  public:
-  DirSource(const std::string& dir, const std::string& spec) : dir_(dir) {
+  DirSource(const std::string& dir, const std::string& spec, bool deskew) : dir_(dir), deskew_(deskew) {
     // Every frame's files and pose (pair files may name frames outside the selection), the selected ones in order.
     // KITTI camera poses come as LiDAR poses (calib.txt's Tr; sglc/sequence.hpp).
     const auto seq = openSequence(dir);
@@ -59,8 +61,9 @@ class DirSource final : public FrameSource {
     const auto selection = FrameSelection::parse(spec);
     for (const auto& f : seq.frames) {
       const int number = static_cast<int>(f.number);
-      files_[number] = {f.scan_path, f.label_path};
+      files_[number] = {f.scan_path, f.label_path, f.point_times_path};
       if (f.pose) poses_[number] = *f.pose;
+      if (f.pose && f.stamp) timed_.push_back({number, {*f.stamp, *f.pose}});
       if (selection.contains(f.number)) frames_.push_back(number);
     }
     if (frames_.empty()) throw InputError(dir + ": no frame matches --frames '" + spec + "'");
@@ -71,15 +74,33 @@ class DirSource final : public FrameSource {
   LabelledScan scan(int f) const override {
     const auto it = files_.find(f);
     if (it == files_.end()) throw InputError(dir_ + ": no frame " + std::to_string(f));
-    return readScan(it->second.first, it->second.second);
+    LabelledScan s = readScan(it->second.scan, it->second.labels);
+    if (deskew_ && !it->second.times.empty())
+      deskew(s.points, readPointTimes(it->second.times, s.points.size()), twist(f));
+    return s;
   }
   std::string describe() const override { return "sequence directory " + dir_; }
 
  private:
+  // The sweep's motion from the poses and stamps of the frames around f (sglc/deskew.hpp sweepTwist).
+  Twist twist(int f) const {
+    const auto it = std::find_if(timed_.begin(), timed_.end(), [&](const auto& t) { return t.first == f; });
+    if (it == timed_.end())
+      throw InputError(dir_ + ": frame " + std::to_string(f) +
+                       " has point times but no pose and stamp to de-skew with");
+    const TimedPose* prev = it == timed_.begin() ? nullptr : &(it - 1)->second;
+    const TimedPose* next = it + 1 == timed_.end() ? nullptr : &(it + 1)->second;
+    return sweepTwist(prev, it->second, next);
+  }
+  struct Files {
+    std::string scan, labels, times;
+  };
   std::string dir_;
+  bool deskew_;
   std::vector<int> frames_;
-  std::map<int, std::pair<std::string, std::string>> files_;
+  std::map<int, Files> files_;
   std::map<int, Mat4d> poses_;
+  std::vector<std::pair<int, TimedPose>> timed_;  // frames with pose and stamp, ascending
 };
 
 class UnlabelledSource final : public FrameSource {
@@ -110,8 +131,8 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
   return std::make_unique<SimSource>(options);
 }
 
-std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames) {
-  return std::make_unique<DirSource>(dir, frames);
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew) {
+  return std::make_unique<DirSource>(dir, frames, deskew);
 }
 
 }  // namespace sglc::eval

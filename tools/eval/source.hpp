@@ -37,7 +37,9 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
 
 // dir: a sequence directory (velodyne/, labels/, optional poses.txt + calib.txt). poses.txt holds camera poses
 // (KITTI convention); with calib.txt they become LiDAR poses. `frames` selects by frame number.
-std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames);
+// deskew: scans with point_times/ files are de-skewed with the motion between their pose and the next frame's
+// (sglc/deskew.hpp); off, they are read as they are.
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew = true);
 
 // The same frames with their labels removed (points only), to measure the label-free path: the engine's
 // built-in labeller labels them.

@@ -712,6 +712,7 @@ void Simulator::compact(const FrameRays& fr, const RayImage& img, Frame& out) co
   out.clean_labels.clear();
   out.beam.clear();
   out.column.clear();
+  out.point_time.clear();
   std::size_t count = 0;
   for (float r : img.range) count += r > 0.0f;
   out.scan.points.reserve(count);
@@ -720,8 +721,13 @@ void Simulator::compact(const FrameRays& fr, const RayImage& img, Frame& out) co
   out.beam.reserve(count);
   out.column.reserve(count);
   const int B = config_.sensor.beams();
+  const bool timed = !fr.sweep.empty();
+  if (timed) out.point_time.reserve(count);
+  // A ray of column c (spinning) or ray k (rosette) fires at c / units of the sweep (render(): fr.sweep).
+  const double per_unit = trajectory_.frame_dt / static_cast<double>(fr.sweep.size() ? fr.sweep.size() : 1);
   for (std::size_t px = 0; px < img.range.size(); ++px) {
     if (img.range[px] <= 0.0f) continue;
+    if (timed) out.point_time.push_back(static_cast<float>(per_unit * (fr.rosette.empty() ? px / B : px)));
     out.scan.points.push_back(img.point[px]);
     out.scan.labels.push_back(img.label[px]);
     out.intensity.push_back(img.intensity[px]);

@@ -50,7 +50,7 @@ void checkFrames(const Simulator& sim, const SequenceOptions& opt) {
 // removed, so that a folder never mixes two runs.
 void prepareFolders(const fs::path& out, const SequenceOptions& opt) {
   std::error_code ec;
-  for (const char* sub : {"velodyne", "labels"}) {
+  for (const char* sub : {"velodyne", "labels", "point_times"}) {
     if (!fs::is_directory(out / sub, ec)) continue;
     std::vector<fs::path> old;
     for (const auto& e : fs::directory_iterator(out / sub, ec)) {
@@ -168,6 +168,11 @@ class FrameWriter {
         sim_.render(opt_.frames[k], frame, 1);
         writeKittiBin((out_ / "velodyne" / (frameName(k) + ".bin")).string(), frame.scan.points, frame.intensity);
         writeLabels((out_ / "labels" / (frameName(k) + ".label")).string(), frame.scan.labels);
+        if (!frame.point_time.empty()) {
+          std::error_code ec;
+          fs::create_directories(out_ / "point_times", ec);
+          writePointTimes((out_ / "point_times" / (frameName(k) + ".bin")).string(), frame.point_time);
+        }
         points_ += frame.scan.points.size();
         if (frame.clean_labels.empty())
           iou.addExact(frame.scan.labels);

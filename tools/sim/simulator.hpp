@@ -128,7 +128,10 @@ struct Frame {
   std::vector<std::uint32_t> clean_labels;  // labels before label noise (filled only when label noise is on)
   std::vector<std::uint16_t> beam;          // beam (row) of each point, 0 = top
   std::vector<std::uint16_t> column;        // azimuth column of each point
-  std::size_t mixed_points = 0;             // points whose range was blended across a depth edge
+  // With motion distortion: when each point's ray fired, in seconds after the sweep's start (the frame's time
+  // and pose); empty without it (every ray then fires from the frame's pose).
+  std::vector<float> point_time;
+  std::size_t mixed_points = 0;  // points whose range was blended across a depth edge
 };
 
 class Simulator {

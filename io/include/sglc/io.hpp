@@ -15,6 +15,10 @@ Points readKittiBin(const std::string& path, std::vector<float>* intensities = n
 // A .label file: uint32 per point (SemanticKITTI); given the scan's point count, also 1 or 2 bytes per point
 // (nuScenes-lidarseg's uint8), chosen by the file's size. Little-endian.
 std::vector<std::uint32_t> readLabels(const std::string& path, std::size_t points = 0);
+// A point_times/NNNNNN.bin file: float32 little-endian per point of its scan (`points` of them), the seconds
+// after the scan's stamp at which each point was measured (what de-skew needs; sglc/deskew.hpp).
+std::vector<float> readPointTimes(const std::string& path, std::size_t points);
+void writePointTimes(const std::string& path, const std::vector<float>& times);
 // Poses, stamps and calibration files are read line by line: blank lines and lines starting with '#' are
 // skipped, errors name the file and line.
 // KITTI poses file: one row-major 3x4 matrix per line (12 numbers).

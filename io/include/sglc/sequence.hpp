@@ -7,6 +7,8 @@
 //                              line) or TUM (t tx ty tz qx qy qz qw, 8 numbers), told apart by the first line
 //   DIR/times.txt              optional: one timestamp in seconds per line, in frame order (a TUM poses.txt
 //                              gives the stamps when there is no times.txt)
+//   DIR/point_times/NNNNNN.bin optional: float32 per point, seconds after the scan's stamp when it was measured
+//                              (the simulator writes them with --motion-distortion); what de-skew needs
 //   DIR/calib.txt              optional: KITTI calibration; its "Tr:" line (velodyne -> left camera) turns
 //                              KITTI camera-frame poses into LiDAR poses (below)
 //
@@ -39,6 +41,7 @@ struct SequenceFrame {
   std::int64_t number = 0;  // 720
   std::string scan_path;    // any format of sglc/scan_file.hpp
   std::string label_path;
+  std::string point_times_path;  // DIR/point_times/NAME.bin when there (sglc/io.hpp readPointTimes), else ""
   std::optional<Mat4d> pose;
   std::optional<double> stamp;
 };

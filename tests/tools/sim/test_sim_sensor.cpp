@@ -1,4 +1,5 @@
 // Sensor realism: named presets, the rosette scanner, per-laser offsets, mixed pixels, motion distortion.
+#include "sglc/deskew.hpp"
 #include "sim/sensor.hpp"
 #include "sim_test_util.hpp"
 
@@ -242,6 +243,47 @@ TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
   EXPECT_NEAR(median(shift), v * traj.frame_dt, 0.1 * v * traj.frame_dt);
   EXPECT_LT(median(own_time), 0.1);
   EXPECT_GT(median(frame_pose), 3 * median(own_time));
+}
+
+// The times the simulator gives each point (when its column fired) are what de-skew needs: with the twist of the
+// frame's motion (the poses around it), the distorted points land on the undistorted scan's surfaces.
+TEST(Sensor, MotionDistortionGivesPointTimesThatDeskewTheSweep) {
+  const Trajectory& traj = loopTrajectory();
+  const int index = 150;
+  SimConfig cfg = smallConfig(7);
+  cfg.sensor.columns = 2048;
+  cfg.sensor.noiseFree();
+  const Simulator plain(traj, cfg);
+  EXPECT_TRUE(plain.render(index).point_time.empty());
+  cfg.sensor.motion_distortion = true;
+  const Simulator moving(traj, cfg);
+  const auto& poses = plain.trajectory().poses;
+  const Frame a = plain.render(index), b = moving.render(index);
+  const int C = cfg.sensor.columns;
+  ASSERT_EQ(b.point_time.size(), b.scan.points.size());
+  for (std::size_t i = 0; i < b.point_time.size(); i += 97)
+    EXPECT_FLOAT_EQ(b.point_time[i], static_cast<float>(traj.frame_dt * b.column[i] / C));
+  Points fixed = b.scan.points;
+  deskew(fixed, b.point_time, twistBetween(poses[index], poses[index + 1], traj.frame_dt));
+  std::map<int, std::vector<Vec3d>> world_a;
+  for (std::size_t i = 0; i < a.beam.size(); ++i)
+    if (a.beam[i] <= 1)
+      world_a[a.beam[i]].push_back((poses[index] * a.scan.points[i].cast<double>().homogeneous()).head<3>());
+  std::vector<double> deskewed, raw;
+  for (std::size_t i = 0; i < b.beam.size(); ++i) {
+    if (b.beam[i] > 1 || b.column[i] < C - 40) continue;
+    auto nearest = [&](const Vec3f& p) {
+      const Vec3d q = (poses[index] * p.cast<double>().homogeneous()).head<3>();
+      double best = 1e9;
+      for (const Vec3d& w : world_a[b.beam[i]]) best = std::min(best, (w - q).norm());
+      return best;
+    };
+    deskewed.push_back(nearest(fixed[i]));
+    raw.push_back(nearest(b.scan.points[i]));
+  }
+  ASSERT_GT(deskewed.size(), 20u);
+  EXPECT_LT(median(deskewed), 0.1);
+  EXPECT_GT(median(raw), 3 * median(deskewed));
 }
 
 }  // namespace
