@@ -265,6 +265,10 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
       ->capture_default_str();
   c->add_option("--keyframe-deg", a->source.keyframe_deg, "... or turned this much (both 0: every cloud)")
       ->capture_default_str();
+  c->add_flag(
+      "--no-deskew", [a](std::int64_t) { a->source.deskew = false; },
+      "Send scans with per-point times (a directory's point_times/, a bag's time field) as they are; by "
+      "default they are de-skewed with the motion the poses give");
   c->add_option("DIR", a->source.path,
                 "Sequence directory (velodyne/NNNNNN.{bin,pcd,ply,npy}, optional labels/ (.label or .npy), "
                 "poses.txt (KITTI or TUM), times.txt, calib.txt), or a bag: an MCAP file, a rosbag2 .db3 file or "

@@ -1,10 +1,12 @@
 #include "ingest_source.hpp"
 
+#include <algorithm>
 #include <filesystem>
 #include <iostream>
 
 #include "common.hpp"
 #include "sglc/bag_drive.hpp"
+#include "sglc/deskew.hpp"
 #include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
 #include "sglc/sequence.hpp"
@@ -16,23 +18,44 @@ class SequenceSource final : public IngestSource {
  public:
   explicit SequenceSource(const SourceOptions& o)
       : seq_(openSequence(o.path, FrameSelection::parse(o.frames), o.every, {o.poses, parsePosesFrame(o.poses_frame)})),
-        label_field_(o.label_field) {
+        label_field_(o.label_field),
+        deskew_(o.deskew) {
     if (seq_.poses_from_camera)
       std::cerr << "sglc ingest: " << seq_.poses_path
                 << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
     for (const auto& w : seq_.warnings) std::cerr << "sglc ingest: warning: " << w << "\n";
     for (const auto& f : seq_.frames) frames_.push_back({f.name, f.number, f.stamp, f.pose});
+    const bool timed = std::any_of(seq_.frames.begin(), seq_.frames.end(),
+                                   [](const SequenceFrame& f) { return !f.point_times_path.empty(); });
+    if (timed && deskew_ && !(seq_.has_poses && seq_.has_stamps)) {
+      std::cerr << "sglc ingest: warning: " << o.path << " has point_times/ but no poses and stamps to de-skew with: "
+                << "scans are sent as they are\n";
+      deskew_ = false;
+    }
+    if (timed && deskew_)
+      std::cerr << "sglc ingest: scans with point_times/ are de-skewed (--no-deskew: as they are)\n";
   }
   const std::vector<IngestFrame>& frames() const override { return frames_; }
   LabelledScan scan(std::size_t i) override {
     const auto& f = seq_.frames.at(i);
-    return readScan(f.scan_path, f.label_path, label_field_);
+    LabelledScan s = readScan(f.scan_path, f.label_path, label_field_);
+    if (deskew_ && !f.point_times_path.empty()) {
+      // The sweep's motion: on to the next frame sent, or from the previous one at the end.
+      auto timed = [&](std::size_t k) { return TimedPose{*seq_.frames[k].stamp, *seq_.frames[k].pose}; };
+      const TimedPose cur = timed(i);
+      const std::optional<TimedPose> next = i + 1 < seq_.frames.size() ? std::optional(timed(i + 1)) : std::nullopt;
+      const std::optional<TimedPose> prev = i > 0 ? std::optional(timed(i - 1)) : std::nullopt;
+      deskew(s.points, readPointTimes(f.point_times_path, s.points.size()),
+             sweepTwist(prev ? &*prev : nullptr, cur, next ? &*next : nullptr));
+    }
+    return s;
   }
   const std::string& name() const override { return seq_.name; }
 
  private:
   Sequence seq_;
   std::string label_field_;
+  bool deskew_;
   std::vector<IngestFrame> frames_;
 };
 
@@ -75,6 +98,7 @@ class BagSource final : public IngestSource {
     d.tf_frame = o.tf_frame;
     d.keyframe_m = o.keyframe_m;
     d.keyframe_deg = o.keyframe_deg;
+    d.deskew = o.deskew;
     return d;
   }
   std::string o_path() const { return drive_.bag().path(); }

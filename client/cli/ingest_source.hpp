@@ -31,6 +31,7 @@ struct SourceOptions {
   std::string poses, poses_frame = "auto";         // sequence directories
   std::string points_topic, odom_topic, tf_frame;  // bags
   double keyframe_m = 1.0, keyframe_deg = 10.0;    // bags with poses
+  bool deskew = true;  // scans with per-point times are de-skewed with the motion the poses give
 };
 
 // A bag (sglc::isBag) or a sequence directory; prints notes and warnings about the poses to stderr.

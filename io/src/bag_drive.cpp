@@ -85,7 +85,8 @@ BagDrive::BagDrive(const std::string& path, const BagDriveOptions& options) : ba
       throw InputError(path + ": frame " + options_.tf_frame + " is in no /tf or /tf_static transform");
   }
 
-  std::optional<Mat4d> extrinsic;  // base -> cloud frame, found once
+  std::optional<Mat4d> extrinsic;               // base -> cloud frame, found once
+  constexpr std::int64_t kSweepNs = 100000000;  // the motion over 0.1 s (a 10 Hz sweep) around a stamp
   std::string warned_frame;
   std::size_t outside = 0;
   const double min_turn = options_.keyframe_deg * M_PI / 180.0;
@@ -124,6 +125,19 @@ BagDrive::BagDrive(const std::string& path, const BagDriveOptions& options) : ba
         continue;
       }
       f.pose = pose;
+      // The motion over the sweep: on to 0.1 s later, or (at the end of the poses) from 0.1 s before. The
+      // extrinsic is the same at both ends, so base poses give the sensor's motion.
+      auto at = [&](std::int64_t t) -> std::optional<Mat4d> {
+        if (have_odometry) {
+          const auto p = odometry.at(t, 0);
+          return p ? std::optional<Mat4d>(*p * *extrinsic) : std::nullopt;
+        }
+        return tree.lookup(options_.tf_frame, warned_frame, t, 0);
+      };
+      if (const auto later = at(f.stamp_ns + kSweepNs))
+        f.twist = twistBetween(*pose, *later, kSweepNs * 1e-9);
+      else if (const auto earlier = at(f.stamp_ns - kSweepNs))
+        f.twist = twistBetween(*earlier, *pose, kSweepNs * 1e-9);
       if (last) {
         const Mat4d d = last->inverse() * *pose;
         const double moved = d.topRightCorner<3, 1>().norm();
@@ -143,7 +157,12 @@ BagDrive::BagDrive(const std::string& path, const BagDriveOptions& options) : ba
 
 RosCloud BagDrive::cloud(std::size_t i) {
   const BagFrame& f = frames_.at(i);
-  return decodePointCloud2(bag_->read(f.message), encoding_, options_.max_points, bag_->where(f.message));
+  RosCloud c = decodePointCloud2(bag_->read(f.message), encoding_, options_.max_points, bag_->where(f.message));
+  if (options_.deskew && !c.times.empty() && f.twist) {
+    deskew(c.points, c.times, *f.twist);
+    c.deskewed = true;
+  }
+  return c;
 }
 
 }  // namespace sglc

@@ -9,7 +9,8 @@
 //        "messages": [{"topic", "type": "pointcloud2" | "odometry" | "tf", "log_time_ns", ...the message}]}
 // Or SPEC {"from_sequence": DIR, "points_topic", "odom_topic", "t0_ns", "storage", "compression"}: a
 // simulated sequence directory (velodyne/NNNNNN.bin, poses.txt in the LiDAR frame, times.txt) as a drive: a
-// PointCloud2 (x y z intensity, float32) per scan and a nav_msgs/Odometry at each scan's stamp.
+// PointCloud2 (x y z intensity, float32; with point_times/, also Ouster's t, uint32 ns) per scan and a
+// nav_msgs/Odometry at each scan's stamp.
 // A pointcloud2 message: stamp_ns, frame_id, height, width, is_bigendian, point_step, fields [{name, offset,
 // datatype, count}], points [[one value per field, in field order]] (null for NaN); the data is packed here.
 import { McapWriter } from "@mcap/core";
@@ -17,7 +18,7 @@ import { parse } from "@foxglove/rosmsg";
 import { MessageWriter } from "@foxglove/rosmsg2-serialization";
 import * as zstd from "@foxglove/wasm-zstd";
 import { execFileSync } from "node:child_process";
-import { readFileSync, mkdirSync, readdirSync, openSync, writeSync, closeSync } from "node:fs";
+import { readFileSync, mkdirSync, readdirSync, openSync, writeSync, closeSync, existsSync } from "node:fs";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
 
@@ -164,7 +165,7 @@ function message(m) {
 function compressor(name) {
   if (name === "zstd") return (data) => ({ compression: "zstd", compressedData: zstd.compress(data, 3) });
   if (name === "lz4")
-    return (data) => ({ compression: "lz4", compressedData: new Uint8Array(execFileSync("lz4", ["-c", "-q"], { input: data })) });
+    return (data) => ({ compression: "lz4", compressedData: new Uint8Array(execFileSync("lz4", ["-c", "-q"], { input: data, maxBuffer: 1 << 30 })) });
   return undefined;
 }
 
@@ -200,10 +201,26 @@ function sequenceMessages(spec) {
   const out = [];
   scans.forEach((file, k) => {
     const stamp = t0 + BigInt(Math.round(times[k] * 1e9));
-    const data = new Uint8Array(readFileSync(join(dir, "velodyne", file)));
-    const xyzi = ["x", "y", "z", "intensity"].map((name, j) => ({ name, offset: 4 * j, datatype: 7, count: 1 }));
+    let data = new Uint8Array(readFileSync(join(dir, "velodyne", file)));
+    const fields = ["x", "y", "z", "intensity"].map((name, j) => ({ name, offset: 4 * j, datatype: 7, count: 1 }));
+    let step = 16;
+    const timesFile = join(dir, "point_times", file);
+    if (existsSync(timesFile)) {
+      // Ouster's convention: t, uint32 ns after the stamp, after x y z intensity.
+      const times = new Float32Array(new Uint8Array(readFileSync(timesFile)).buffer);
+      const n = data.length / 16;
+      const packed = new Uint8Array(n * 20);
+      const view = new DataView(packed.buffer);
+      for (let i = 0; i < n; ++i) {
+        packed.set(data.subarray(i * 16, i * 16 + 16), i * 20);
+        view.setUint32(i * 20 + 16, Math.round(times[i] * 1e9), true);
+      }
+      fields.push({ name: "t", offset: 16, datatype: 6, count: 1 });
+      data = packed;
+      step = 20;
+    }
     out.push({ topic: spec.points_topic, type: "pointcloud2", log_time_ns: (stamp + 5000000n).toString(), stamp_ns: stamp.toString(),
-               frame_id: "velodyne", height: 1, width: data.length / 16, is_bigendian: false, point_step: 16, fields: xyzi, data });
+               frame_id: "velodyne", height: 1, width: data.length / step, is_bigendian: false, point_step: step, fields, data });
     const m = poses[k];
     out.push({ topic: spec.odom_topic, type: "odometry", log_time_ns: stamp.toString(), stamp_ns: stamp.toString(), frame_id: "odom",
                child_frame_id: "velodyne", position: [m[3], m[7], m[11]], orientation: quaternion([m[0], m[1], m[2], 0, m[4], m[5], m[6], 0, m[8], m[9], m[10]]) });
@@ -227,7 +244,7 @@ if (spec.storage === "db3") {
   mkdirSync(out, { recursive: true });
   const lines = encoded.map((e) => JSON.stringify({ topic: e.topic, type: e.type, log_time_ns: e.log_time_ns.toString(),
                                                      data: Buffer.from(e.data).toString("base64") })).join("\n");
-  execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { input: lines });
+  execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { input: lines, maxBuffer: 1 << 30 });
 } else {
   // Written straight to the file (an in-memory buffer of a long drive grows by copying).
   const fd = openSync(out, "w");

@@ -151,6 +151,9 @@ TEST(Bags, DriveFromOdometryWithTheSensorExtrinsicAndKeyframes) {
     EXPECT_NEAR((*f.pose)(1, 0), 1.0, 1e-9);  // the LiDAR's x points along the base's y
   }
   EXPECT_EQ(drive.cloud(3).points.size(), 2u);
+  EXPECT_FALSE(drive.cloud(3).deskewed);  // no per-point times
+  EXPECT_TRUE(drive.frames()[3].twist);
+  EXPECT_NEAR(drive.frames()[3].twist->linear.norm(), 5.0, 1e-6);  // the base's 5 m/s, in the sensor's axes
 
   // Every cloud when both thresholds are 0.
   o.keyframe_m = o.keyframe_deg = 0;
@@ -254,4 +257,29 @@ TEST(Bags, BadInputNamesFileTopicAndMessage) {
     EXPECT_NE(msg.find("topic /points, message 0"), std::string::npos) << msg;
     EXPECT_NE(msg.find(name), std::string::npos) << msg;
   }
+}
+
+TEST(Bags, CloudsWithPointTimesAreDeskewedWithTheOdometry) {
+  TempDir tmp;
+  // The sensor drives along its x at 10 m/s; a wall point 20 m ahead is measured at 0, 50 and 99 ms after
+  // the stamp: the sensor is then 0, 0.5 and 0.99 m further on, so the raw x is 20, 19.5 and 19.01 m.
+  json fields = {field("x", 0, 7), field("y", 4, 7), field("z", 8, 7), field("t", 12, 6)};
+  json messages = json::array();
+  for (int i = 0; i <= 20; ++i) messages.push_back(odometry("/odom", kT0 + i * 50000000LL, 0.5 * i, 0, 0, "lidar"));
+  messages.push_back(cloud("/points", kT0 + 300000000LL, fields, 16,
+                           {{20, 0, 0, 0}, {19.5, 1, 0, 50000000}, {19.01, 2, 0, 99000000}}));
+  writeBag({{"storage", "mcap"}, {"compression", "zstd"}, {"messages", messages}}, tmp.file("d.mcap"));
+  BagDriveOptions o;
+  o.points_topic = "/points";
+  o.odom_topic = "/odom";
+  BagDrive drive(tmp.file("d.mcap"), o);
+  ASSERT_EQ(drive.frames().size(), 1u);
+  const RosCloud c = drive.cloud(0);
+  EXPECT_TRUE(c.deskewed);
+  ASSERT_EQ(c.points.size(), 3u);
+  for (const auto& p : c.points) EXPECT_NEAR(p.x(), 20.0, 1e-4) << p.transpose();
+  o.deskew = false;
+  const RosCloud raw = BagDrive(tmp.file("d.mcap"), o).cloud(0);
+  EXPECT_FALSE(raw.deskewed);
+  EXPECT_NEAR(raw.points[2].x(), 19.01, 1e-5);
 }

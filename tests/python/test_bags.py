@@ -77,8 +77,10 @@ def test_bag_gives_the_loops_and_trajectory_of_the_sequence(server, drive, tmp_p
     t_dir = trajectory(cli, server, "dir", tmp_path / "dir.tum")
     t_bag = trajectory(cli, server, "mcap", tmp_path / "mcap.tum")
     assert len(t_dir) == len(t_bag) == 80
+    # The graph is optimised in the background while scans arrive, so two runs may stop at another iteration:
+    # agreement to a millimetre (translations) and 1e-3 (quaternions), not to the last bit.
     worst = max(max(abs(x - y) for x, y in zip(p, q)) for p, q in zip(t_dir, t_bag))
-    assert worst < 1e-5, worst
+    assert worst < 1e-3, worst
 
 
 def test_keyframes_by_distance(server, drive):
@@ -104,3 +106,43 @@ def test_bag_errors_name_the_topic(server, drive):
     r = subprocess.run([cli, "ingest", "--server", server, "--map", "m", "--robot", "r", str(mcap)],
                        capture_output=True, text=True)
     assert r.returncode != 0 and "--points-topic" in r.stderr, r.stderr
+
+
+def loop_errors(rows, poses):
+    """Translation error (m) of each reported loop's T against the simulator's poses (T: query in candidate)."""
+    import numpy as np
+    errors = []
+    for r in rows:
+        for loop in r["loops"]:
+            q, c = poses[int(r["frame"])], poses[loop["seq"]]
+            truth = np.linalg.inv(c) @ q
+            T = np.array(loop["T"], dtype=float).reshape(4, 4)
+            errors.append(float(np.linalg.norm(T[:3, 3] - truth[:3, 3])))
+    return errors
+
+
+def test_motion_distorted_drive_is_deskewed(server, tmp_path):
+    """The simulator's motion-distorted drive (9 m/s: the last column of a sweep is 0.9 m on) with its per-point
+    times: de-skewed by `sglc ingest`, from a directory and from a bag (Ouster's t field), its loops' poses are
+    right; sent as they are, they are off by about the distortion."""
+    import numpy as np
+    sim, node = _binary("SGLC_SIM_BIN", "sglc-sim"), shutil.which("node")
+    cli = _binary("SGLC_CLI_BIN", "sglc")
+    run([sim, "--route", "loop", "--frames", SIM_FRAMES, "--motion-distortion", "--out", str(tmp_path / "sim")])
+    assert len(os.listdir(tmp_path / "sim" / "point_times")) == 80
+    poses = [np.vstack([np.array(line.split(), dtype=float).reshape(3, 4), [0, 0, 0, 1]])
+             for line in open(tmp_path / "sim" / "poses.txt")]
+    fixed, note = ingest(cli, server, "deskewed", tmp_path / "sim")
+    assert "de-skewed" in note, note
+    raw, _ = ingest(cli, server, "raw", tmp_path / "sim", "--no-deskew")
+    spec = tmp_path / "spec.json"
+    spec.write_text(json.dumps({"from_sequence": str(tmp_path / "sim"), "points_topic": "/points",
+                                "odom_topic": "/odom", "storage": "mcap", "compression": "lz4"}))
+    run([node, os.path.join(REPO, "tests", "interop", "write_bag.mjs"), str(spec), str(tmp_path / "d.mcap")])
+    from_bag, _ = ingest(cli, server, "bag", tmp_path / "d.mcap", "--points-topic", "/points", "--odom-topic",
+                         "/odom", "--keyframe-m", "0", "--keyframe-deg", "0")
+    e_fixed, e_raw, e_bag = loop_errors(fixed, poses), loop_errors(raw, poses), loop_errors(from_bag, poses)
+    assert len(e_fixed) >= 10 and len(e_bag) >= 10, (len(e_fixed), len(e_bag))
+    assert np.median(e_fixed) < 0.1, np.median(e_fixed)
+    assert np.median(e_bag) < 0.1, np.median(e_bag)
+    assert not e_raw or np.median(e_raw) > 3 * np.median(e_fixed), (np.median(e_raw), np.median(e_fixed))

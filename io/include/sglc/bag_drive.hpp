@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "sglc/bag.hpp"
+#include "sglc/deskew.hpp"
 #include "sglc/ros_messages.hpp"
 
 namespace sglc {
@@ -28,12 +29,16 @@ struct BagDriveOptions {
   double keyframe_m = 1.0;
   double keyframe_deg = 10.0;
   std::size_t max_points = 0;  // per cloud; 0: kMaxScanPoints
+  // Clouds with per-point times are de-skewed (sglc/deskew.hpp) with the sensor's motion over the 0.1 s after
+  // their stamp (or before it, at the end of the poses), from the same poses.
+  bool deskew = true;
 };
 
 struct BagFrame {
   std::int64_t number = 0;  // the cloud's index on its topic
   std::int64_t stamp_ns = 0;
-  std::optional<Mat4d> pose;  // the sensor's pose in the odometry's (or tf_frame's) frame
+  std::optional<Mat4d> pose;   // the sensor's pose in the odometry's (or tf_frame's) frame
+  std::optional<Twist> twist;  // the sensor's motion around the stamp, when the poses give it
   BagMessage message;
 };
 
@@ -44,7 +49,8 @@ class BagDrive {
   std::size_t clouds() const { return clouds_; }                   // clouds on the topic
   const std::vector<std::string>& warnings() const { return warnings_; }
   const Bag& bag() const { return *bag_; }
-  // Keyframe i decoded (NaN points dropped, per-point times in seconds after its stamp where the cloud has them).
+  // Keyframe i decoded: NaN points dropped; per-point times in seconds after its stamp where the cloud has them,
+  // and then de-skewed (options.deskew) when its twist is known.
   RosCloud cloud(std::size_t i);
 
  private:
