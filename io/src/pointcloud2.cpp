@@ -143,11 +143,13 @@ RosCloud decodePointCloud2(const std::vector<std::uint8_t>& bytes, MessageEncodi
       const double x = value(p + xyz[0]->offset, xyz[0]->type, big);
       const double y = value(p + xyz[1]->offset, xyz[1]->type, big);
       const double z = value(p + xyz[2]->offset, xyz[2]->type, big);
-      if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+      // Finite as float32: a float64 beyond float range (1e300) would become infinite, so it is dropped too.
+      const Vec3f point(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+      if (!point.allFinite()) {
         ++c.dropped;
         continue;
       }
-      c.points.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+      c.points.push_back(point);
       if (intensity) c.intensities.push_back(static_cast<float>(value(p + intensity->offset, intensity->type, big)));
       if (time) {
         const double s = secondsAfter(time->name, value(p + time->offset, time->type, big), c.stamp_ns);

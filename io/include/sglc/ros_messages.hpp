@@ -26,7 +26,7 @@ struct RosCloud {
   std::vector<float> intensities;  // empty without an intensity field
   std::vector<float> times;        // seconds after stamp_ns; empty without a time field
   std::string time_field;          // the field the times came from ("" when none)
-  std::size_t dropped = 0;         // points with NaN or infinite coordinates
+  std::size_t dropped = 0;         // points with NaN or infinite coordinates (as float32)
   bool deskewed = false;           // moved into the sensor's frame at the stamp (sglc/bag_drive.hpp)
   std::uint32_t width = 0, height = 0;
 };
