@@ -33,8 +33,10 @@ PACKAGES=(
   python3-yaml
   # dense ICP reference poses (tools/eval/dense_reference.py, results.sh part nuscenes)
   python3-scipy
-  # bags: MCAP chunks (zstd, lz4); the lz4 tool compresses the test bags' chunks (tests/interop/write_bag.mjs)
-  libzstd-dev liblz4-dev lz4
+  # bags: MCAP chunks (zstd, lz4), ROS 1 chunks (lz4, bz2); the lz4 tool compresses the test bags' chunks
+  # (tests/interop/write_bag.mjs); Debian's ROS 1 bag writer for the ROS 1 test bags (write_ros1_bag.py)
+  libzstd-dev liblz4-dev libbz2-dev lz4
+  python3-rosbag python3-roslz4 python3-sensor-msgs python3-nav-msgs python3-tf2-msgs
 )
 
 # Node.js and npm run the test bags' writers (tests/interop). A machine with its own Node.js keeps it; without

@@ -11,6 +11,7 @@
 
 #include "db3_bag.hpp"
 #include "mcap_bag.hpp"
+#include "ros1_bag.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc {
@@ -57,10 +58,18 @@ bool hasMcapMagic(const std::string& path) {
   return f.gcount() == 8 && std::memcmp(magic, "\x89MCAP0\r\n", 8) == 0;
 }
 
+bool hasRos1Magic(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  char magic[13] = {};
+  f.read(magic, 13);
+  return f.gcount() == 13 && std::memcmp(magic, "#ROSBAG V2.0\n", 13) == 0;
+}
+
 std::unique_ptr<Bag> openFile(const std::string& path) {
   if (hasMcapMagic(path)) return std::make_unique<McapBag>(path);
+  if (hasRos1Magic(path) || fs::path(path).extension() == ".bag") return std::make_unique<Ros1Bag>(path);
   if (fs::path(path).extension() == ".db3") return std::make_unique<Db3Bag>(path);
-  throw InputError(path + ": not a bag (neither MCAP nor a rosbag2 .db3 file)");
+  throw InputError(path + ": not a bag (neither MCAP, a rosbag2 .db3 file nor a ROS 1 .bag)");
 }
 
 // A rosbag2 directory: metadata.yaml names its storage and files (several when the recording was split); their
@@ -125,7 +134,9 @@ class SplitBag final : public Bag {
 bool isBag(const std::string& path) {
   std::error_code ec;
   if (fs::is_directory(path, ec)) return fs::is_regular_file(fs::path(path) / "metadata.yaml", ec);
-  return fs::is_regular_file(path, ec) && (hasMcapMagic(path) || fs::path(path).extension() == ".db3");
+  return fs::is_regular_file(path, ec) &&
+         (hasMcapMagic(path) || hasRos1Magic(path) || fs::path(path).extension() == ".db3" ||
+          fs::path(path).extension() == ".bag");
 }
 
 std::unique_ptr<Bag> openBag(const std::string& path) {

@@ -2,7 +2,6 @@
 // the data section, chunks decompressed with Debian's libzstd and liblz4 and checked against their CRC-32.
 #include "mcap_bag.hpp"
 
-#include <lz4frame.h>
 #include <zlib.h>
 #include <zstd.h>
 
@@ -12,6 +11,7 @@
 #include <map>
 
 #include "byte_cursor.hpp"
+#include "decompress.hpp"
 
 namespace sglc {
 namespace {
@@ -39,33 +39,6 @@ std::uint32_t crc32Of(const std::vector<std::uint8_t>& bytes) {
     done += n;
   }
   return static_cast<std::uint32_t>(crc);
-}
-
-std::vector<std::uint8_t> lz4Frame(const std::uint8_t* src, std::size_t n, std::size_t out_size,
-                                   const std::string& what) {
-  LZ4F_dctx* ctx = nullptr;
-  if (LZ4F_isError(LZ4F_createDecompressionContext(&ctx, LZ4F_VERSION)))
-    throw InputError(what + ": cannot start lz4 decompression");
-  std::vector<std::uint8_t> out(out_size);
-  std::size_t in_at = 0, out_at = 0;
-  std::size_t hint = 1;
-  while (hint != 0 && in_at < n) {
-    std::size_t in_n = n - in_at, out_n = out_size - out_at;
-    hint = LZ4F_decompress(ctx, out.data() + out_at, &out_n, src + in_at, &in_n, nullptr);
-    if (LZ4F_isError(hint)) {
-      const std::string why = LZ4F_getErrorName(hint);
-      LZ4F_freeDecompressionContext(ctx);
-      throw InputError(what + ": lz4 data is corrupt (" + why + ")");
-    }
-    in_at += in_n;
-    out_at += out_n;
-    if (in_n == 0 && out_n == 0) break;  // no progress: the frame wants more than is there, or more room
-  }
-  LZ4F_freeDecompressionContext(ctx);
-  if (hint != 0 || out_at != out_size)
-    throw InputError(what + ": lz4 data gives " + std::to_string(out_at) + " bytes, the chunk says " +
-                     std::to_string(out_size) + (hint != 0 ? " (frame truncated)" : ""));
-  return out;
 }
 
 }  // namespace
@@ -250,27 +223,34 @@ void McapBag::chunk(std::uint64_t at, std::uint64_t body, std::uint64_t len) {
 
 const std::vector<std::uint8_t>& McapBag::records(std::uint64_t index) {
   if (cached_ == index) return cache_;
-  const Chunk& k = chunks_.at(index - 1);
+  Chunk& k = chunks_.at(index - 1);
   const std::string what =
       path_ + ": chunk " + std::to_string(index) + " (records at byte " + std::to_string(k.offset) + ")";
-  auto raw = recordAt(k.offset, k.size, "chunk");
   cached_ = 0;
+  // The buffers are reused from chunk to chunk: no allocation, and no zeroing, once they are large enough.
+  if (k.size > raw_.size()) raw_.resize(k.size);
+  if (!readAt(k.offset, raw_.data(), k.size)) throw InputError(what + ": runs past the end of the file");
+  cache_.resize(k.uncompressed_size);
   if (k.compression.empty()) {
-    if (raw.size() != k.uncompressed_size)
-      throw InputError(what + ": " + std::to_string(raw.size()) + " bytes of records, the chunk says " +
+    if (k.size != k.uncompressed_size)
+      throw InputError(what + ": " + std::to_string(k.size) + " bytes of records, the chunk says " +
                        std::to_string(k.uncompressed_size));
-    cache_ = std::move(raw);
+    std::copy(raw_.begin(), raw_.begin() + static_cast<std::ptrdiff_t>(k.size), cache_.begin());
   } else if (k.compression == "zstd") {
-    cache_.assign(k.uncompressed_size, 0);
-    const std::size_t got = ZSTD_decompress(cache_.data(), cache_.size(), raw.data(), raw.size());
+    const std::size_t got = ZSTD_decompress(cache_.data(), cache_.size(), raw_.data(), k.size);
     if (ZSTD_isError(got)) throw InputError(what + ": zstd data is corrupt (" + ZSTD_getErrorName(got) + ")");
     if (got != k.uncompressed_size)
       throw InputError(what + ": zstd data gives " + std::to_string(got) + " bytes, the chunk says " +
                        std::to_string(k.uncompressed_size));
   } else {
-    cache_ = lz4Frame(raw.data(), raw.size(), k.uncompressed_size, what);
+    lz4Frame(raw_.data(), k.size, cache_, what);
   }
-  if (k.crc != 0 && crc32Of(cache_) != k.crc) throw InputError(what + ": CRC mismatch (the records are corrupt)");
+  // The CRC is checked the first time a chunk is decompressed (when the bag is opened); the same bytes read
+  // again later are not checked twice.
+  if (!k.checked) {
+    if (k.crc != 0 && crc32Of(cache_) != k.crc) throw InputError(what + ": CRC mismatch (the records are corrupt)");
+    k.checked = true;
+  }
   cached_ = index;
   return cache_;
 }

@@ -22,6 +22,7 @@ class McapBag final : public Bag {
     std::uint64_t uncompressed_size = 0;
     std::uint32_t crc = 0;
     std::string compression;
+    bool checked = false;  // its CRC was checked once
   };
   bool readAt(std::uint64_t offset, void* out, std::size_t n);
   std::vector<std::uint8_t> recordAt(std::uint64_t offset, std::uint64_t n, const char* what);
@@ -39,6 +40,7 @@ class McapBag final : public Bag {
   std::vector<Chunk> chunks_;
   std::uint64_t cached_ = 0;  // the chunk in cache_ (0: none)
   std::vector<std::uint8_t> cache_;
+  std::vector<std::uint8_t> raw_;  // the last chunk's compressed records
 };
 
 }  // namespace sglc

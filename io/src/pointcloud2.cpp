@@ -133,6 +133,7 @@ RosCloud decodePointCloud2(const std::vector<std::uint8_t>& bytes, MessageEncodi
     if ((time = find(name))) break;
   if (time) c.time_field = time->name;
 
+  const bool plain_float = !big && xyz[0]->type == 7 && xyz[1]->type == 7 && xyz[2]->type == 7;
   c.points.reserve(n);
   if (intensity) c.intensities.reserve(n);
   if (time) c.times.reserve(n);
@@ -140,11 +141,17 @@ RosCloud decodePointCloud2(const std::vector<std::uint8_t>& bytes, MessageEncodi
     const std::uint8_t* line = data + std::size_t(row) * row_step;
     for (std::uint32_t col = 0; col < c.width; ++col) {
       const std::uint8_t* p = line + std::size_t(col) * point_step;
-      const double x = value(p + xyz[0]->offset, xyz[0]->type, big);
-      const double y = value(p + xyz[1]->offset, xyz[1]->type, big);
-      const double z = value(p + xyz[2]->offset, xyz[2]->type, big);
       // Finite as float32: a float64 beyond float range (1e300) would become infinite, so it is dropped too.
-      const Vec3f point(static_cast<float>(x), static_cast<float>(y), static_cast<float>(z));
+      Vec3f point;
+      if (plain_float) {  // the common layout, read without conversions
+        std::memcpy(&point.x(), p + xyz[0]->offset, 4);
+        std::memcpy(&point.y(), p + xyz[1]->offset, 4);
+        std::memcpy(&point.z(), p + xyz[2]->offset, 4);
+      } else {
+        point = Vec3f(static_cast<float>(value(p + xyz[0]->offset, xyz[0]->type, big)),
+                      static_cast<float>(value(p + xyz[1]->offset, xyz[1]->type, big)),
+                      static_cast<float>(value(p + xyz[2]->offset, xyz[2]->type, big)));
+      }
       if (!point.allFinite()) {
         ++c.dropped;
         continue;

@@ -40,7 +40,7 @@ EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/":
             "faiss/": "faiss", "omp.h": "openmp", "cblas.h": "blas", "spdlog/": "spdlog", "ceres/": "ceres",
             "nlohmann/": "json", "CLI/": "cli11", "benchmark/": "benchmark", "gtest/": "gtest", "gmock/": "gtest",
             "pybind11/": "pybind11", "pqxx/": "postgres", "libpq-fe.h": "postgres", "pcl/": "pcl",
-            "zstd.h": "zstd", "lz4frame.h": "lz4", "boost/asio/": "beast", "boost/beast/": "beast"}
+            "zstd.h": "zstd", "lz4frame.h": "lz4", "bzlib.h": "bzip2", "boost/asio/": "beast", "boost/beast/": "beast"}
 # Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
 POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
          "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
@@ -55,7 +55,7 @@ LAYERS = {
     "config": (["config"], {"types", "core", "config"}, {"yaml"}),
     # Point-cloud files: PCD and PLY through PCL's I/O module (in io/src/pcl_cloud.cpp only). Bags: MCAP chunks
     # through zstd and lz4 with zlib's CRC-32, rosbag2 .db3 through SQLite, metadata.yaml through yaml-cpp.
-    "io": (["io"], {"types", "io"}, {"eigen", "pcl", "zstd", "lz4", "zlib", "sqlite", "yaml"}),
+    "io": (["io"], {"types", "io"}, {"eigen", "pcl", "zstd", "lz4", "bzip2", "zlib", "sqlite", "yaml"}),
     # The map database: SQLite (embedded) or PostgreSQL through libpq, the FAISS indexes.
     "storage": (["storage"], {"types", "core", "storage"}, {"eigen", "sqlite", "postgres", "faiss"}),
     # The use cases: the engine and the map database, nothing of any transport.

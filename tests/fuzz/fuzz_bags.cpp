@@ -1,4 +1,5 @@
-// Fuzzing the bag readers (sglc/bag.hpp, sglc/ros_messages.hpp, sglc/bag_drive.hpp) on mutated MCAP files and
+// Fuzzing the bag readers (sglc/bag.hpp, sglc/ros_messages.hpp, sglc/bag_drive.hpp) on mutated MCAP files, ROS 1
+// bags (seeds by Debian's python3-rosbag) and
 // mutated PointCloud2 / Odometry / TFMessage bytes. The seeds are written by tests/interop/write_bag.mjs
 // (@mcap/core, Foxglove's CDR serialiser): every failure must be an InputError; what is accepted must be sane
 // (finite points, as many times and intensities as points, no more points than the limit).
@@ -69,10 +70,15 @@ TEST(Fuzz, BagReaders) {
     test::writeBag({{"storage", "mcap"}, {"compression", compression}, {"messages", seedMessages()}}, path);
     corpus.push_back(slurp(path));
   }
+  for (const char* compression : {"lz4", "bz2"}) {  // ROS 1 bags, by Debian's python3-rosbag
+    const std::string path = dir.file(std::string("seed-") + compression + ".bag");
+    test::writeBag({{"storage", "ros1"}, {"compression", compression}, {"messages", seedMessages()}}, path);
+    corpus.push_back(slurp(path));
+  }
   const std::string file = dir.file("case.mcap");
-  const fuzz::Mutator mutator({std::string("\x89MCAP0\r\n", 8), "zstd", "lz4", std::string("\x06", 1),
-                               std::string("\x05", 1), std::string("\xff\xff\xff\xff\xff\xff\xff\x7f", 8),
-                               std::string("\0\0\0\0", 4)});
+  const fuzz::Mutator mutator({std::string("\x89MCAP0\r\n", 8), "#ROSBAG V2.0\n", "op=", "compression=", "zstd", "lz4",
+                               std::string("\x06", 1), std::string("\x05", 1),
+                               std::string("\xff\xff\xff\xff\xff\xff\xff\x7f", 8), std::string("\0\0\0\0", 4)});
   auto make = [&](fuzz::Rng& rng, std::uint64_t i) -> std::string {
     if (i < corpus.size()) return corpus[i];
     std::string s = corpus[fuzz::below(rng, corpus.size())];

@@ -18,8 +18,8 @@ import { parse } from "@foxglove/rosmsg";
 import { MessageWriter } from "@foxglove/rosmsg2-serialization";
 import * as zstd from "@foxglove/wasm-zstd";
 import { execFileSync } from "node:child_process";
-import { readFileSync, mkdirSync, readdirSync, openSync, writeSync, closeSync, existsSync } from "node:fs";
-import { dirname, join } from "node:path";
+import { readFileSync, mkdirSync, readdirSync, openSync, writeSync, closeSync, existsSync, unlinkSync } from "node:fs";
+import { basename, dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
 
 const HEADER = `
@@ -240,11 +240,19 @@ const encoded = spec.messages.map((m) => {
 });
 
 if (spec.storage === "db3") {
-  // make_db3.py reads the messages as JSON lines (data in base64) and writes OUT/OUT-name_0.db3 + metadata.yaml.
+  // make_db3.py reads the messages as JSON lines (data in base64) and writes OUT/OUT-name_0.db3 + metadata.yaml;
+  // the lines go through a file, one message at a time (a long drive is more than a string can hold).
   mkdirSync(out, { recursive: true });
-  const lines = encoded.map((e) => JSON.stringify({ topic: e.topic, type: e.type, log_time_ns: e.log_time_ns.toString(),
-                                                     data: Buffer.from(e.data).toString("base64") })).join("\n");
-  execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { input: lines, maxBuffer: 1 << 30 });
+  const linesPath = join(out, "..", `.${basename(out)}.lines`);
+  const fd = openSync(linesPath, "w");
+  for (const e of encoded)
+    writeSync(fd, JSON.stringify({ topic: e.topic, type: e.type, log_time_ns: e.log_time_ns.toString(),
+                                   data: Buffer.from(e.data).toString("base64") }) + "\n");
+  closeSync(fd);
+  const input = openSync(linesPath, "r");
+  execFileSync("/usr/bin/python3", [join(dirname(fileURLToPath(import.meta.url)), "make_db3.py"), out], { stdio: [input, "inherit", "inherit"] });
+  closeSync(input);
+  unlinkSync(linesPath);
 } else {
   // Written straight to the file (an in-memory buffer of a long drive grows by copying).
   const fd = openSync(out, "w");

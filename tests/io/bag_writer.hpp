@@ -19,6 +19,15 @@ inline std::string interopDir() { return std::string(SGLC_SOURCE_DIR) + "/tests/
 // Writes `spec` (see write_bag.mjs) to `out`; fails the test with the reason when node or the npm packages are
 // missing (scripts/install-deps.sh installs them).
 inline void writeBag(const json& spec, const std::string& out) {
+  if (spec.value("storage", "") == "ros1") {
+    // Debian's python3-rosbag writes ROS 1 bags.
+    const std::string spec_path = out + ".spec.json";
+    std::ofstream(spec_path) << spec.dump();
+    const std::string cmd =
+        "/usr/bin/python3 '" + interopDir() + "/write_ros1_bag.py' '" + spec_path + "' '" + out + "' 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd << " (python3-rosbag missing? run scripts/install-deps.sh)";
+    return;
+  }
   ASSERT_TRUE(std::filesystem::exists(interopDir() + "/node_modules/@mcap/core"))
       << "npm packages missing in tests/interop: run scripts/install-deps.sh";
   const std::string spec_path = out + ".spec.json";

@@ -84,14 +84,23 @@ void expectConventions(Bag& bag) {
 
 TEST(Bags, McapInEveryCompressionAndDb3GiveEveryTimeConvention) {
   TempDir tmp;
-  for (const std::string storage : {"zstd", "lz4", "", "db3"}) {
+  for (const std::string storage : {"zstd", "lz4", "", "db3", "ros1-none", "ros1-bz2", "ros1-lz4"}) {
     SCOPED_TRACE("storage " + storage);
-    json spec = {{"storage", storage == "db3" ? "db3" : "mcap"}, {"compression", storage}, {"messages", conventions()}};
-    const std::string out = tmp.file(storage == "db3" ? "db3bag" : "bag-" + storage + ".mcap");
+    const bool ros1 = storage.rfind("ros1", 0) == 0;
+    json spec = {{"storage", storage == "db3" ? "db3"
+                             : ros1           ? "ros1"
+                                              : "mcap"},
+                 {"compression", ros1 ? storage.substr(5) : storage},
+                 {"messages", conventions()}};
+    const std::string out = tmp.file(storage == "db3" ? "db3bag"
+                                     : ros1           ? storage + ".bag"
+                                                      : "bag-" + storage + ".mcap");
     writeBag(spec, out);
     ASSERT_TRUE(isBag(out));
     auto bag = openBag(out);
     EXPECT_EQ(bag->topics().size(), 5u);
+    for (const auto& t : bag->topics())
+      EXPECT_EQ(t.encoding, ros1 ? MessageEncoding::kRos1 : MessageEncoding::kCdr) << t.name;
     expectConventions(*bag);
   }
 }
@@ -154,6 +163,16 @@ TEST(Bags, DriveFromOdometryWithTheSensorExtrinsicAndKeyframes) {
   EXPECT_FALSE(drive.cloud(3).deskewed);  // no per-point times
   EXPECT_TRUE(drive.frames()[3].twist);
   EXPECT_NEAR(drive.frames()[3].twist->linear.norm(), 5.0, 1e-6);  // the base's 5 m/s, in the sensor's axes
+
+  // The same drive in a ROS 1 bag (Debian's python3-rosbag, bz2 chunks): the same keyframes and poses.
+  writeBag({{"storage", "ros1"}, {"compression", "bz2"}, {"messages", messages}}, tmp.file("drive.bag"));
+  BagDrive ros1(tmp.file("drive.bag"), o);
+  ASSERT_EQ(ros1.frames().size(), drive.frames().size());
+  for (std::size_t i = 0; i < drive.frames().size(); ++i) {
+    EXPECT_EQ(ros1.frames()[i].stamp_ns, drive.frames()[i].stamp_ns);
+    EXPECT_TRUE(ros1.frames()[i].pose->isApprox(*drive.frames()[i].pose, 1e-9)) << i;
+  }
+  EXPECT_EQ(ros1.cloud(3).points, drive.cloud(3).points);
 
   // Every cloud when both thresholds are 0.
   o.keyframe_m = o.keyframe_deg = 0;

@@ -1,7 +1,7 @@
-// Recorded robot data: rosbag2 (MCAP storage, or SQLite .db3 storage with metadata.yaml) read message by
-// message. A bag is opened once, lists its topics, and hands out each message's bytes on request, so a long
-// drive is never held in memory. Every failure throws InputError naming the file (and the record or message
-// where it went wrong); nothing in a bag is trusted before it is checked.
+// Recorded robot data: rosbag2 (MCAP storage, or SQLite .db3 storage with metadata.yaml) and ROS 1 bags
+// (format 2.0) read message by message. A bag is opened once, lists its topics, and hands out each message's bytes on
+// request, so a long drive is never held in memory. Every failure throws InputError naming the file (and the record or
+// message where it went wrong); nothing in a bag is trusted before it is checked.
 #pragma once
 
 #include <array>
@@ -57,10 +57,11 @@ class Bag {
   void finish();
 };
 
-// True when `path` looks like a bag: an MCAP file (by its magic), a .db3 file, or a directory with a rosbag2
-// metadata.yaml.
+// True when `path` looks like a bag: an MCAP file or ROS 1 bag (by their magic), a .db3 or .bag file, or a
+// directory with a rosbag2 metadata.yaml.
 bool isBag(const std::string& path);
-// Opens an MCAP file, a .db3 file, or a rosbag2 directory (its metadata.yaml names the storage and files).
+// Opens an MCAP file, a ROS 1 .bag, a .db3 file, or a rosbag2 directory (its metadata.yaml names the storage
+// and files).
 std::unique_ptr<Bag> openBag(const std::string& path);
 
 }  // namespace sglc
