@@ -71,8 +71,9 @@ LAYERS = {
                {"eigen", "grpc", "protobuf", "spdlog", "json", "cli11", "beast"}),
     # The command line is a client: it reads files, it does not run the engine or open the database.
     "cli": (["client/cli"], {"types", "io", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json", "cli11"}),
-    # The Python package's engine module (sglc._engine): the engine and its YAML configuration, through pybind11.
-    "python": (["client/python/engine"], {"types", "core", "config"}, {"eigen", "pybind11"}),
+    # The Python package's engine module (sglc._engine): the engine and its YAML configuration, and the scan and
+    # bag readers, through pybind11.
+    "python": (["client/python/engine"], {"types", "core", "config", "io"}, {"eigen", "pybind11"}),
     "tools": (["tools"], ALL, {"eigen", "grpc", "protobuf", "json", "cli11", "benchmark", "spdlog", "yaml"}),
 }
 

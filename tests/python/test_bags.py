@@ -146,3 +146,34 @@ def test_motion_distorted_drive_is_deskewed(server, tmp_path):
     assert np.median(e_fixed) < 0.1, np.median(e_fixed)
     assert np.median(e_bag) < 0.1, np.median(e_bag)
     assert not e_raw or np.median(e_raw) > 3 * np.median(e_fixed), (np.median(e_raw), np.median(e_fixed))
+
+
+def test_python_readers_give_the_drive(drive):
+    """sglc.read_bag on the MCAP, .db3 and ROS 1 forms of the drive gives the directory's scans and poses;
+    sglc.read_scan reads the directory's .bin files."""
+    import numpy as np
+    import sglc
+    seq, mcap, db3 = drive
+    poses = [np.vstack([np.array(line.split(), dtype=float).reshape(3, 4), [0, 0, 0, 1]])
+             for line in open(seq / "poses.txt")]
+    bins = sorted(os.listdir(seq / "velodyne"))
+    for path in (mcap, db3):
+        bag = sglc.read_bag(path, "/points", odom_topic="/odom", keyframe_m=0, keyframe_deg=0)
+        assert len(bag) == bag.clouds == 80 and bag.warnings == []
+        for k in (0, 37, 79):
+            scan = bag[k]
+            points, labels = sglc.read_scan(seq / "velodyne" / bins[k])
+            assert labels is None
+            assert scan.index == k and scan.points.dtype == np.float32
+            assert np.array_equal(scan.points, points)
+            assert np.allclose(scan.pose, poses[k], atol=1e-6)
+            assert scan.intensities is not None and scan.times is None and not scan.deskewed
+    # Keyframes every 50 m, iterated.
+    sparse = list(sglc.read_bag(mcap, "/points", odom_topic="/odom", keyframe_m=50, keyframe_deg=360))
+    assert 20 <= len(sparse) <= 30 and sparse[0].index == 0
+    with pytest.raises(ValueError, match="no topic /nope"):
+        sglc.read_bag(mcap, "/nope")
+    with pytest.raises(IndexError):
+        sglc.read_bag(mcap, "/points")[80]
+    with pytest.raises(ValueError, match="not a bag"):
+        sglc.read_bag(seq / "poses.txt", "/points")

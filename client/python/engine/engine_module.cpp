@@ -15,8 +15,10 @@
 #include <string>
 #include <vector>
 
+#include "sglc/bag_drive.hpp"
 #include "sglc/config/engine_file.hpp"
 #include "sglc/pipeline.hpp"
+#include "sglc/scan_file.hpp"
 #include "sglc/version.hpp"
 
 namespace py = pybind11;
@@ -133,6 +135,81 @@ class PyEngine {
   sglc::Pipeline pipeline_;
 };
 
+py::array_t<float> pointArray(const sglc::Points& points) {
+  py::array_t<float> out({static_cast<py::ssize_t>(points.size()), py::ssize_t{3}});
+  float* o = out.mutable_data();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    o[3 * i] = points[i].x();
+    o[3 * i + 1] = points[i].y();
+    o[3 * i + 2] = points[i].z();
+  }
+  return out;
+}
+
+template <typename T>
+py::object vectorArray(const std::vector<T>& v, bool none_when_empty) {
+  if (v.empty() && none_when_empty) return py::none();
+  py::array_t<T> out(static_cast<py::ssize_t>(v.size()));
+  if (!v.empty()) std::memcpy(out.mutable_data(), v.data(), v.size() * sizeof(T));
+  return out;
+}
+
+py::object poseArray(const std::optional<sglc::Mat4d>& T) {
+  if (!T) return py::none();
+  py::array_t<double> out({py::ssize_t{4}, py::ssize_t{4}});
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) out.mutable_at(r, c) = (*T)(r, c);
+  return out;
+}
+
+// A bag's drive (sglc/bag_drive.hpp): its keyframes by index, each decoded when asked for.
+class PyBag {
+ public:
+  PyBag(const std::string& path, const std::string& points_topic, const std::string& odom_topic,
+        const std::string& tf_frame, double keyframe_m, double keyframe_deg, bool deskew)
+      : drive_(path, options(points_topic, odom_topic, tf_frame, keyframe_m, keyframe_deg, deskew)) {}
+  std::size_t size() const { return drive_.frames().size(); }
+  std::size_t clouds() const { return drive_.clouds(); }
+  std::vector<std::string> warnings() const { return drive_.warnings(); }
+  py::dict get(std::size_t i) {
+    if (i >= drive_.frames().size())
+      throw py::index_error("keyframe " + std::to_string(i) + " of " + std::to_string(size()));
+    const auto& f = drive_.frames()[i];
+    sglc::RosCloud c;
+    {
+      py::gil_scoped_release release;
+      c = drive_.cloud(i);
+    }
+    py::dict d;
+    d["index"] = f.number;
+    d["stamp"] = static_cast<double>(f.stamp_ns) * 1e-9;
+    d["stamp_ns"] = f.stamp_ns;
+    d["frame_id"] = c.frame_id;
+    d["pose"] = poseArray(f.pose);
+    d["points"] = pointArray(c.points);
+    d["intensities"] = vectorArray(c.intensities, true);
+    d["times"] = vectorArray(c.times, true);
+    d["deskewed"] = c.deskewed;
+    d["dropped"] = c.dropped;
+    return d;
+  }
+
+ private:
+  static sglc::BagDriveOptions options(const std::string& points_topic, const std::string& odom_topic,
+                                       const std::string& tf_frame, double keyframe_m, double keyframe_deg,
+                                       bool deskew) {
+    sglc::BagDriveOptions o;
+    o.points_topic = points_topic;
+    o.odom_topic = odom_topic;
+    o.tf_frame = tf_frame;
+    o.keyframe_m = keyframe_m;
+    o.keyframe_deg = keyframe_deg;
+    o.deskew = deskew;
+    return o;
+  }
+  sglc::BagDrive drive_;
+};
+
 }  // namespace
 
 PYBIND11_MODULE(_engine, m) {
@@ -152,6 +229,29 @@ PYBIND11_MODULE(_engine, m) {
         if (!d.empty()) std::memcpy(out.mutable_data(), d.data(), d.size() * sizeof(float));
         return out;
       });
+
+  m.def(
+      "read_scan",
+      [](const std::string& path, const std::string& labels, const std::string& label_field) {
+        sglc::LabelledScan scan;
+        {
+          py::gil_scoped_release release;
+          scan = sglc::readScan(path, labels, label_field);
+        }
+        return py::make_tuple(pointArray(scan.points), vectorArray(scan.labels, true));
+      },
+      py::arg("path"), py::arg("labels") = std::string(), py::arg("label_field") = std::string("label"));
+
+  py::class_<PyBag>(m, "Bag")
+      .def(py::init<const std::string&, const std::string&, const std::string&, const std::string&, double, double,
+                    bool>(),
+           py::arg("path"), py::arg("points_topic"), py::arg("odom_topic") = std::string(),
+           py::arg("tf_frame") = std::string(), py::arg("keyframe_m") = 1.0, py::arg("keyframe_deg") = 10.0,
+           py::arg("deskew") = true)
+      .def("__len__", &PyBag::size)
+      .def("__getitem__", &PyBag::get)
+      .def_property_readonly("clouds", &PyBag::clouds)
+      .def_property_readonly("warnings", &PyBag::warnings);
 
   py::class_<PyEngine>(m, "Engine")
       .def(py::init<const std::string&>(), py::arg("config_yaml") = std::string())

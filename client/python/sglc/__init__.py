@@ -20,6 +20,7 @@ from .errors import (AbortedError, AlreadyExistsError, CancelledError, DataLossE
                      UnavailableError, UnimplementedError, UnknownError, error_class)
 from .packing import pack_scan, read_kitti_scan, unpack_labels, unpack_points
 from .pose_graph import MapWatch
+from .readers import Bag, BagScan, read_bag, read_scan
 from .results import (Backup, Evidence, GraphNode, IngestResult, Loop, LoopEdge, LoopEnd, MapEvent, MapInfo,
                       MatchResult, QueryResult, RobotInfo, ScanInfo, ScanPose, ServerInfo, SessionFrame, SessionInfo, Stats,
                       Timing, information, matrix)
@@ -35,5 +36,6 @@ __all__ = [
     "Backup", "Evidence", "GraphNode", "IngestResult", "Loop", "LoopEdge", "LoopEnd", "MapEvent", "MapInfo",
     "MatchResult", "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats",
     "Timing", "information", "matrix", "pack_scan", "read_kitti_scan", "unpack_points", "unpack_labels",
+    "Bag", "BagScan", "read_bag", "read_scan",
     "__version__",
 ]
