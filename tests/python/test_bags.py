@@ -177,3 +177,22 @@ def test_python_readers_give_the_drive(drive):
         sglc.read_bag(mcap, "/points")[80]
     with pytest.raises(ValueError, match="not a bag"):
         sglc.read_bag(seq / "poses.txt", "/points")
+
+
+def test_sglc_pair_reads_a_bag(drive):
+    """sglc-pair takes a bag's cloud by index or stamp and answers as it does for the same scans as files."""
+    pair = _binary("SGLC_PAIR_BIN", "sglc-pair")
+    seq, mcap, _ = drive
+    bins = sorted(os.listdir(seq / "velodyne"))
+    files = json.loads(run([pair, "--scan-a", str(seq / "velodyne" / bins[6]), "--scan-b",
+                            str(seq / "velodyne" / bins[5])]).stdout)
+    from_bag = json.loads(run([pair, "--scan-a", str(mcap), "--scan-b", str(mcap), "--points-topic", "/points",
+                               "--index-a", "6", "--index-b", "5"]).stdout)
+    stamps = [float(x) for x in open(seq / "times.txt") if x.strip()]
+    by_stamp = json.loads(run([pair, "--scan-a", str(mcap), "--scan-b", str(mcap), "--points-topic", "/points",
+                               "--stamp-a", str(1700000000 + stamps[6] + 0.01), "--index-b", "5"]).stdout)
+    for key in ("is_loop", "T_a_b", "probability", "inliers"):
+        assert files[key] == from_bag[key] == by_stamp[key], key
+    r = subprocess.run([pair, "--scan-a", str(mcap), "--scan-b", str(mcap), "--points-topic", "/points",
+                        "--index-a", "600", "--index-b", "5"], capture_output=True, text=True)
+    assert r.returncode != 0 and "has no cloud 600" in r.stderr, r.stderr

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <nlohmann/json.hpp>
 
+#include "sglc/bag_drive.hpp"
 #include "sglc/config/engine_file.hpp"
 #include "sglc/elapsed.hpp"
 #include "sglc/io.hpp"
@@ -81,6 +82,45 @@ sglc::LabelledScan readChecked(const std::string& path, const std::string& label
   return scan;
 }
 
+// Which cloud of a bag: its index on the topic, or the one whose stamp is nearest `stamp` (seconds).
+struct BagPick {
+  std::string topic, odom;
+  std::int64_t index = -1;
+  double stamp = -1;
+};
+
+// A cloud of a bag (sglc/bag_drive.hpp), de-skewed when the odometry gives its motion and it has per-point times.
+sglc::LabelledScan readFromBag(const std::string& path, const BagPick& pick, const char* which) {
+  if (pick.topic.empty()) throw sglc::InputError(path + " is a bag: give --points-topic");
+  if ((pick.index >= 0) == (pick.stamp >= 0))
+    throw sglc::InputError(std::string("scan ") + which + " is in a bag: give its --index-" + which + " or --stamp-" +
+                           which + " (one of them)");
+  sglc::BagDriveOptions o;
+  o.points_topic = pick.topic;
+  o.odom_topic = pick.odom;
+  o.keyframe_m = o.keyframe_deg = 0;
+  sglc::BagDrive drive(path, o);
+  std::size_t best = 0;
+  for (std::size_t i = 0; i < drive.frames().size(); ++i) {
+    const auto& f = drive.frames()[i];
+    if (pick.index >= 0 ? f.number == pick.index
+                        : std::abs(static_cast<double>(f.stamp_ns) * 1e-9 - pick.stamp) <
+                              std::abs(static_cast<double>(drive.frames()[best].stamp_ns) * 1e-9 - pick.stamp))
+      best = i;
+  }
+  if (pick.index >= 0 && drive.frames()[best].number != pick.index)
+    throw sglc::InputError(path + ": " + pick.topic + " has no cloud " + std::to_string(pick.index) +
+                           (pick.odom.empty() ? "" : " with a pose") + " (" + std::to_string(drive.clouds()) +
+                           " clouds)");
+  sglc::LabelledScan scan{drive.cloud(best).points, {}};
+  try {
+    sglc::validateScan(scan);
+  } catch (const sglc::InputError& e) {
+    throw sglc::InputError(path + ": " + e.what());
+  }
+  return scan;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -100,6 +140,15 @@ int main(int argc, char** argv) {
                "The scans are known to show the same place: estimate T_a_b even when verification rejects the pair "
                "(is_loop keeps the decision, refined says whether a pose was found)");
   app.add_option("--config", config_path, "YAML file overriding engine parameters (see --dump-config)");
+  BagPick pick_a, pick_b;
+  app.add_option("--points-topic", pick_a.topic,
+                 "When a scan is a bag (MCAP, .db3, rosbag2 directory, ROS 1 .bag): its "
+                 "PointCloud2 topic");
+  app.add_option("--odom-topic", pick_a.odom, "... and its Odometry topic (clouds with per-point times are de-skewed)");
+  app.add_option("--index-a", pick_a.index, "Scan A's cloud in its bag: its index on the topic");
+  app.add_option("--stamp-a", pick_a.stamp, "... or the cloud whose stamp (s) is nearest");
+  app.add_option("--index-b", pick_b.index, "Scan B's cloud in its bag (as --index-a)");
+  app.add_option("--stamp-b", pick_b.stamp, "... or by stamp (as --stamp-a)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForVersion& e) {
@@ -117,8 +166,10 @@ int main(int argc, char** argv) {
       return 0;
     }
     if (scan_a.empty() || scan_b.empty()) throw sglc::InputError("--scan-a and --scan-b are required");
-    const auto a = readChecked(scan_a, labels_a, label_field);
-    const auto b = readChecked(scan_b, labels_b, label_field);
+    pick_b.topic = pick_a.topic;
+    pick_b.odom = pick_a.odom;
+    const auto a = sglc::isBag(scan_a) ? readFromBag(scan_a, pick_a, "a") : readChecked(scan_a, labels_a, label_field);
+    const auto b = sglc::isBag(scan_b) ? readFromBag(scan_b, pick_b, "b") : readChecked(scan_b, labels_b, label_field);
     auto t0 = std::chrono::steady_clock::now();
     sglc::ScanReport report_a, report_b;
     const auto fa = pipeline.fingerprint(a, &report_a);
