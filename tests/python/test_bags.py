@@ -196,3 +196,23 @@ def test_sglc_pair_reads_a_bag(drive):
     r = subprocess.run([pair, "--scan-a", str(mcap), "--scan-b", str(mcap), "--points-topic", "/points",
                         "--index-a", "600", "--index-b", "5"], capture_output=True, text=True)
     assert r.returncode != 0 and "has no cloud 600" in r.stderr, r.stderr
+
+
+def test_sglc_eval_reads_a_bag(drive, tmp_path):
+    """The sequence protocol on the MCAP form of the drive (poses from its odometry) gives the figures of the
+    same drive as a directory."""
+    evaluate = _binary("SGLC_EVAL_BIN", "sglc-eval")
+    seq, mcap, _ = drive
+    summaries = []
+    for name, args in (("dir", ["--data", str(seq)]),
+                       ("bag", ["--data", str(mcap), "--points-topic", "/points", "--odom-topic", "/odom"])):
+        # Frames here are 24 trajectory frames apart: 10 of them span what the default 100 do.
+        run([evaluate, "--protocol", "sequence", *args, "--exclude-recent", "10", "--out", str(tmp_path / name),
+             "--no-plots"], timeout=1800)
+        summaries.append(json.load(open(tmp_path / name / "summary.json")))
+    a, b = summaries
+    for key in ("f1max", "recall_at_1", "verified_true", "verified_false", "queries_with_true_loop"):
+        assert a[key] == b[key], (key, a[key], b[key])
+    # The poses went through a quaternion in the bag: the same to about 1e-9 m.
+    assert abs(a["rte_median"] - b["rte_median"]) < 1e-6
+    assert a["queries_with_true_loop"] > 0

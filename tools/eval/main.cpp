@@ -50,6 +50,7 @@ struct Options {
   std::uint64_t seed = 7;
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
   int threads = 2;
+  BagSourceOptions bag;
   LoopQuery query;
   SlamOptions slam;
 };
@@ -73,6 +74,14 @@ void addSourceOptions(CLI::App& app, Options& o) {
   app.add_flag("--no-labels", o.no_labels,
                "send points only (labels removed from any source): the engine's labeller labels them");
   app.add_option("--frames", o.frames, "frame selection 'a:b:s,...' (default: all)");
+  app.add_option("--points-topic", o.bag.points_topic,
+                 "--data is a bag (MCAP, .db3, rosbag2 directory, ROS 1 .bag): "
+                 "its PointCloud2 topic");
+  app.add_option("--odom-topic", o.bag.odom_topic, "... its Odometry topic (the poses the protocols compare with)");
+  app.add_option("--tf", o.bag.tf_frame, "... or the fixed frame to look the clouds up in over /tf");
+  app.add_option("--keyframe-m", o.bag.keyframe_m, "... a cloud every this many metres (0: every cloud)")
+      ->capture_default_str();
+  app.add_option("--keyframe-deg", o.bag.keyframe_deg, "... or degrees of turn")->capture_default_str();
   app.add_flag("--no-deskew", o.no_deskew,
                "read scans with point_times/ as they are (default: de-skewed with the motion to the next frame)");
 }
@@ -141,7 +150,7 @@ void validate(const Options& o) {
 
 std::unique_ptr<FrameSource> makeSource(const Options& o) {
   auto source = o.sim ? simulatedSource({o.poses, o.calib, o.frames, o.seed, o.label_noise, o.beams})
-                      : directorySource(o.data, o.frames, !o.no_deskew);
+                      : directorySource(o.data, o.frames, !o.no_deskew, o.bag);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }
@@ -149,7 +158,7 @@ std::unique_ptr<FrameSource> makeSource(const Options& o) {
 // The relocalization protocol's map drive (every frame), or none.
 std::unique_ptr<FrameSource> makeMapSource(const Options& o) {
   if (o.map_data.empty()) return nullptr;
-  auto source = directorySource(o.map_data, "", !o.no_deskew);
+  auto source = directorySource(o.map_data, "", !o.no_deskew, o.bag);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }

@@ -4,8 +4,10 @@
 #include <filesystem>
 #include <iostream>
 #include <map>
+#include <mutex>
 #include <sstream>
 
+#include "sglc/bag_drive.hpp"
 #include "sglc/deskew.hpp"
 #include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
@@ -103,6 +105,56 @@ class DirSource final : public FrameSource {
   std::vector<std::pair<int, TimedPose>> timed_;  // frames with pose and stamp, ascending
 };
 
+// A bag's drive (sglc/bag_drive.hpp): every cloud of the topic that has a pose (keyframes by index on the
+// topic), the odometry as the poses the protocols compare with.
+class BagSource final : public FrameSource {
+ public:
+  BagSource(const std::string& path, const BagSourceOptions& o, const std::string& spec)
+      : path_(path), drive_(path, options(o)) {
+    for (const auto& w : drive_.warnings()) std::cerr << "warning: " << w << "\n";
+    const auto selection = FrameSelection::parse(spec);
+    for (std::size_t i = 0; i < drive_.frames().size(); ++i) {
+      const auto& f = drive_.frames()[i];
+      const int number = static_cast<int>(f.number);
+      index_[number] = i;
+      if (f.pose) poses_[number] = *f.pose;
+      if (selection.contains(f.number)) frames_.push_back(number);
+    }
+    if (frames_.empty()) throw InputError(path + ": no cloud matches --frames '" + spec + "'");
+  }
+  const std::vector<int>& frames() const override { return frames_; }
+  bool hasPose(int f) const override { return poses_.count(f) > 0; }
+  Mat4d pose(int f) const override { return poses_.at(f); }
+  LabelledScan scan(int f) const override {
+    const auto it = index_.find(f);
+    if (it == index_.end()) throw InputError(path_ + ": no cloud " + std::to_string(f));
+    const std::lock_guard lock(mutex_);  // the bag reads through one file and one chunk cache
+    return {drive_.cloud(it->second).points, {}};
+  }
+  std::string describe() const override { return "bag " + path_; }
+
+ private:
+  static BagDriveOptions options(const BagSourceOptions& o) {
+    if (o.points_topic.empty()) throw InputError("a bag needs --points-topic");
+    if (o.odom_topic.empty() && o.tf_frame.empty())
+      throw InputError("the protocols need poses: give --odom-topic or --tf for the bag");
+    BagDriveOptions d;
+    d.points_topic = o.points_topic;
+    d.odom_topic = o.odom_topic;
+    d.tf_frame = o.tf_frame;
+    d.keyframe_m = o.keyframe_m;
+    d.keyframe_deg = o.keyframe_deg;
+    d.deskew = o.deskew;
+    return d;
+  }
+  std::string path_;
+  mutable BagDrive drive_;
+  mutable std::mutex mutex_;
+  std::vector<int> frames_;
+  std::map<int, std::size_t> index_;
+  std::map<int, Mat4d> poses_;
+};
+
 class UnlabelledSource final : public FrameSource {
  public:
   explicit UnlabelledSource(std::unique_ptr<FrameSource> inner) : inner_(std::move(inner)) {}
@@ -131,7 +183,12 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
   return std::make_unique<SimSource>(options);
 }
 
-std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew) {
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew,
+                                             const BagSourceOptions& bag) {
+  if (isBag(dir))
+    return std::make_unique<BagSource>(
+        dir, BagSourceOptions{bag.points_topic, bag.odom_topic, bag.tf_frame, bag.keyframe_m, bag.keyframe_deg, deskew},
+        frames);
   return std::make_unique<DirSource>(dir, frames, deskew);
 }
 
