@@ -153,6 +153,9 @@ def test_python_readers_give_the_drive(drive):
     sglc.read_scan reads the directory's .bin files."""
     import numpy as np
     import sglc
+    from sglc import engine
+    if engine._engine is None:
+        pytest.skip("no engine module in this build (sanitizer builds have none): sglc.read_bag is not there")
     seq, mcap, db3 = drive
     poses = [np.vstack([np.array(line.split(), dtype=float).reshape(3, 4), [0, 0, 0, 1]])
              for line in open(seq / "poses.txt")]
