@@ -255,18 +255,18 @@ void addIngest(CLI::App& app, Common& common, Commands& out) {
                 "Scans larger than this (packed) go through IngestChunked in pieces this size")
       ->capture_default_str();
   addQueryFlags(c, a->q, false);
-  c->add_option("--points-topic", a->source.points_topic, "A bag's sensor_msgs/PointCloud2 topic");
-  c->add_option("--odom-topic", a->source.odom_topic,
+  c->add_option("--points-topic", a->source.bag.points_topic, "A bag's sensor_msgs/PointCloud2 topic");
+  c->add_option("--odom-topic", a->source.bag.odom_topic,
                 "A bag's nav_msgs/Odometry topic (the sensor's extrinsic from /tf_static)");
-  c->add_option("--tf", a->source.tf_frame,
+  c->add_option("--tf", a->source.bag.tf_frame,
                 "Or: the fixed frame (odom, map) to look the cloud's frame up in, over /tf");
-  c->add_option("--keyframe-m", a->source.keyframe_m,
+  c->add_option("--keyframe-m", a->source.bag.keyframe_m,
                 "With poses, a bag's cloud is sent when the sensor moved this far since the last one sent")
       ->capture_default_str();
-  c->add_option("--keyframe-deg", a->source.keyframe_deg, "... or turned this much (both 0: every cloud)")
+  c->add_option("--keyframe-deg", a->source.bag.keyframe_deg, "... or turned this much (both 0: every cloud)")
       ->capture_default_str();
   c->add_flag(
-      "--no-deskew", [a](std::int64_t) { a->source.deskew = false; },
+      "--no-deskew", [a](std::int64_t) { a->source.bag.deskew = false; },
       "Send scans with per-point times (a directory's point_times/, a bag's time field) as they are; by "
       "default they are de-skewed with the motion the poses give");
   c->add_option("DIR", a->source.path,

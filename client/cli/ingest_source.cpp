@@ -19,7 +19,7 @@ class SequenceSource final : public IngestSource {
   explicit SequenceSource(const SourceOptions& o)
       : seq_(openSequence(o.path, FrameSelection::parse(o.frames), o.every, {o.poses, parsePosesFrame(o.poses_frame)})),
         label_field_(o.label_field),
-        deskew_(o.deskew) {
+        deskew_(o.bag.deskew) {
     if (seq_.poses_from_camera)
       std::cerr << "sglc ingest: " << seq_.poses_path
                 << ": KITTI camera poses, turned into LiDAR poses with calib.txt's Tr\n";
@@ -78,7 +78,7 @@ class BagSource final : public IngestSource {
     }
     if (frames_.empty()) throw InputError(o.path + ": no keyframe in frame selection '" + selection.text() + "'");
     std::cerr << "sglc ingest: " << o.path << ": " << frames_.size() << " keyframes of " << drive_.clouds()
-              << " clouds on " << o.points_topic << "\n";
+              << " clouds on " << o.bag.points_topic << "\n";
     name_ = std::filesystem::path(o.path).lexically_normal().filename().stem().string();
   }
   const std::vector<IngestFrame>& frames() const override { return frames_; }
@@ -90,16 +90,9 @@ class BagSource final : public IngestSource {
   const std::string& name() const override { return name_; }
 
  private:
-  static BagDriveOptions driveOptions(const SourceOptions& o) {
-    if (o.points_topic.empty()) throw UsageError("a bag needs --points-topic (its PointCloud2 topic)");
-    BagDriveOptions d;
-    d.points_topic = o.points_topic;
-    d.odom_topic = o.odom_topic;
-    d.tf_frame = o.tf_frame;
-    d.keyframe_m = o.keyframe_m;
-    d.keyframe_deg = o.keyframe_deg;
-    d.deskew = o.deskew;
-    return d;
+  static const BagDriveOptions& driveOptions(const SourceOptions& o) {
+    if (o.bag.points_topic.empty()) throw UsageError("a bag needs --points-topic (its PointCloud2 topic)");
+    return o.bag;
   }
   std::string o_path() const { return drive_.bag().path(); }
   BagDrive drive_;
@@ -112,7 +105,7 @@ class BagSource final : public IngestSource {
 
 std::unique_ptr<IngestSource> openSource(const SourceOptions& o) {
   if (isBag(o.path)) return std::make_unique<BagSource>(o);
-  if (!o.points_topic.empty() || !o.odom_topic.empty() || !o.tf_frame.empty())
+  if (!o.bag.points_topic.empty() || !o.bag.odom_topic.empty() || !o.bag.tf_frame.empty())
     throw UsageError(o.path +
                      ": --points-topic, --odom-topic and --tf are for bags, and this is not one (an MCAP file, "
                      "a .db3 file or a rosbag2 directory with metadata.yaml)");

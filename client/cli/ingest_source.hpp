@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "sglc/bag_drive.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc::cli {
@@ -28,10 +29,8 @@ class IngestSource {
 struct SourceOptions {
   std::string path, frames, label_field = "label";
   int every = 1;
-  std::string poses, poses_frame = "auto";         // sequence directories
-  std::string points_topic, odom_topic, tf_frame;  // bags
-  double keyframe_m = 1.0, keyframe_deg = 10.0;    // bags with poses
-  bool deskew = true;  // scans with per-point times are de-skewed with the motion the poses give
+  std::string poses, poses_frame = "auto";  // sequence directories
+  BagDriveOptions bag;  // bags: topics, keyframes; bag.deskew also applies to directories with point_times/
 };
 
 // A bag (sglc::isBag) or a sequence directory; prints notes and warnings about the poses to stderr.

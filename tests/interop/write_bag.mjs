@@ -30,6 +30,17 @@ string frame_id
 MSG: builtin_interfaces/Time
 int32 sec
 uint32 nanosec`;
+const VECTOR3 = `================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z`;
+const QUATERNION = `================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x
+float64 y
+float64 z
+float64 w`;
 const DEFINITIONS = {
   pointcloud2: ["sensor_msgs/msg/PointCloud2", `std_msgs/Header header
 uint32 height
@@ -64,12 +75,7 @@ MSG: geometry_msgs/Point
 float64 x
 float64 y
 float64 z
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
+${QUATERNION}
 ================================================================================
 MSG: geometry_msgs/TwistWithCovariance
 Twist twist
@@ -78,11 +84,7 @@ float64[36] covariance
 MSG: geometry_msgs/Twist
 Vector3 linear
 Vector3 angular
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
+${VECTOR3}
 ================================================================================${HEADER}`],
   tf: ["tf2_msgs/msg/TFMessage", `geometry_msgs/TransformStamped[] transforms
 ================================================================================
@@ -94,17 +96,8 @@ Transform transform
 MSG: geometry_msgs/Transform
 Vector3 translation
 Quaternion rotation
-================================================================================
-MSG: geometry_msgs/Vector3
-float64 x
-float64 y
-float64 z
-================================================================================
-MSG: geometry_msgs/Quaternion
-float64 x
-float64 y
-float64 z
-float64 w
+${VECTOR3}
+${QUATERNION}
 ================================================================================${HEADER}`],
 };
 

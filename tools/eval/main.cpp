@@ -42,6 +42,13 @@ constexpr int kSimPairMinGap = 50;
 // 3-D distance below which a loop pair gets a pose row (sglc-sim's loop_distance4.txt).
 constexpr double kSimPoseMaxM = 4.0;
 
+// sglc-eval reads every cloud of a bag unless told otherwise.
+BagDriveOptions everyCloud() {
+  BagDriveOptions o;
+  o.keyframe_m = o.keyframe_deg = 0;
+  return o;
+}
+
 struct Options {
   std::string protocol, data, map_data, poses, calib, frames, pairs, pose_pairs, server, token, out, config_path,
       gt_list, title;
@@ -50,7 +57,7 @@ struct Options {
   std::uint64_t seed = 7;
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
   int threads = 2;
-  BagSourceOptions bag;
+  BagDriveOptions bag = everyCloud();
   LoopQuery query;
   SlamOptions slam;
 };

@@ -109,7 +109,7 @@ class DirSource final : public FrameSource {
 // topic), the odometry as the poses the protocols compare with.
 class BagSource final : public FrameSource {
  public:
-  BagSource(const std::string& path, const BagSourceOptions& o, const std::string& spec)
+  BagSource(const std::string& path, const BagDriveOptions& o, const std::string& spec)
       : path_(path), drive_(path, options(o)) {
     for (const auto& w : drive_.warnings()) std::cerr << "warning: " << w << "\n";
     const auto selection = FrameSelection::parse(spec);
@@ -134,18 +134,11 @@ class BagSource final : public FrameSource {
   std::string describe() const override { return "bag " + path_; }
 
  private:
-  static BagDriveOptions options(const BagSourceOptions& o) {
+  static const BagDriveOptions& options(const BagDriveOptions& o) {
     if (o.points_topic.empty()) throw InputError("a bag needs --points-topic");
     if (o.odom_topic.empty() && o.tf_frame.empty())
       throw InputError("the protocols need poses: give --odom-topic or --tf for the bag");
-    BagDriveOptions d;
-    d.points_topic = o.points_topic;
-    d.odom_topic = o.odom_topic;
-    d.tf_frame = o.tf_frame;
-    d.keyframe_m = o.keyframe_m;
-    d.keyframe_deg = o.keyframe_deg;
-    d.deskew = o.deskew;
-    return d;
+    return o;
   }
   std::string path_;
   mutable BagDrive drive_;
@@ -184,11 +177,12 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
 }
 
 std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew,
-                                             const BagSourceOptions& bag) {
-  if (isBag(dir))
-    return std::make_unique<BagSource>(
-        dir, BagSourceOptions{bag.points_topic, bag.odom_topic, bag.tf_frame, bag.keyframe_m, bag.keyframe_deg, deskew},
-        frames);
+                                             const BagDriveOptions& bag) {
+  if (isBag(dir)) {
+    BagDriveOptions o = bag;
+    o.deskew = deskew;
+    return std::make_unique<BagSource>(dir, o, frames);
+  }
   return std::make_unique<DirSource>(dir, frames, deskew);
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "sglc/bag_drive.hpp"
 #include "sglc/types.hpp"
 
 namespace sglc::eval {
@@ -37,17 +38,12 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
 
 // dir: a sequence directory (velodyne/, labels/, optional poses.txt + calib.txt). poses.txt holds camera poses
 // (KITTI convention); with calib.txt they become LiDAR poses. `frames` selects by frame number.
-// A bag given as --data: its PointCloud2 topic, and the poses (Odometry topic or tf frame) the protocols need.
-struct BagSourceOptions {
-  std::string points_topic, odom_topic, tf_frame;
-  double keyframe_m = 0, keyframe_deg = 0;  // default: every cloud
-  bool deskew = true;
-};
 // deskew: scans with point_times/ files are de-skewed with the motion between their pose and the next frame's
 // (sglc/deskew.hpp); off, they are read as they are. `dir` may be a bag (sglc::isBag): its clouds, numbered by
 // their index on the topic, with `bag`'s options.
+// A bag needs its PointCloud2 topic and the poses (Odometry topic or tf frame) the protocols compare with.
 std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew = true,
-                                             const BagSourceOptions& bag = {});
+                                             const BagDriveOptions& bag = {});
 
 // The same frames with their labels removed (points only), to measure the label-free path: the engine's
 // built-in labeller labels them.

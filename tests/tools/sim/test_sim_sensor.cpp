@@ -201,15 +201,25 @@ TEST(Sensor, MotionDistortionIsIdentityWhenStill) {
 
 // At speed v the last column is cast v * frame_dt further on; its points, placed with the pose of their own time,
 // land on the surfaces the undistorted scan sees, and placed with the frame's pose they are off by about that.
-TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
+// Frame 150 of the built-in route (2048 columns, no noise), rendered still and with motion distortion.
+struct DistortedFrame {
+  static SimConfig config(bool distorted) {
+    SimConfig cfg = smallConfig(7);
+    cfg.sensor.columns = 2048;
+    cfg.sensor.noiseFree();
+    cfg.sensor.motion_distortion = distorted;
+    return cfg;
+  }
   const Trajectory& traj = loopTrajectory();
   const int index = 150;
-  SimConfig cfg = smallConfig(7);
-  cfg.sensor.columns = 2048;
-  cfg.sensor.noiseFree();
-  const Simulator plain(traj, cfg);
-  cfg.sensor.motion_distortion = true;
-  const Simulator moving(traj, cfg);
+  const SimConfig cfg = config(true);
+  const Simulator plain{traj, config(false)};
+  const Simulator moving{traj, config(true)};
+};
+
+TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
+  const DistortedFrame d;
+  const auto& [traj, index, cfg, plain, moving] = d;
   const auto& poses = plain.trajectory().poses;
   const double v = translationError(poses[index], poses[index + 1]) / traj.frame_dt;
   ASSERT_GT(v, 5.0);
@@ -248,15 +258,9 @@ TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
 // The times the simulator gives each point (when its column fired) are what de-skew needs: with the twist of the
 // frame's motion (the poses around it), the distorted points land on the undistorted scan's surfaces.
 TEST(Sensor, MotionDistortionGivesPointTimesThatDeskewTheSweep) {
-  const Trajectory& traj = loopTrajectory();
-  const int index = 150;
-  SimConfig cfg = smallConfig(7);
-  cfg.sensor.columns = 2048;
-  cfg.sensor.noiseFree();
-  const Simulator plain(traj, cfg);
+  const DistortedFrame d;
+  const auto& [traj, index, cfg, plain, moving] = d;
   EXPECT_TRUE(plain.render(index).point_time.empty());
-  cfg.sensor.motion_distortion = true;
-  const Simulator moving(traj, cfg);
   const auto& poses = plain.trajectory().poses;
   const Frame a = plain.render(index), b = moving.render(index);
   const int C = cfg.sensor.columns;
