@@ -219,7 +219,12 @@ struct DistortedFrame {
 
 TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
   const DistortedFrame d;
-  const auto& [traj, index, cfg, plain, moving] = d;
+  // Named one by one (not a structured binding): the lambdas below capture them.
+  const Trajectory& traj = d.traj;
+  const int index = d.index;
+  const SimConfig& cfg = d.cfg;
+  const Simulator& plain = d.plain;
+  const Simulator& moving = d.moving;
   const auto& poses = plain.trajectory().poses;
   const double v = translationError(poses[index], poses[index + 1]) / traj.frame_dt;
   ASSERT_GT(v, 5.0);
@@ -259,7 +264,12 @@ TEST(Sensor, MotionDistortionCastsTheLastColumnFromTheMovedSensor) {
 // frame's motion (the poses around it), the distorted points land on the undistorted scan's surfaces.
 TEST(Sensor, MotionDistortionGivesPointTimesThatDeskewTheSweep) {
   const DistortedFrame d;
-  const auto& [traj, index, cfg, plain, moving] = d;
+  // Named one by one (not a structured binding): the lambdas below capture them.
+  const Trajectory& traj = d.traj;
+  const int index = d.index;
+  const SimConfig& cfg = d.cfg;
+  const Simulator& plain = d.plain;
+  const Simulator& moving = d.moving;
   EXPECT_TRUE(plain.render(index).point_time.empty());
   const auto& poses = plain.trajectory().poses;
   const Frame a = plain.render(index), b = moving.render(index);
