@@ -19,6 +19,10 @@ namespace {
 constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
 constexpr std::uint64_t kMaxChunkBytes = 1ull << 31;   // a chunk's records, uncompressed
 constexpr std::uint64_t kMaxRecordBytes = 1ull << 31;  // any record read whole (schema, channel, chunk)
+// A chunk may expand this much at most (LiDAR data compresses 1-3 times; all-zero data far more, so small chunks
+// up to kPlainChunkBytes are taken whatever their ratio): memory is never claimed on a header's word alone.
+constexpr std::uint64_t kMaxRatio = 256;
+constexpr std::uint64_t kPlainChunkBytes = 64ull << 20;
 
 enum Op : std::uint8_t {
   kHeader = 0x01,
@@ -202,6 +206,10 @@ void McapBag::chunk(std::uint64_t at, std::uint64_t body, std::uint64_t len) {
   if (k.uncompressed_size > kMaxChunkBytes)
     throw InputError(path_ + ": " + what + " claims " + std::to_string(k.uncompressed_size) +
                      " bytes uncompressed (more than 2 GiB)");
+  if (!k.compression.empty() && k.uncompressed_size > std::max<std::uint64_t>(kPlainChunkBytes, kMaxRatio * k.size))
+    throw InputError(path_ + ": " + what + " claims " + std::to_string(k.uncompressed_size) + " bytes from " +
+                     std::to_string(k.size) + " compressed (more than " + std::to_string(kMaxRatio) +
+                     " times: a decompression bomb, or corrupt)");
   chunks_.push_back(k);
   const std::uint64_t index = chunks_.size();  // BagMessage::where: 1-based chunk, 0 for a message outside chunks
   const auto& recs = records(index);

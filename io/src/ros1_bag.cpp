@@ -86,6 +86,10 @@ Ros1Bag::Ros1Bag(const std::string& path) : Bag(path), file_(path, std::ios::bin
       if (k.compression != "none" && k.compression != "bz2" && k.compression != "lz4")
         throw InputError(what + ": chunk compression '" + k.compression + "'; this reader takes none, bz2 or lz4");
       if (k.uncompressed_size > kMaxChunkBytes) throw InputError(what + ": chunk claims more than 2 GiB");
+      // At most 256 times its compressed size (small chunks excepted): memory is never claimed on a word alone.
+      if (k.compression != "none" && k.uncompressed_size > std::max<std::uint64_t>(64ull << 20, 256 * k.size))
+        throw InputError(what + ": chunk claims " + std::to_string(k.uncompressed_size) + " bytes from " +
+                         std::to_string(k.size) + " compressed (a decompression bomb, or corrupt)");
       chunks_.push_back(k);
       const auto& recs = chunk(chunks_.size());
       records(recs.data(), recs.size(), 0, chunks_.size(), what + " (chunk)");

@@ -241,6 +241,12 @@ TEST(Bags, BadInputNamesFileTopicAndMessage) {
   msg = errorOf([&] { BagDrive(write("flip.mcap", flipped), o).cloud(0); });
   EXPECT_TRUE(msg.find("CRC mismatch") != std::string::npos || msg.find("zstd data") != std::string::npos) << msg;
   EXPECT_NE(msg.find("flip.mcap"), std::string::npos) << msg;
+  // A chunk claiming 1 GiB from a few hundred bytes: refused before any memory is taken.
+  std::string bomb = bytes;
+  const std::uint64_t gib = 1ull << 30;
+  bomb.replace(chunk - 16, 8, std::string(reinterpret_cast<const char*>(&gib), 8));
+  msg = errorOf([&] { openBag(write("bomb.mcap", bomb)); });
+  EXPECT_NE(msg.find("decompression bomb"), std::string::npos) << msg;
   // An unknown compression.
   std::string brotli = bytes;
   brotli.replace(chunk, 4, "brot");
