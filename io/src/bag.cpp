@@ -146,7 +146,8 @@ std::unique_ptr<Bag> openBag(const std::string& path) {
       throw InputError(path + ": a directory without metadata.yaml is not a rosbag2 bag");
     return std::make_unique<SplitBag>(path);
   }
-  if (!fs::is_regular_file(path, ec)) throw InputError(path + ": no such file");
+  if (!fs::is_regular_file(path, ec))
+    throw InputError(path + (fs::exists(path, ec) ? ": not a regular file" : ": no such file"));
   return openFile(path);
 }
 

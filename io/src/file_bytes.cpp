@@ -51,15 +51,20 @@ RegularFile::~RegularFile() {
 
 std::vector<char> RegularFile::read(std::uint64_t offset, std::size_t bytes) const {
   std::vector<char> data(bytes);
+  readInto(offset, data.data(), bytes);
+  return data;
+}
+
+void RegularFile::readInto(std::uint64_t offset, void* out, std::size_t bytes) const {
+  char* to = static_cast<char*>(out);
   std::size_t done = 0;
   while (done < bytes) {
-    const ssize_t n = ::pread(fd_, data.data() + done, bytes - done, static_cast<off_t>(offset + done));
+    const ssize_t n = ::pread(fd_, to + done, bytes - done, static_cast<off_t>(offset + done));
     if (n < 0 && errno == EINTR) continue;
     if (n < 0) throw InputError(path_ + ": read failed (" + std::strerror(errno) + ")");
     if (n == 0) throw InputError(path_ + ": read failed (the file is shorter than it was)");
     done += static_cast<std::size_t>(n);
   }
-  return data;
 }
 
 void checkScanFileSize(const RegularFile& file) {

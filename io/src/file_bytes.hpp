@@ -23,6 +23,8 @@ class RegularFile {
   // `bytes` bytes from `offset`; InputError naming the file on a short or failed read.
   std::vector<char> read(std::uint64_t offset, std::size_t bytes) const;
   std::vector<char> readAll() const { return read(0, static_cast<std::size_t>(size_)); }
+  // The same into `out` (no allocation).
+  void readInto(std::uint64_t offset, void* out, std::size_t bytes) const;
 
  private:
   std::string path_;

@@ -47,23 +47,12 @@ std::uint32_t crc32Of(const std::vector<std::uint8_t>& bytes) {
 
 }  // namespace
 
-McapBag::McapBag(const std::string& path) : Bag(path), file_(path, std::ios::binary) {
-  if (!file_) throw InputError(path + ": cannot open");
-  file_.seekg(0, std::ios::end);
-  size_ = static_cast<std::uint64_t>(file_.tellg());
+McapBag::McapBag(const std::string& path) : Bag(path), file_(path), size_(file_.size()) {
   std::uint8_t magic[8];
   if (size_ < 8 || !readAt(0, magic, 8) || std::memcmp(magic, kMagic, 8) != 0)
     throw InputError(path + ": not an MCAP file (no MCAP magic at its start)");
   scan();
   finish();
-}
-
-bool McapBag::readAt(std::uint64_t offset, void* out, std::size_t n) {
-  if (offset > size_ || n > size_ - offset) return false;
-  file_.clear();
-  file_.seekg(static_cast<std::streamoff>(offset));
-  file_.read(static_cast<char*>(out), static_cast<std::streamsize>(n));
-  return static_cast<std::size_t>(file_.gcount()) == n;
 }
 
 std::vector<std::uint8_t> McapBag::recordAt(std::uint64_t offset, std::uint64_t n, const char* what) {

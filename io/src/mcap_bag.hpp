@@ -1,9 +1,9 @@
 // An MCAP file as a Bag (sglc/bag.hpp).
 #pragma once
 
-#include <fstream>
 #include <map>
 
+#include "bag_file.hpp"
 #include "sglc/bag.hpp"
 
 namespace sglc {
@@ -24,7 +24,7 @@ class McapBag final : public Bag {
     std::string compression;
     bool checked = false;  // its CRC was checked once
   };
-  bool readAt(std::uint64_t offset, void* out, std::size_t n);
+  bool readAt(std::uint64_t offset, void* out, std::size_t n) { return file_.readAt(offset, out, n); }
   std::vector<std::uint8_t> recordAt(std::uint64_t offset, std::uint64_t n, const char* what);
   void scan();
   void definition(std::uint8_t op, const std::uint8_t* p, std::size_t n, const std::string& where);
@@ -33,8 +33,8 @@ class McapBag final : public Bag {
   void chunk(std::uint64_t at, std::uint64_t body, std::uint64_t len);
   const std::vector<std::uint8_t>& records(std::uint64_t index);  // chunk `index` (1-based), decompressed, checked
 
-  std::ifstream file_;
-  std::uint64_t size_ = 0;
+  BagFile file_;
+  std::uint64_t size_ = 0;  // file_.size()
   std::map<std::uint16_t, Schema> schemas_;
   std::map<std::uint16_t, std::size_t> channels_;  // channel id -> topic
   std::vector<Chunk> chunks_;

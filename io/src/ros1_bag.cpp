@@ -55,10 +55,7 @@ std::string ros2Name(const std::string& type) {
 
 }  // namespace
 
-Ros1Bag::Ros1Bag(const std::string& path) : Bag(path), file_(path, std::ios::binary) {
-  if (!file_) throw InputError(path + ": cannot open");
-  file_.seekg(0, std::ios::end);
-  size_ = static_cast<std::uint64_t>(file_.tellg());
+Ros1Bag::Ros1Bag(const std::string& path) : Bag(path), file_(path), size_(file_.size()) {
   char magic[kMagicSize];
   if (!readAt(0, magic, kMagicSize) || std::memcmp(magic, kMagic, kMagicSize) != 0)
     throw InputError(path + ": not a ROS 1 bag of format 2.0 (no '#ROSBAG V2.0' line at its start)");
@@ -101,14 +98,6 @@ Ros1Bag::Ros1Bag(const std::string& path) : Bag(path), file_(path, std::ios::bin
     at = data_at + data_len;
   }
   finish();
-}
-
-bool Ros1Bag::readAt(std::uint64_t offset, void* out, std::size_t n) {
-  if (offset > size_ || n > size_ - offset) return false;
-  file_.clear();
-  file_.seekg(static_cast<std::streamoff>(offset));
-  file_.read(static_cast<char*>(out), static_cast<std::streamsize>(n));
-  return static_cast<std::size_t>(file_.gcount()) == n;
 }
 
 void Ros1Bag::records(const std::uint8_t* p, std::size_t n, std::uint64_t base, std::uint64_t where,

@@ -2,6 +2,8 @@
 // Python's sqlite3, read by the project's readers (sglc/bag.hpp, sglc/ros_messages.hpp, sglc/bag_drive.hpp).
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <cmath>
 #include <fstream>
 
@@ -212,6 +214,12 @@ TEST(Bags, BadInputNamesFileTopicAndMessage) {
   };
   BagDriveOptions o;
   o.points_topic = "/points";
+
+  // A FIFO or a directory without metadata.yaml is refused at once, never waited on.
+  ASSERT_EQ(::mkfifo(tmp.file("fifo.mcap").c_str(), 0600), 0);
+  EXPECT_NE(errorOf([&] { openBag(tmp.file("fifo.mcap")); }).find("not a regular file"), std::string::npos);
+  EXPECT_NE(errorOf([&] { openBag(tmp.path().string()); }).find("without metadata.yaml"), std::string::npos);
+  EXPECT_NE(errorOf([&] { openBag(tmp.file("none.mcap")); }).find("no such file"), std::string::npos);
 
   // A topic that is not there: the ones that are, with their types.
   o.points_topic = "/velodyne_points";
