@@ -78,6 +78,10 @@ class SqliteMapStore final : public MapStore {
                                        std::int64_t seq) const override {
     return scan_table::find(core_, map, robot, session, seq);
   }
+  std::optional<std::int64_t> previousScan(const std::string& map, const std::string& robot, const std::string& session,
+                                           std::int64_t seq) const override {
+    return scan_table::find(core_, map, robot, session, seq, scan_table::SeqMatch::kLatestBefore);
+  }
   std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session) override {
     return scan_table::deleteSession(core_, map, robot, session);
   }

@@ -63,6 +63,10 @@ class PgMapStore final : public MapStore {
                                        std::int64_t seq) const override {
     return scans::find(core_, map, robot, session, seq);
   }
+  std::optional<std::int64_t> previousScan(const std::string& map, const std::string& robot, const std::string& session,
+                                           std::int64_t seq) const override {
+    return scans::find(core_, map, robot, session, seq, scans::SeqMatch::kLatestBefore);
+  }
   std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session) override {
     return scans::deleteSession(core_, map, robot, session);
   }

@@ -14,8 +14,10 @@ std::int64_t add(Core& core, const NewScan& scan);
 std::optional<ScanInfo> info(const Core& core, std::int64_t scan_id);
 std::shared_ptr<const Fingerprint> fingerprint(const Core& core, std::int64_t scan_id);
 std::optional<LabelledScan> raw(const Core& core, std::int64_t scan_id);
+// The scan of the session with exactly `seq`, or the one with the largest seq below it.
+enum class SeqMatch { kExact, kLatestBefore };
 std::optional<std::int64_t> find(const Core& core, const std::string& map, const std::string& robot,
-                                 const std::string& session, std::int64_t seq);
+                                 const std::string& session, std::int64_t seq, SeqMatch match = SeqMatch::kExact);
 std::int64_t deleteSession(Core& core, const std::string& map, const std::string& robot, const std::string& session);
 std::int64_t deleteRobot(Core& core, const std::string& map, const std::string& robot);
 std::int64_t deleteMap(Core& core, const std::string& map);

@@ -153,13 +153,14 @@ std::optional<LabelledScan> raw(const Core& core, std::int64_t scan_id) {
 }
 
 std::optional<std::int64_t> find(const Core& core, const std::string& map, const std::string& robot,
-                                 const std::string& session, std::int64_t seq) {
+                                 const std::string& session, std::int64_t seq, SeqMatch match) {
   const auto map_id = core.mapId(map);
   auto db = core.readers.acquire();
-  const auto r = db->query(
+  const std::string query =
       "SELECT s.id FROM scans s JOIN robots rb ON rb.id = s.robot_id JOIN sessions x ON x.id = s.session_id"
-      " WHERE s.map_id = $1 AND rb.name = $2 AND x.name = $3 AND s.seq = $4",
-      {map_id, robot, session, seq});
+      " WHERE s.map_id = $1 AND rb.name = $2 AND x.name = $3 AND " +
+      std::string(match == SeqMatch::kExact ? "s.seq = $4" : "s.seq < $4 ORDER BY s.seq DESC LIMIT 1");
+  const auto r = db->query(query.c_str(), {map_id, robot, session, seq});
   if (r.rows() == 0) return std::nullopt;
   return r.i64(0, 0);
 }

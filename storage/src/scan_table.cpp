@@ -170,14 +170,16 @@ std::optional<LabelledScan> raw(const StoreCore& core, std::int64_t scan_id) {
 }
 
 std::optional<std::int64_t> find(const StoreCore& core, const std::string& map, const std::string& robot,
-                                 const std::string& session, std::int64_t seq) {
+                                 const std::string& session, std::int64_t seq, SeqMatch match) {
   std::shared_lock lock(core.state_mutex);
   const MapState& m = core.catalogue.map(map);
   const auto robot_id = m.robotId(robot);
   const auto session_id = robot_id < 0 ? -1 : m.sessionId(robot_id, session);
   if (session_id < 0) return std::nullopt;
   auto reader = core.readers.acquire();
-  sql::Stmt st(*reader, "SELECT id FROM scans WHERE session_id = ? AND seq = ?");
+  sql::Stmt st(*reader, match == SeqMatch::kExact
+                            ? "SELECT id FROM scans WHERE session_id = ? AND seq = ?"
+                            : "SELECT id FROM scans WHERE session_id = ? AND seq < ? ORDER BY seq DESC LIMIT 1");
   st.bind(1, session_id).bind(2, seq);
   if (!st.step()) return std::nullopt;
   return st.i64(0);

@@ -111,6 +111,11 @@ TEST_P(OnBothBackends, StoresAndFindsItsOwnDescriptorFirst) {
   EXPECT_EQ(*info->stamp, all[17].stamp);
   EXPECT_EQ(store->findScan("m", all[17].robot, all[17].session, all[17].seq), all[17].id);
   EXPECT_FALSE(store->findScan("m", all[17].robot, all[17].session, 999));
+  // The scan before a seq in its session: the largest seq below it, whether that seq is stored or not.
+  EXPECT_EQ(store->previousScan("m", all[17].robot, all[17].session, all[17].seq + 1), all[17].id);
+  EXPECT_EQ(store->previousScan("m", all[17].robot, all[17].session, all[17].seq + 100), all[19].id);
+  EXPECT_EQ(store->previousScan("m", all[17].robot, all[17].session, all[10].seq), std::nullopt);
+  EXPECT_EQ(store->previousScan("m", "nobody", all[17].session, all[17].seq), std::nullopt);
   const auto st = store->stats();
   EXPECT_EQ(st.scans, 40);
   EXPECT_EQ(st.index_entries, 40);

@@ -239,6 +239,9 @@ class MapStore {
   // The scan of (map, robot, session, seq), if stored.
   virtual std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot,
                                                const std::string& session, std::int64_t seq) const = 0;
+  // The session's stored scan with the largest seq below `seq`, if any (the scan before it in the robot's run).
+  virtual std::optional<std::int64_t> previousScan(const std::string& map, const std::string& robot,
+                                                   const std::string& session, std::int64_t seq) const = 0;
 
   // Deletions remove scans from the index and the database together. Return the number of scans removed.
   virtual std::int64_t deleteSession(const std::string& map, const std::string& robot, const std::string& session) = 0;
