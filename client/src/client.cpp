@@ -57,6 +57,7 @@ v1::IngestRequest makeIngestRequest(const v1::ScanKey& key, const LabelledScan& 
   v1::IngestRequest request;
   *request.mutable_key() = key;
   packScan(scan, request.mutable_scan());
+  packSweep(options.sweep, request.mutable_scan());
   if (options.stamp) request.set_stamp(*options.stamp);
   if (options.odometry_pose) {
     // The server refuses a pose that is not a rigid motion; say so before sending.

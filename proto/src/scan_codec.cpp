@@ -124,7 +124,12 @@ std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, s
   } catch (const WireError& e) {
     throw WireError(std::string("cannot chunk a malformed scan: ") + e.what());
   }
-  const std::size_t per_chunk = std::max<std::size_t>(1, max_chunk_bytes / (kPointBytes + kLabelBytes));
+  const std::string& times = request.scan().point_times();
+  if (!times.empty() && times.size() != n * 4)
+    throw WireError("cannot chunk a malformed scan: " + std::to_string(n) + " points but " +
+                    std::to_string(times.size()) + " bytes of point times");
+  const std::size_t per_point = kPointBytes + kLabelBytes + (times.empty() ? 0 : 4);
+  const std::size_t per_chunk = std::max<std::size_t>(1, max_chunk_bytes / per_point);
 
   std::vector<v1::IngestChunk> chunks;
   chunks.reserve(1 + (n + per_chunk - 1) / per_chunk);
@@ -132,11 +137,13 @@ std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, s
   *first.mutable_header() = request;
   first.mutable_header()->mutable_scan()->clear_points();
   first.mutable_header()->mutable_scan()->clear_labels();
+  first.mutable_header()->mutable_scan()->clear_point_times();
   for (std::size_t begin = 0; begin < n; begin += per_chunk) {
     const std::size_t count = std::min(per_chunk, n - begin);
     v1::IngestChunk& chunk = chunks.emplace_back();
     chunk.set_points(points.substr(begin * kPointBytes, count * kPointBytes));
     if (!labels.empty()) chunk.set_labels(labels.substr(begin * kLabelBytes, count * kLabelBytes));
+    if (!times.empty()) chunk.set_point_times(times.substr(begin * 4, count * 4));
   }
   return chunks;
 }

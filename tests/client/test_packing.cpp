@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "sglc/client/client.hpp"
@@ -281,4 +282,106 @@ TEST(Wire, DecodeScanSaysWhatIsWrongWithTheStatusToAnswer) {
   const auto [nan, m2] = code(msg.points(), msg.labels(), 10);
   EXPECT_EQ(nan, grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(m2.find("point 7"), std::string::npos) << m2;
+}
+
+// ---- The sweep: per-point times and the twist (Scan.point_times, Scan.twist)
+
+namespace {
+
+std::vector<float> sweepTimes(std::size_t n) {
+  std::vector<float> t(n);
+  for (std::size_t i = 0; i < n; ++i) t[i] = -0.05f + 0.1f * static_cast<float>(i) / static_cast<float>(n);
+  return t;
+}
+
+// The message of decodeSweep's error, or "" when it accepts.
+std::string sweepError(const std::string& times, const v1::Twist& twist, std::size_t n) {
+  try {
+    sglc::wire::decodeSweep(times, twist, n);
+  } catch (const sglc::wire::WireError& e) {
+    EXPECT_EQ(e.code(), grpc::StatusCode::INVALID_ARGUMENT);
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(Sweep, TimesAndTwistRoundTripLittleEndian) {
+  const auto scan = randomScan(50, 6);
+  sc::IngestOptions options;
+  options.sweep.point_times = sweepTimes(50);
+  options.sweep.twist = sglc::Twist{Eigen::Vector3d(1, 2, 3), Eigen::Vector3d(0.1, 0.2, 0.3)};
+  const auto request = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), scan, options);
+  const std::string& bytes = request.scan().point_times();
+  ASSERT_EQ(bytes.size(), 200u);
+  float first;
+  std::memcpy(&first, bytes.data(), 4);  // this host is little-endian, as the wire is
+  EXPECT_EQ(first, -0.05f);
+  const auto sweep = sglc::wire::decodeSweep(bytes, request.scan().twist(), 50);
+  EXPECT_EQ(sweep.point_times, options.sweep.point_times);
+  ASSERT_TRUE(sweep.twist);
+  EXPECT_EQ(sweep.twist->linear, Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(sweep.twist->angular, Eigen::Vector3d(0.1, 0.2, 0.3));
+
+  // Without any: nothing on the wire, nothing decoded.
+  const auto bare = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), scan);
+  EXPECT_TRUE(bare.scan().point_times().empty());
+  EXPECT_FALSE(bare.scan().has_twist());
+  const auto none = sglc::wire::decodeSweep("", bare.scan().twist(), 50);
+  EXPECT_TRUE(none.point_times.empty());
+  EXPECT_FALSE(none.twist);
+}
+
+TEST(Sweep, BadTimesAndTwistsSayWhatIsWrong) {
+  const auto times = sc::packPointTimes(sweepTimes(10));
+  const v1::Twist none;
+  EXPECT_EQ(sweepError(times, none, 10), "");
+  EXPECT_NE(sweepError(times, none, 11).find("11 points but 10 point times"), std::string::npos);
+  EXPECT_NE(sweepError(times.substr(1), none, 10).find("not a multiple of 4"), std::string::npos);
+  for (const float bad : {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity(), 1.5f}) {
+    auto t = sweepTimes(10);
+    t[6] = bad;
+    const auto e = sweepError(sc::packPointTimes(t), none, 10);
+    EXPECT_NE(e.find("point_times[6]"), std::string::npos) << e;
+  }
+  v1::Twist twist;
+  sc::packTwist(sglc::Twist{}, &twist);
+  EXPECT_EQ(sweepError(times, twist, 10), "");
+  EXPECT_NE(sweepError("", twist, 10).find("twist is set but scan.point_times is empty"), std::string::npos);
+  auto two = twist;
+  two.mutable_linear()->RemoveLast();
+  EXPECT_NE(sweepError(times, two, 10).find("linear has 2 values, expected 3"), std::string::npos);
+  auto nan = twist;
+  nan.set_angular(1, std::numeric_limits<double>::quiet_NaN());
+  EXPECT_NE(sweepError(times, nan, 10).find("angular is not finite"), std::string::npos);
+
+  // The client refuses what the server would.
+  sc::IngestOptions options;
+  options.sweep.point_times = sweepTimes(9);
+  EXPECT_THROW(sc::makeIngestRequest(sc::makeKey("m", "r", "s", 0), randomScan(10, 1), options), sglc::InputError);
+}
+
+TEST(Sweep, ChunksCarryEachPointsTime) {
+  const auto scan = randomScan(1000, 8);
+  sc::IngestOptions options;
+  options.sweep.point_times = sweepTimes(1000);
+  options.sweep.twist = sglc::Twist{Eigen::Vector3d(5, 0, 0), Eigen::Vector3d::Zero()};
+  const auto request = sc::makeIngestRequest(sc::makeKey("m", "r", "s", 1), scan, options);
+  const std::size_t limit = 100 * 20;  // 100 points with their labels and times
+  const auto chunks = sc::splitIntoChunks(request, limit);
+  ASSERT_EQ(chunks.size(), 1u + 10u);
+  EXPECT_TRUE(chunks[0].header().scan().point_times().empty());
+  EXPECT_EQ(chunks[0].header().scan().twist().linear(0), 5.0) << "the twist travels in the header";
+  std::string times;
+  for (std::size_t i = 1; i < chunks.size(); ++i) {
+    EXPECT_EQ(chunks[i].point_times().size() / 4, chunks[i].points().size() / 12) << "chunk " << i;
+    EXPECT_LE(chunks[i].points().size() + chunks[i].labels().size() + chunks[i].point_times().size(), limit);
+    times += chunks[i].point_times();
+  }
+  EXPECT_EQ(times, request.scan().point_times());
+
+  auto broken = request;
+  broken.mutable_scan()->mutable_point_times()->resize(400);
+  EXPECT_THROW(sc::splitIntoChunks(broken, limit), sglc::InputError);
 }

@@ -1,12 +1,15 @@
-// Fuzzing the server side of the wire codec (proto/include/sglc/wire): decodeScan, decodeRigidTransform and
-// checkName see every request's bytes and throw WireError, which becomes the call's status; decodeInformation
-// reads a candidate's 36 values. A rejection must be a WireError with code INVALID_ARGUMENT or RESOURCE_EXHAUSTED and a
-// message. An accepted scan has as many labels as points (at least one, at most max_points), finite coordinates
-// and the bytes it came from; an accepted transform is 16 finite values that decode again to (nearly) the same.
+// Fuzzing the server side of the wire codec (proto/include/sglc/wire): decodeScan, decodeSweep,
+// decodeRigidTransform and checkName see every request's bytes and throw WireError, which becomes the call's status;
+// decodeInformation reads a candidate's 36 values. A rejection must be a WireError with code INVALID_ARGUMENT or
+// RESOURCE_EXHAUSTED and a message. An accepted scan has as many labels as points (at least one, at most max_points),
+// finite coordinates and the bytes it came from; an accepted sweep has no times or one finite time within 1 s per
+// point, and a twist only with times, of 3 + 3 finite values; an accepted transform is 16 finite values that decode
+// again to (nearly) the same.
 #include "fuzz_util.hpp"
 #include "fuzz_wire.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
+#include "sglc/wire/sweep_codec.hpp"
 
 namespace sglc {
 namespace {
@@ -15,8 +18,9 @@ using fuzz::Outcome;
 using fuzz::Rng;
 using wire::WireError;
 
-enum Kind : std::uint8_t { kScan, kTransform, kName, kInformation, kKinds };
-const char* const kKindNames[] = {"decodeScan", "decodeRigidTransform", "checkName", "decodeInformation"};
+enum Kind : std::uint8_t { kScan, kTransform, kName, kInformation, kSweep, kKinds };
+const char* const kKindNames[] = {"decodeScan", "decodeRigidTransform", "checkName", "decodeInformation",
+                                  "decodeSweep"};
 
 struct CodecCase {
   Kind kind = kScan;
@@ -25,6 +29,8 @@ struct CodecCase {
   v1::Transform transform;
   std::string text;  // decodeTransform's `what`, checkName's name
   v1::Candidate candidate;
+  std::string times;  // Scan.point_times, for max_points points
+  v1::Twist twist;
 };
 
 std::string bytesOf(const CodecCase& c) {
@@ -37,6 +43,10 @@ std::string bytesOf(const CodecCase& c) {
       return out + c.transform.SerializeAsString();
     case kName:
       return out + c.text;
+    case kSweep:
+      out.append(reinterpret_cast<const char*>(&c.max_points), 8);
+      out += c.twist.SerializeAsString();
+      return out.append(1, '\0') + c.times;
     default:
       return out + c.candidate.SerializeAsString();
   }
@@ -52,6 +62,9 @@ std::string describe(const CodecCase& c) {
       return out + fuzz::describeTransform(c.transform);
     case kName:
       return out + fuzz::textPreview(c.text);
+    case kSweep:
+      return out + std::to_string(c.max_points) + " points, times " + fuzz::hexPreview(c.times) + ", twist of " +
+             std::to_string(c.twist.linear_size()) + " + " + std::to_string(c.twist.angular_size()) + " values";
     default:
       return out + std::to_string(c.candidate.information_size()) + " information values";
   }
@@ -80,6 +93,11 @@ TEST(Fuzz, ServerCodec) {
       for (int k = 0; k < 16; ++k) c.transform.add_m(T(k / 4, k % 4));
       c.text = "robot-1";
       for (int k = 0; k < 36; ++k) c.candidate.add_information(k % 7 == 0 ? 1.0 : 0.0);
+      if (c.kind == kSweep) {
+        c.max_points = 2;
+        c.times = wire::packPointTimes({0.01f, -0.02f});
+        wire::packTwist(Twist{Eigen::Vector3d(3, 0, 0), Eigen::Vector3d(0, 0, 0.5)}, &c.twist);
+      }
       return c;
     }
     switch (c.kind) {
@@ -106,6 +124,28 @@ TEST(Fuzz, ServerCodec) {
           c.text = mutator.random(rng, 300);
         else
           name_mutator.mutate(rng, c.text, names, 400);
+        break;
+      }
+      case kSweep: {
+        const std::size_t n = fuzz::below(rng, 40);
+        std::vector<float> times(n);
+        for (auto& t : times)
+          t = fuzz::chance(rng, 10) ? static_cast<float>(fuzz::interestingReal(rng))
+                                    : std::uniform_real_distribution<float>(-1.2f, 1.2f)(rng);
+        c.times = wire::packPointTimes(times);
+        if (fuzz::chance(rng, 5)) mutator.mutate(rng, c.times, {c.times}, 400);
+        const std::uint64_t choices[] = {n, n, n + 1, n ? n - 1 : 0, 0};
+        c.max_points = choices[fuzz::below(rng, std::size(choices))];
+        if (fuzz::chance(rng, 2)) {
+          const auto values = [&](google::protobuf::RepeatedField<double>* f) {
+            const int count = fuzz::chance(rng, 4) ? static_cast<int>(fuzz::below(rng, 6)) : 3;
+            for (int k = 0; k < count; ++k)
+              f->Add(fuzz::chance(rng, 10) ? fuzz::interestingReal(rng)
+                                           : std::uniform_real_distribution<double>(-10, 10)(rng));
+          };
+          values(c.twist.mutable_linear());
+          values(c.twist.mutable_angular());
+        }
         break;
       }
       default: {
@@ -172,6 +212,25 @@ TEST(Fuzz, ServerCodec) {
               v.fail("checkName accepted a control character");
               break;
             }
+          break;
+        }
+        case kSweep: {
+          const auto sweep = wire::decodeSweep(c.times, c.twist, c.max_points);
+          const auto& t = sweep.point_times;
+          if (!t.empty() && t.size() != c.max_points)
+            v.fail("accepted " + std::to_string(t.size()) + " times for " + std::to_string(c.max_points) + " points");
+          if (t.size() * 4 != c.times.size() || (!t.empty() && std::memcmp(t.data(), c.times.data(), c.times.size())))
+            v.fail("decoded times differ from their bytes");
+          for (std::size_t k = 0; k < t.size(); ++k)
+            if (!std::isfinite(t[k]) || std::abs(t[k]) > 1.0f) {
+              v.fail("accepted time " + std::to_string(k) + " of " + std::to_string(t[k]) + " s");
+              break;
+            }
+          const bool has_values = c.twist.linear_size() + c.twist.angular_size() > 0;
+          if (sweep.twist.has_value() != has_values) v.fail("a twist was decoded from nothing or lost");
+          if (sweep.twist && (t.empty() || !sweep.twist->linear.allFinite() || !sweep.twist->angular.allFinite() ||
+                              c.twist.linear_size() != 3 || c.twist.angular_size() != 3))
+            v.fail("accepted a twist without times, not finite, or not of 3 + 3 values");
           break;
         }
         default: {

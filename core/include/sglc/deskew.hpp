@@ -3,6 +3,7 @@
 // (a twist held constant over the sweep), every point is moved into the sensor's frame at the stamp.
 #pragma once
 
+#include <optional>
 #include <vector>
 
 #include "sglc/types.hpp"
@@ -19,6 +20,13 @@ struct Twist {
 // seconds: the rotation's axis-angle and the translation (in `from`'s axes), each divided by dt. Throws
 // InputError when dt is not positive and finite.
 Twist twistBetween(const Mat4d& from, const Mat4d& to, double dt);
+
+// What a scan may carry for de-skew: one time per point (s after the stamp) and, when its sender knows it,
+// the sensor's twist over the sweep.
+struct ScanSweep {
+  std::vector<float> point_times;
+  std::optional<Twist> twist;
+};
 
 // A pose with its time (s).
 struct TimedPose {

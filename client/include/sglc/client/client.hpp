@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "sglc/client/packing.hpp"
+#include "sglc/deskew.hpp"
 #include "sglc/types.hpp"
 #include "sglc/v1/sglc.grpc.pb.h"
 #include "sglc/v1/sglc.pb.h"
@@ -85,6 +86,9 @@ struct IngestOptions {
   bool store_raw = false;              // also keep the raw cloud on the server
   bool query = false;                  // look for loops first (against the scans stored before it)
   v1::QueryOptions query_options;
+  // Per-point times (and the twist, when known) for the server to de-skew the scan (sglc.v1.Scan.point_times):
+  // leave empty for a scan that is de-skewed already or was taken standing still.
+  ScanSweep sweep;
 };
 
 // Builders for the small messages.

@@ -41,16 +41,19 @@ LabelledScan unpackScan(const v1::Scan& scan);
 LabelledScan decodeScan(std::string_view points, std::string_view labels,
                         std::size_t max_points = std::numeric_limits<std::size_t>::max());
 
-// Size in bytes of a scan once packed (points + labels).
+// Size in bytes of a scan once packed (points + labels, + point times on the wire).
 inline std::size_t packedSize(const LabelledScan& scan) {
   return scan.points.size() * kPointBytes + scan.labels.size() * kLabelBytes;
 }
-inline std::size_t packedSize(const v1::Scan& scan) { return scan.points().size() + scan.labels().size(); }
+inline std::size_t packedSize(const v1::Scan& scan) {
+  return scan.points().size() + scan.labels().size() + scan.point_times().size();
+}
 
 // Splits an ingest request into IngestChunked messages whose points + labels payload is at most
 // `max_chunk_bytes` each (at least one point per chunk, whatever the limit). The first chunk carries the request
-// as header with an empty scan and no payload of its own; the following chunks carry the scan's points and labels
-// in order, cut on point boundaries so that every chunk holds whole points and their labels. The concatenation of
+// as header with an empty scan (its twist kept) and no payload of its own; the following chunks carry the scan's
+// points, labels and point times in order, cut on point boundaries so that every chunk holds whole points with
+// their labels and times. The concatenation of
 // the chunks' bytes is the original scan. Throws on a scan that fails unpackScan's layout checks.
 std::vector<v1::IngestChunk> splitIntoChunks(const v1::IngestRequest& request, std::size_t max_chunk_bytes);
 
