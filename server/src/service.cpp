@@ -16,11 +16,13 @@
 #include "server_metrics.hpp"
 #include "sglc/closing/ingestor.hpp"
 #include "sglc/closing/loop_finder.hpp"
+#include "sglc/closing/sweep_undo.hpp"
 #include "sglc/config/engine_file.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/version.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
+#include "sglc/wire/sweep_codec.hpp"
 
 namespace sglc::server {
 namespace {
@@ -50,6 +52,20 @@ void reportScan(const ScanReport& report, const std::string& map, const std::str
             {{"event", "scan_warning"}, {"map", map}, {"robot", robot}, {"seq", seq}, {"warnings", report.warnings}}));
 }
 
+// A scan that came with point times: whether it was de-skewed, and if not why (also in the log).
+template <typename Response>
+void reportSweep(const closing::SweepOutcome& sweep, const std::string& map, const std::string& robot, std::int64_t seq,
+                 Response* resp) {
+  resp->set_deskewed(sweep.deskewed);
+  if (!sweep.warning) return;
+  resp->add_warnings(*sweep.warning);
+  spdlog::warn("{}", logging::logLine({{"event", "scan_warning"},
+                                       {"map", map},
+                                       {"robot", robot},
+                                       {"seq", seq},
+                                       {"warnings", std::vector<std::string>{*sweep.warning}}}));
+}
+
 // Engine work of a call: spread over the compute pool's idle threads, abandoned when the call is.
 closing::Execution executionOf(const ServiceState& state, const grpc::ServerContextBase* ctx) {
   return {[&state](std::size_t n, const std::function<void(std::size_t)>& fn) { state.compute().parallelFor(n, fn); },
@@ -77,7 +93,7 @@ closing::IngestInput ingestInput(const v1::IngestRequest& req) {
 
 void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, const TokenTable::Grant& grant,
                 const v1::IngestRequest& req, const std::string& points, const std::string& labels,
-                v1::IngestResponse* resp, MemoryBudget::Lease* held) {
+                const std::string& point_times, v1::IngestResponse* resp, MemoryBudget::Lease* held) {
   const auto t_start = Clock::now();
   const auto& key = req.key();
   wire::checkName("key.map", key.map());
@@ -89,10 +105,12 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   auto& store = state.store();
   MemoryBudget::Lease own;
   if (!held)
-    own = state.memory().acquire((points.size() + labels.size()) * kScanCostFactor, ctx->deadline(),
-                                 [ctx] { return ctx->IsCancelled(); });
-  const auto scan = wire::decodeScan(points, labels, state.limits().max_points);
+    own = state.memory().acquire((points.size() + labels.size() + point_times.size()) * kScanCostFactor,
+                                 ctx->deadline(), [ctx] { return ctx->IsCancelled(); });
+  auto scan = wire::decodeScan(points, labels, state.limits().max_points);
+  const auto sweep = wire::decodeSweep(point_times, req.scan().twist(), scan.points.size());
   checkAlive(ctx);
+  reportSweep(closing::undoSweep(sweep, scan, &store, &input), key.map(), key.robot(), key.seq(), resp);
 
   auto* graph = state.graph();
   closing::Ingestor::LoopsRecorded recorded;
@@ -133,7 +151,7 @@ grpc::Status LoopClosureService::Ingest(grpc::ServerContext* ctx, const v1::Inge
                                         v1::IngestResponse* resp) {
   return run(ctx, {"Ingest", req->key().map(), req->key().robot()}, [&](CallLog&) {
     const auto grant = state_.tokens().authenticate(*ctx);
-    ingestScan(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), resp);
+    ingestScan(state_, ctx, grant, *req, req->scan().points(), req->scan().labels(), req->scan().point_times(), resp);
   });
 }
 
@@ -154,7 +172,9 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     std::shared_ptr<const Fingerprint> fp;
     auto slot = state_.compute().acquire(ctx);
     if (req->has_scan()) {
-      const auto scan = wire::decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
+      auto scan = wire::decodeScan(req->scan().points(), req->scan().labels(), state_.limits().max_points);
+      const auto sweep = wire::decodeSweep(req->scan().point_times(), req->scan().twist(), scan.points.size());
+      reportSweep(closing::undoSweep(sweep, scan), req->map(), req->robot(), req->seq(), resp);
       const auto t0 = Clock::now();
       ScanReport report;
       fp = std::make_shared<const Fingerprint>(state_.pipeline().fingerprint(scan, &report));

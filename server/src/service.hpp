@@ -150,7 +150,7 @@ class PoseGraphService final : public PoseGraphBase {
 // reservation of scan memory (chunked uploads reserve as chunks arrive); without one the call reserves its own.
 void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, const TokenTable::Grant& grant,
                 const v1::IngestRequest& req, const std::string& points, const std::string& labels,
-                v1::IngestResponse* resp, MemoryBudget::Lease* held = nullptr);
+                const std::string& point_times, v1::IngestResponse* resp, MemoryBudget::Lease* held = nullptr);
 // Checks the map name and the caller's access, and that the map exists (NOT_FOUND); returns the map.
 storage::MapInfo requireMap(const ServiceState& state, const grpc::ServerContextBase* ctx, const std::string& map);
 // A robot or session name given as a filter: empty, or a valid name (INVALID_ARGUMENT otherwise, before it is

@@ -192,7 +192,8 @@ class IngestStreamReactor final : public StreamReactor<grpc::ServerBidiReactor<B
       in_.Clear();
       log_.map = req.key().map();
       log_.robot = req.key().robot();
-      ingestScan(state_, ctx_, grant_, req, req.scan().points(), req.scan().labels(), &resp, &lease);
+      ingestScan(state_, ctx_, grant_, req, req.scan().points(), req.scan().labels(), req.scan().point_times(), &resp,
+                 &lease);
     } catch (...) {
       complete(std::current_exception());
       return;
@@ -265,7 +266,8 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
   }
 
  private:
-  std::size_t maxBytes() const { return state_.limits().max_points * 16 + 16; }
+  // A whole scan of the most points allowed: 12 bytes of point, 4 of label, 4 of time each (and slack).
+  std::size_t maxBytes() const { return state_.limits().max_points * 20 + 16; }
 
   // Marks work in flight; false when the stream is ending (Finish was called).
   bool begin() {
@@ -281,7 +283,7 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
     auto chunk = parseMessage<v1::IngestChunk>(
         in_, "chunk " + std::to_string(log_.messages) + " of the stream (nothing of the scan was stored)");
     in_.Clear();
-    const std::size_t before = points_.size() + labels_.size();
+    const std::size_t before = payloadBytes();
     if (log_.messages == 1) {
       if (!chunk.has_header())
         throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "the first chunk must carry the header");
@@ -291,22 +293,24 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
       TokenTable::require(grant_, header_.key().map());
       points_ = std::move(*header_.mutable_scan()->mutable_points());
       labels_ = std::move(*header_.mutable_scan()->mutable_labels());
+      times_ = std::move(*header_.mutable_scan()->mutable_point_times());
     } else if (chunk.has_header()) {
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "only the first chunk may carry a header");
     }
     points_ += chunk.points();
     labels_ += chunk.labels();
-    if (points_.size() + labels_.size() > maxBytes())
+    times_ += chunk.point_times();
+    if (payloadBytes() > maxBytes())
       throw RpcError(grpc::StatusCode::RESOURCE_EXHAUSTED, "chunked scan exceeds the server's point limit (" +
                                                                std::to_string(state_.limits().max_points) + ")");
-    return points_.size() + labels_.size() > before || log_.messages == 1;
+    return payloadBytes() > before || log_.messages == 1;
   }
 
   void process() {
     v1::IngestResponse resp;
     try {
-      state_.memory().shrink(lease_, (points_.size() + labels_.size()) * kScanCostFactor);
-      ingestScan(state_, ctx_, grant_, header_, points_, labels_, &resp, &lease_);
+      state_.memory().shrink(lease_, payloadBytes() * kScanCostFactor);
+      ingestScan(state_, ctx_, grant_, header_, points_, labels_, times_, &resp, &lease_);
     } catch (...) {
       complete(std::current_exception());
       return;
@@ -318,7 +322,9 @@ class IngestChunkedReactor final : public StreamReactor<grpc::ServerReadReactor<
   Bytes* response_;
   Bytes in_;
   v1::IngestRequest header_;
-  std::string points_, labels_;
+  std::size_t payloadBytes() const { return points_.size() + labels_.size() + times_.size(); }
+
+  std::string points_, labels_, times_;
   MemoryBudget::Lease lease_;
 };
 
