@@ -8,6 +8,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <array>
 #include <cstdint>
 #include <cstring>
 #include <memory>
@@ -17,6 +18,7 @@
 
 #include "sglc/bag_drive.hpp"
 #include "sglc/config/engine_file.hpp"
+#include "sglc/deskew.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/scan_file.hpp"
 #include "sglc/version.hpp"
@@ -241,6 +243,39 @@ PYBIND11_MODULE(_engine, m) {
         return py::make_tuple(pointArray(scan.points), vectorArray(scan.labels, true));
       },
       py::arg("path"), py::arg("labels") = std::string(), py::arg("label_field") = std::string("label"));
+
+  m.def(
+      "deskew",
+      [](const PointArray& points, const py::array_t<float, py::array::c_style>& times,
+         const std::array<double, 3>& linear, const std::array<double, 3>& angular) {
+        auto scan = toScan(points, std::nullopt);
+        if (times.ndim() != 1) throw sglc::InputError("point_times must have shape (N,)");
+        std::vector<float> t(times.data(), times.data() + times.shape(0));
+        const sglc::Twist twist{Eigen::Vector3d(linear[0], linear[1], linear[2]),
+                                Eigen::Vector3d(angular[0], angular[1], angular[2])};
+        {
+          py::gil_scoped_release release;
+          sglc::deskew(scan.points, t, twist);
+        }
+        return pointArray(scan.points);
+      },
+      py::arg("points"), py::arg("point_times"), py::arg("linear"), py::arg("angular"));
+  m.def(
+      "twist_between",
+      [](const py::array_t<double, py::array::c_style>& from, const py::array_t<double, py::array::c_style>& to,
+         double dt) {
+        const auto pose = [](const py::array_t<double, py::array::c_style>& a, const char* name) {
+          if (a.ndim() != 2 || a.shape(0) != 4 || a.shape(1) != 4)
+            throw sglc::InputError(std::string(name) + " must be a 4x4 pose");
+          sglc::Mat4d M;
+          for (int k = 0; k < 16; ++k) M(k / 4, k % 4) = a.data()[k];
+          return M;
+        };
+        const auto t = sglc::twistBetween(pose(from, "pose_from"), pose(to, "pose_to"), dt);
+        return py::make_tuple(std::array<double, 3>{t.linear.x(), t.linear.y(), t.linear.z()},
+                              std::array<double, 3>{t.angular.x(), t.angular.y(), t.angular.z()});
+      },
+      py::arg("pose_from"), py::arg("pose_to"), py::arg("dt"));
 
   py::class_<PyBag>(m, "Bag")
       .def(py::init<const std::string&, const std::string&, const std::string&, const std::string&, double, double,

@@ -13,7 +13,7 @@
 """
 from ._stubs import pb2
 from .client import DEFAULT_CHUNK_BYTES, SCOPES, Client
-from .engine import Engine
+from .engine import Engine, deskew, twist_between
 from .errors import (AbortedError, AlreadyExistsError, CancelledError, DataLossError, DeadlineExceededError,
                      FailedPreconditionError, InternalError, InvalidArgumentError, NotFoundError, OutOfRangeError,
                      PermissionDeniedError, ResourceExhaustedError, SglcError, UnauthenticatedError,
@@ -36,6 +36,6 @@ __all__ = [
     "Backup", "Evidence", "GraphNode", "IngestResult", "Loop", "LoopEdge", "LoopEnd", "MapEvent", "MapInfo",
     "MatchResult", "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats",
     "Timing", "information", "matrix", "pack_scan", "read_kitti_scan", "unpack_points", "unpack_labels",
-    "Bag", "BagScan", "read_bag", "read_scan",
+    "Bag", "BagScan", "read_bag", "read_scan", "deskew", "twist_between",
     "__version__",
 ]

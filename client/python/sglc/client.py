@@ -21,6 +21,21 @@ SCOPES = {"all": pb2.SCOPE_WHOLE_MAP, "same": pb2.SCOPE_SAME_ROBOT, "other": pb2
 _HEALTH_CHECK = "/grpc.health.v1.Health/Check"
 
 
+def _scan(points, labels=None, point_times=None, twist=None):
+    """A sglc.v1.Scan: points, labels, and the per-point times and twist for de-skew."""
+    p, lab = packing.pack_scan(points, labels)
+    scan = pb2.Scan(points=p, labels=lab)
+    if point_times is not None:
+        scan.point_times = packing.pack_point_times(point_times, len(p) // packing.POINT_BYTES)
+    if twist is not None:
+        if point_times is None:
+            raise ValueError("a twist needs point_times: it moves each point by its time")
+        linear, angular = packing.twist_values(twist)
+        scan.twist.linear.extend(linear)
+        scan.twist.angular.extend(angular)
+    return scan
+
+
 def _retry_service_config(max_attempts: int) -> str:
     """gRPC's retry policy for every service of ours (and health checks): UNAVAILABLE only."""
     # Not the deletes or Backup: a delete whose answer was lost would be repeated, a backup would dump again.
@@ -132,13 +147,15 @@ class Client(AdminCalls, PoseGraphCalls):
 
     def ingest_request(self, map: str, robot: str, session: str, seq: int, points, labels=None,
                        stamp: Optional[float] = None, odometry_pose=None, store_raw: bool = False, query: bool = False,
-                       query_options=None, **query_kwargs):
+                       query_options=None, point_times=None, twist=None, **query_kwargs):
         """An IngestRequest. points: (N, 3+) array or packed bytes; labels: (N,) integer array, packed bytes, or
         None (the server labels the scan, its labeller mode permitting). odometry_pose: 4x4 array-like.
-        query_options: a QueryOptions message, or keyword arguments of query_options()."""
-        p, lab = packing.pack_scan(points, labels)
+        query_options: a QueryOptions message, or keyword arguments of query_options().
+        point_times: (N,) seconds after the stamp at which each point was measured, for the server to de-skew the
+        scan; twist: the sensor's (linear, angular) velocity over the sweep, else the server takes the constant
+        velocity from the session's previous scan (both need stamp and odometry_pose)."""
         r = pb2.IngestRequest(key=pb2.ScanKey(map=map, robot=robot, session=session, seq=integer("seq", seq)),
-                              scan=pb2.Scan(points=p, labels=lab), store_raw=store_raw, query=query)
+                              scan=_scan(points, labels, point_times, twist), store_raw=store_raw, query=query)
         if stamp is not None:
             r.stamp = float(stamp)
         if odometry_pose is not None:
@@ -150,16 +167,19 @@ class Client(AdminCalls, PoseGraphCalls):
         return r
 
     def _chunks(self, request):
-        points, labels = request.scan.points, request.scan.labels
+        points, labels, times = request.scan.points, request.scan.labels, request.scan.point_times
         header = pb2.IngestRequest()
         header.CopyFrom(request)
-        header.scan.Clear()
+        header.scan.ClearField("points")
+        header.scan.ClearField("labels")
+        header.scan.ClearField("point_times")
         yield pb2.IngestChunk(header=header)
-        per = max(1, self.chunk_bytes // (packing.POINT_BYTES + packing.LABEL_BYTES))
+        per = max(1, self.chunk_bytes // (packing.POINT_BYTES + packing.LABEL_BYTES + (packing.TIME_BYTES if times else 0)))
         n = len(points) // packing.POINT_BYTES
         for begin in range(0, n, per):
             end = min(n, begin + per)
-            yield pb2.IngestChunk(points=points[begin * 12:end * 12], labels=labels[begin * 4:end * 4] if labels else b"")
+            yield pb2.IngestChunk(points=points[begin * 12:end * 12], labels=labels[begin * 4:end * 4] if labels else b"",
+                                  point_times=times[begin * 4:end * 4] if times else b"")
 
     # ------------------------------------------------------------------------------------------------
     # LoopClosure
@@ -173,7 +193,7 @@ class Client(AdminCalls, PoseGraphCalls):
 
     def ingest_message(self, request, timeout: Optional[float] = None) -> IngestResult:
         """Sends a prepared IngestRequest (chunked when large)."""
-        if len(request.scan.points) + len(request.scan.labels) > self.chunk_bytes:
+        if packing.packed_size(request.scan) > self.chunk_bytes:
             return self.ingest_chunked(request, timeout)
         return IngestResult.from_proto(self._call(self._loop.Ingest, "LoopClosure.Ingest", request, timeout))
 
@@ -211,19 +231,19 @@ class Client(AdminCalls, PoseGraphCalls):
 
     def query(self, map: str, scan_id: Optional[int] = None, points=None, labels=None, robot: str = "",
               session: str = "", seq: int = 0, stamp: Optional[float] = None, options=None,
-              timeout: Optional[float] = None, **option_kwargs) -> QueryResult:
+              timeout: Optional[float] = None, point_times=None, twist=None, **option_kwargs) -> QueryResult:
         """Queries with a stored scan (scan_id) or with a scan that is not stored (points, labels optional:
-        relocalization). options: a QueryOptions message, or keyword arguments of query_options()."""
+        relocalization; point_times with a twist de-skew it). options: a QueryOptions message, or keyword
+        arguments of query_options()."""
         if (scan_id is None) == (points is None):
             raise ValueError("give either scan_id or points (with optional labels)")
         r = pb2.QueryRequest(map=map, robot=robot, session=session, seq=integer("seq", seq))
         if scan_id is not None:
-            if labels is not None:
-                raise ValueError("labels go with points, not with scan_id")
+            if labels is not None or point_times is not None or twist is not None:
+                raise ValueError("labels, point_times and twist go with points, not with scan_id")
             r.scan_id = integer("scan_id", scan_id)
         else:
-            p, lab = packing.pack_scan(points, labels)
-            r.scan.points, r.scan.labels = p, lab
+            r.scan.CopyFrom(_scan(points, labels, point_times, twist))
         if stamp is not None:
             r.stamp = float(stamp)
         r.options.CopyFrom(options if options is not None else self.query_options(**option_kwargs))

@@ -1,6 +1,7 @@
 """Scans and transforms in the sglc.v1 wire format.
 
 Scan.points: float32 little-endian x, y, z per point (12 bytes). Scan.labels: uint32 little-endian per point.
+Scan.point_times: float32 little-endian per point (s after the stamp), for the server to de-skew the scan.
 Transform.m: 16 doubles, row-major 4x4.
 
 Points: any (N, 3+) numeric array (KITTI's (N, 4) x, y, z, reflectance included: columns past the third are
@@ -10,7 +11,7 @@ Malformed input raises ValueError saying what is wrong.
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence, Tuple, Union
+from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -87,6 +88,41 @@ def pack_scan(points: ArrayOrBytes, labels: Optional[ArrayOrBytes] = None) -> Tu
     if len(p) // POINT_BYTES != len(lab) // LABEL_BYTES:
         raise ValueError(f"scan has {len(p) // POINT_BYTES} points but {len(lab) // LABEL_BYTES} labels")
     return p, lab
+
+
+TIME_BYTES = 4  # float32 per point
+
+
+def pack_point_times(times: ArrayOrBytes, count: int) -> bytes:
+    """Per-point times (s after the stamp; (N,) array or packed float32 bytes) -> float32 little-endian bytes,
+    checked to be one per point, finite and within 1 s of the stamp."""
+    if _is_bytes(times):
+        data = bytes(times)
+        if len(data) % TIME_BYTES:
+            raise ValueError(f"point_times: {len(data)} bytes is not a multiple of 4 (float32 per point)")
+        t = np.frombuffer(data, dtype="<f4")
+    else:
+        t = np.asarray(times, dtype=np.float64).reshape(-1)
+    if len(t) != count:
+        raise ValueError(f"scan has {count} points but {len(t)} point times")
+    if len(t) and not (np.all(np.isfinite(t)) and np.max(np.abs(t)) <= 1.0):
+        bad = int(np.flatnonzero(~np.isfinite(t) | (np.abs(np.nan_to_num(t, nan=2.0)) > 1.0))[0])
+        raise ValueError(f"point_times[{bad}] is {t[bad]} s, not within 1 s of the stamp")
+    return t.astype("<f4").tobytes()
+
+
+def twist_values(twist) -> Tuple[List[float], List[float]]:
+    """(linear, angular) from a twist given as a pair of 3-vectors (m/s; rad/s, axis times rate, in the sensor's
+    frame at the stamp) or a 6-vector (linear first)."""
+    v = np.asarray(twist, dtype=np.float64).reshape(-1)
+    if v.shape != (6,) or not np.all(np.isfinite(v)):
+        raise ValueError("twist: expected 6 finite values (linear m/s, then angular rad/s)")
+    return [float(x) for x in v[:3]], [float(x) for x in v[3:]]
+
+
+def packed_size(scan) -> int:
+    """Bytes of a sglc.v1.Scan's payload (points, labels and point times), as the chunking limit counts them."""
+    return len(scan.points) + len(scan.labels) + len(scan.point_times)
 
 
 def unpack_points(data: bytes) -> np.ndarray:

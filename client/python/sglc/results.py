@@ -124,11 +124,12 @@ class IngestResult:
     loops: List[Loop]
     warnings: List[str]
     timing: Timing
+    deskewed: bool = False  # the scan's points were moved by their point_times
 
     @classmethod
     def from_proto(cls, m) -> "IngestResult":
         return cls(m.scan_id, m.seq, m.already_stored, LABEL_SOURCES.get(m.label_source, "unspecified"),
-                   [Loop.from_proto(c) for c in m.loops], list(m.warnings), Timing.from_proto(m.timing))
+                   [Loop.from_proto(c) for c in m.loops], list(m.warnings), Timing.from_proto(m.timing), m.deskewed)
 
 
 @dataclass
@@ -137,11 +138,12 @@ class QueryResult:
     label_source: str
     warnings: List[str]
     timing: Timing
+    deskewed: bool = False  # the query scan was de-skewed by its point_times and twist
 
     @classmethod
     def from_proto(cls, m) -> "QueryResult":
         return cls([Loop.from_proto(c) for c in m.candidates], LABEL_SOURCES.get(m.label_source, "unspecified"),
-                   list(m.warnings), Timing.from_proto(m.timing))
+                   list(m.warnings), Timing.from_proto(m.timing), m.deskewed)
 
 
 @dataclass

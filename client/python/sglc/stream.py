@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Optional
 
 import grpc
 
+from . import packing
 from .errors import InternalError, SglcError
 from .results import IngestResult
 
@@ -29,11 +30,13 @@ class ScanInput:
     store_raw: bool = False
     query: bool = False
     query_options: Optional[Dict[str, Any]] = None  # keyword arguments of Client.query_options()
+    point_times: Any = None  # (N,) s after the stamp, for the server to de-skew the scan
+    twist: Any = None        # (linear, angular) over the sweep; else the server's constant velocity
 
     def as_kwargs(self) -> Dict[str, Any]:
         kw = dict(map=self.map, robot=self.robot, session=self.session, seq=self.seq, points=self.points,
                   labels=self.labels, stamp=self.stamp, odometry_pose=self.odometry_pose, store_raw=self.store_raw,
-                  query=self.query)
+                  query=self.query, point_times=self.point_times, twist=self.twist)
         kw.update(self.query_options or {})
         return kw
 
@@ -106,7 +109,7 @@ class IngestSession:
         if self._closed or self._ended:
             raise RuntimeError("IngestSession: send() after finish() or end_requests()")
         request = args[0] if len(args) == 1 and not kwargs else self._client.ingest_request(*args, **kwargs)
-        if len(request.scan.points) + len(request.scan.labels) > self._client.chunk_bytes:
+        if packing.packed_size(request.scan) > self._client.chunk_bytes:
             for i, r in enumerate(self._outstanding):  # everything sent before is processed first
                 if r is None:
                     self._outstanding[i] = self._read()
