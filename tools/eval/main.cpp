@@ -53,6 +53,7 @@ struct Options {
   std::string protocol, data, map_data, poses, calib, frames, pairs, pose_pairs, server, token, out, config_path,
       gt_list, title;
   bool sim = false, no_plots = false, gt_from_file = false, no_labels = false, keep_maps = false, no_deskew = false;
+  std::string deskew_motion = "next";
   int beams = 64;
   std::uint64_t seed = 7;
   double label_noise = 0, positive_m = 3.0, negative_m = 20.0;
@@ -91,6 +92,16 @@ void addSourceOptions(CLI::App& app, Options& o) {
   app.add_option("--keyframe-deg", o.bag.keyframe_deg, "... or degrees of turn")->capture_default_str();
   app.add_flag("--no-deskew", o.no_deskew,
                "read scans with point_times/ as they are (default: de-skewed with the motion to the next frame)");
+  app.add_option("--deskew-motion", o.deskew_motion,
+                 "the motion scans with point_times/ are de-skewed with: next (the next frame's pose) or keyframe "
+                 "(as the server does: constant velocity from the previous selected frame)")
+      ->check(CLI::IsMember({"next", "keyframe"}))
+      ->capture_default_str();
+}
+
+DeskewMotion deskewMotion(const Options& o) {
+  if (o.no_deskew) return DeskewMotion::kOff;
+  return o.deskew_motion == "keyframe" ? DeskewMotion::kPreviousKeyframe : DeskewMotion::kNextFrame;
 }
 
 void addProtocolOptions(CLI::App& app, Options& o) {
@@ -157,7 +168,7 @@ void validate(const Options& o) {
 
 std::unique_ptr<FrameSource> makeSource(const Options& o) {
   auto source = o.sim ? simulatedSource({o.poses, o.calib, o.frames, o.seed, o.label_noise, o.beams})
-                      : directorySource(o.data, o.frames, !o.no_deskew, o.bag);
+                      : directorySource(o.data, o.frames, deskewMotion(o), o.bag);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }
@@ -165,7 +176,7 @@ std::unique_ptr<FrameSource> makeSource(const Options& o) {
 // The relocalization protocol's map drive (every frame), or none.
 std::unique_ptr<FrameSource> makeMapSource(const Options& o) {
   if (o.map_data.empty()) return nullptr;
-  auto source = directorySource(o.map_data, "", !o.no_deskew, o.bag);
+  auto source = directorySource(o.map_data, "", deskewMotion(o), o.bag);
   if (o.no_labels) source = withoutLabels(std::move(source));
   return source;
 }

@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "sglc/bag_drive.hpp"
+#include "sglc/closing/sweep_undo.hpp"
 #include "sglc/deskew.hpp"
 #include "sglc/frame_selection.hpp"
 #include "sglc/io.hpp"
@@ -55,7 +56,7 @@ class SimSource final : public FrameSource {
 
 class DirSource final : public FrameSource {
  public:
-  DirSource(const std::string& dir, const std::string& spec, bool deskew) : dir_(dir), deskew_(deskew) {
+  DirSource(const std::string& dir, const std::string& spec, DeskewMotion deskew) : dir_(dir), deskew_(deskew) {
     // Every frame's files and pose (pair files may name frames outside the selection), the selected ones in order.
     // KITTI camera poses come as LiDAR poses (calib.txt's Tr; sglc/sequence.hpp).
     const auto seq = openSequence(dir);
@@ -77,19 +78,27 @@ class DirSource final : public FrameSource {
     const auto it = files_.find(f);
     if (it == files_.end()) throw InputError(dir_ + ": no frame " + std::to_string(f));
     LabelledScan s = readScan(it->second.scan, it->second.labels);
-    if (deskew_ && !it->second.times.empty())
-      deskew(s.points, readPointTimes(it->second.times, s.points.size()), twist(f));
+    if (deskew_ == DeskewMotion::kOff || it->second.times.empty()) return s;
+    if (const auto motion = twist(f)) deskew(s.points, readPointTimes(it->second.times, s.points.size()), *motion);
     return s;
   }
   std::string describe() const override { return "sequence directory " + dir_; }
 
  private:
-  // The sweep's motion from the poses and stamps of the frames around f (sglc/deskew.hpp sweepTwist).
-  Twist twist(int f) const {
+  // The sweep's motion from the poses and stamps of the frames around f (sglc/deskew.hpp sweepTwist); none for
+  // the server's model where the server would have none.
+  std::optional<Twist> twist(int f) const {
     const auto it = std::find_if(timed_.begin(), timed_.end(), [&](const auto& t) { return t.first == f; });
     if (it == timed_.end())
       throw InputError(dir_ + ": frame " + std::to_string(f) +
                        " has point times but no pose and stamp to de-skew with");
+    if (deskew_ == DeskewMotion::kPreviousKeyframe) {
+      const auto sel = std::lower_bound(frames_.begin(), frames_.end(), f);
+      if (sel == frames_.begin()) return std::nullopt;
+      const auto prev = std::find_if(timed_.begin(), it, [&](const auto& t) { return t.first == *(sel - 1); });
+      if (prev == it || it->second.stamp - prev->second.stamp > closing::kMaxSweepGap) return std::nullopt;
+      return sweepTwist(&prev->second, it->second, nullptr);
+    }
     const TimedPose* prev = it == timed_.begin() ? nullptr : &(it - 1)->second;
     const TimedPose* next = it + 1 == timed_.end() ? nullptr : &(it + 1)->second;
     return sweepTwist(prev, it->second, next);
@@ -98,7 +107,7 @@ class DirSource final : public FrameSource {
     std::string scan, labels, times;
   };
   std::string dir_;
-  bool deskew_;
+  DeskewMotion deskew_;
   std::vector<int> frames_;
   std::map<int, Files> files_;
   std::map<int, Mat4d> poses_;
@@ -176,11 +185,11 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options) {
   return std::make_unique<SimSource>(options);
 }
 
-std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew,
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, DeskewMotion deskew,
                                              const BagDriveOptions& bag) {
   if (isBag(dir)) {
     BagDriveOptions o = bag;
-    o.deskew = deskew;
+    o.deskew = deskew != DeskewMotion::kOff;
     return std::make_unique<BagSource>(dir, o, frames);
   }
   return std::make_unique<DirSource>(dir, frames, deskew);

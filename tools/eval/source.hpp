@@ -38,11 +38,18 @@ std::unique_ptr<FrameSource> simulatedSource(const SimSourceOptions& options);
 
 // dir: a sequence directory (velodyne/, labels/, optional poses.txt + calib.txt). poses.txt holds camera poses
 // (KITTI convention); with calib.txt they become LiDAR poses. `frames` selects by frame number.
-// deskew: scans with point_times/ files are de-skewed with the motion between their pose and the next frame's
-// (sglc/deskew.hpp); off, they are read as they are. `dir` may be a bag (sglc::isBag): its clouds, numbered by
-// their index on the topic, with `bag`'s options.
+// deskew: how scans with point_times/ files are de-skewed (sglc/deskew.hpp). `dir` may be a bag (sglc::isBag):
+// its clouds, numbered by their index on the topic, with `bag`'s options (de-skewed by the bag drive's own
+// motion unless kOff).
 // A bag needs its PointCloud2 topic and the poses (Odometry topic or tf frame) the protocols compare with.
-std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames, bool deskew = true,
+enum class DeskewMotion {
+  kOff,               // read as they are
+  kNextFrame,         // the motion from the frame's pose to the next frame's, as a recorded drive has it
+  kPreviousKeyframe,  // as the server does it: the constant velocity from the previous selected frame (its
+                      // previous stored scan), at most closing::kMaxSweepGap before; the first is left as it is
+};
+std::unique_ptr<FrameSource> directorySource(const std::string& dir, const std::string& frames,
+                                             DeskewMotion deskew = DeskewMotion::kNextFrame,
                                              const BagDriveOptions& bag = {});
 
 // The same frames with their labels removed (points only), to measure the label-free path: the engine's
