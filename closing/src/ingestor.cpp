@@ -80,7 +80,7 @@ Ingested Ingestor::commit(PendingScan p, const LabelledScan& scan) const {
     out.already_stored = true;
   }
   out.timing.store_ms = msSince(t0);
-  if (loops_recorded_ && in.odometry_pose) recordLoops(out, in);
+  if (loops_recorded_) recordLoops(out, in);
   return std::move(out);
 }
 

@@ -60,8 +60,9 @@ class Ingestor {
   // Told the map after verified loops were recorded for it.
   using LoopsRecorded = std::function<void(const std::string& map)>;
 
-  // Both must outlive the ingestor. Verified loops of scans with an odometry pose are recorded (MapStore::
-  // addLoop) only when `loops_recorded` is given: without a pose graph nobody reads them.
+  // Both must outlive the ingestor. Verified loops are recorded (MapStore::addLoop) only when `loops_recorded`
+  // is given (a server with a pose graph): every one, also of scans without an odometry pose, which the pose
+  // graph leaves out but listings and exports show.
   Ingestor(const Pipeline& pipeline, storage::MapStore& store, LoopsRecorded loops_recorded = {})
       : pipeline_(pipeline), store_(store), finder_(pipeline, store), loops_recorded_(std::move(loops_recorded)) {}
 
