@@ -18,20 +18,10 @@
 namespace sglc::posegraph {
 namespace {
 
-constexpr double kRadPerDeg = std::numbers::pi / 180.0;
 constexpr double kWideLoss = 10.0;  // loss scale of the first solve, in nominal loss scales
 // Whitened squared error of a discounted loop: the 99.9 % point of a chi-square with six degrees of freedom,
 // in loss scales (the Cauchy weight there is below 0.05).
 constexpr double kRejectChi2 = 22.46;
-
-// Why a stored loop cannot be an edge, or nullopt.
-std::optional<std::string> loopError(const storage::LoopRecord& l) {
-  if (l.query_scan == l.candidate_scan) return std::string("joins a scan to itself");
-  if (const auto error = rigidMotionError(l.T)) return "transform " + *error;
-  if (l.information && !l.information->allFinite()) return std::string("information is not finite");
-  if (!std::isfinite(l.rmse)) return std::string("rmse is not finite");
-  return std::nullopt;
-}
 
 // The solver's parameters of a pose.
 std::array<double, 7> parameters(const Pose& pose) {
@@ -41,13 +31,19 @@ std::array<double, 7> parameters(const Pose& pose) {
 // The loop's edge: the registration's information plus a floor covariance, or (loops recorded without one) a
 // sigma from the refinement's residual.
 RelativePoseError loopEdge(const MapGraph::Loop& l, const GraphOptimiserOptions& options) {
-  const double floor_r = options.loop_sigma_deg * kRadPerDeg;
-  if (l.information) return relativePoseError(l.T, loopSqrtInformation(*l.information, options.loop_sigma_m, floor_r));
-  const double st = std::max(options.loop_sigma_m, l.rmse);
-  return relativePoseError(l.T, diagonalSqrtInformation(st, floor_r * st / options.loop_sigma_m));
+  return relativePoseError(
+      l.T, loopEdgeSqrtInformation(l.information, l.rmse, options.loop_sigma_m, options.loop_sigma_deg));
 }
 
 }  // namespace
+
+std::optional<std::string> loopError(const storage::LoopRecord& l) {
+  if (l.query_scan == l.candidate_scan) return std::string("joins a scan to itself");
+  if (const auto error = rigidMotionError(l.T)) return "transform " + *error;
+  if (l.information && !l.information->allFinite()) return std::string("information is not finite");
+  if (!std::isfinite(l.rmse)) return std::string("rmse is not finite");
+  return std::nullopt;
+}
 
 Pose Pose::of(const Mat4d& T) {
   Pose p;
@@ -250,11 +246,9 @@ void MapGraph::buildProblem(GraphProblem& p, const GraphOptimiserOptions& option
   // Odometry: trusted (no robust loss), sigmas growing with the distance driven.
   for (const auto& [a, b] : odometry) {
     const Mat4d step = nodes_[a].odometry.inverse() * nodes_[b].odometry;
-    const double d = step.block<3, 1>(0, 3).norm();
-    const auto edge = relativePoseError(
-        step,
-        diagonalSqrtInformation(options.odometry_sigma_m + options.odometry_sigma_per_m * d,
-                                (options.odometry_sigma_deg + options.odometry_sigma_deg_per_m * d) * kRadPerDeg));
+    const auto edge =
+        relativePoseError(step, odometrySqrtInformation(step, options.odometry_sigma_m, options.odometry_sigma_per_m,
+                                                        options.odometry_sigma_deg, options.odometry_sigma_deg_per_m));
     p.addEdge(slot[a], slot[b], edge, nullptr);
     if (isFree(a) != isFree(b)) p.boundary_edges.push_back({slot[a], slot[b], edge});
   }

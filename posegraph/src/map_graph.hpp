@@ -21,6 +21,9 @@ namespace sglc::posegraph {
 
 struct GraphProblem;
 
+// Why a stored loop cannot be an edge (joins a scan to itself, damaged values), or nullopt.
+std::optional<std::string> loopError(const storage::LoopRecord& l);
+
 // A pose as a unit quaternion and a translation (what the solver optimises).
 struct Pose {
   Eigen::Quaterniond q = Eigen::Quaterniond::Identity();

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <algorithm>
+#include <optional>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -67,6 +68,25 @@ inline Mat6d loopSqrtInformation(const Mat6d& information, double floor_t, doubl
   cov.diagonal().tail<3>().array() += floor_r * floor_r;
   const Mat6d info = cov.inverse();
   return Eigen::LLT<Mat6d>(0.5 * (info + info.transpose())).matrixU();
+}
+
+inline constexpr double kRadPerDeg = 3.14159265358979323846 / 180.0;
+
+// An odometry step's edge weight: per-axis sigmas growing with the distance driven (GraphOptimiserOptions).
+inline Mat6d odometrySqrtInformation(const Mat4d& step, double sigma_m, double sigma_per_m, double sigma_deg,
+                                     double sigma_deg_per_m) {
+  const double d = step.block<3, 1>(0, 3).norm();
+  return diagonalSqrtInformation(sigma_m + sigma_per_m * d, (sigma_deg + sigma_deg_per_m * d) * kRadPerDeg);
+}
+
+// A loop's edge weight: the registration's information plus a floor covariance, or (loops recorded without
+// one) a sigma from the refinement's residual, at least the floor.
+inline Mat6d loopEdgeSqrtInformation(const std::optional<Mat6d>& information, double rmse, double sigma_m,
+                                     double sigma_deg) {
+  const double floor_r = sigma_deg * kRadPerDeg;
+  if (information) return loopSqrtInformation(*information, sigma_m, floor_r);
+  const double st = std::max(sigma_m, rmse);
+  return diagonalSqrtInformation(st, floor_r * st / sigma_m);
 }
 
 // The edge as an automatically differentiated Ceres cost (owned by the problem it is added to). Compiled in a

@@ -133,6 +133,9 @@ class GraphOptimiser {
   void stop();
   bool stopping() const;
 
+  // What it was made with (edge weights, windows): exports weigh edges as its solves do.
+  const GraphOptimiserOptions& options() const { return options_; }
+
  private:
   void run();
   GraphEvent optimise(const std::string& map, Scope scope);
