@@ -3,8 +3,9 @@
 // trajectory --format kitti: 12 numbers per line (row-major 3x4), plus OUT.frames naming each line's robot,
 //   session, frame number (seq) and scan id, so a subset (--every) still lines up with the ground truth.
 // trajectory --format tum: "stamp tx ty tz qx qy qz qw" per line (evo, TUM RGB-D); needs stamps.
-// loops --format json: one object per line; csv: a header and one row per loop; g2o: VERTEX_SE3:QUAT for every
-//   scan at the end of a loop (at its optimised pose) and EDGE_SE3:QUAT per loop, information in g2o's order.
+// loops --format json: one object per line; csv: a header and one row per loop.
+// export --format g2o|json: the whole pose graph as the server weighs it (PoseGraph.ExportGraph) into a directory.
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -85,8 +86,9 @@ struct LoopsArgs {
 };
 
 int runLoops(const Common& common, const LoopsArgs& a) {
-  if (a.format != "json" && a.format != "csv" && a.format != "g2o")
-    throw UsageError("--format must be json, csv or g2o");
+  if (a.format == "g2o")
+    throw UsageError("g2o is the whole pose graph now: sglc export --map " + a.map + " --format g2o --out DIR");
+  if (a.format != "json" && a.format != "csv") throw UsageError("--format must be json or csv");
   const sc::Client client = connectClient(common);
   const auto loops = client.getLoops(a.map, a.robot);
   std::ofstream file;
@@ -94,22 +96,56 @@ int runLoops(const Common& common, const LoopsArgs& a) {
   std::ostream& out = a.out.empty() ? std::cout : file;
   if (a.format == "json") {
     for (const auto& l : loops) out << sc::loopJson(l).dump() << "\n";
-  } else if (a.format == "csv") {
-    sc::writeLoopsCsv(loops, out);
   } else {
-    std::set<std::int64_t> ends;
-    for (const auto& l : loops) ends.insert({l.query().scan_id(), l.candidate().scan_id()});
-    std::vector<v1::ScanPose> vertices;
-    for (auto& p : client.getPoses(a.map))
-      if (ends.count(p.scan_id())) vertices.push_back(std::move(p));
-    if (const auto missing = sc::writeLoopsG2o(loops, vertices, out); missing > 0)
-      std::cerr << "sglc: warning: " << missing
-                << " loop ends have no pose (scans ingested without an odometry pose); written at the identity\n";
+    sc::writeLoopsCsv(loops, out);
   }
   if (!a.out.empty()) {
     closeOut(file, a.out);
     std::cerr << loops.size() << " loops of map " << a.map << " -> " << a.out << "\n";
   }
+  return 0;
+}
+
+struct ExportArgs {
+  std::string map, out, format = "g2o";
+  std::vector<std::string> robots;
+};
+
+// A file name the server sent: a plain name, never a path.
+void checkFileName(const std::string& name) {
+  const bool plain = !name.empty() && name.size() <= 64 &&
+                     name.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789._-") ==
+                         std::string::npos &&
+                     name[0] != '.';
+  if (!plain) throw sglc::InputError("the server sent an export file named '" + name.substr(0, 64) + "': refused");
+}
+
+int runExport(const Common& common, const ExportArgs& a) {
+  if (a.format != "g2o" && a.format != "json") throw UsageError("--format must be g2o or json");
+  const sc::Client client = connectClient(common);
+  v1::ExportGraphRequest request;
+  request.set_map(a.map);
+  request.set_format(a.format);
+  for (const auto& r : a.robots) request.add_robots(r);
+  v1::ExportSummary summary;
+  const auto files = client.exportGraph(request, &summary);
+  std::error_code ec;
+  std::filesystem::create_directories(a.out, ec);
+  if (ec) throw sglc::InputError(a.out + ": cannot create the directory: " + ec.message());
+  for (const auto& f : files) {
+    checkFileName(f.name);
+    const auto path = (std::filesystem::path(a.out) / f.name).string();
+    auto out = openOut(path);
+    out << f.data;
+    closeOut(out, path);
+  }
+  std::cerr << "map " << a.map << " (graph version " << summary.graph_version() << "): " << summary.nodes()
+            << " scans, " << summary.odometry_edges() << " odometry edges, " << summary.loop_edges() << " loops -> "
+            << a.out << "\n";
+  if (summary.loops_left_out() > 0)
+    std::cerr << "sglc: warning: " << summary.loops_left_out()
+              << " verified loops cannot join the graph (an end without odometry pose, or another robot's); listed in "
+              << (a.format == "g2o" ? "graph.left_out.csv" : "the JSON's left_out") << "\n";
   return 0;
 }
 
@@ -128,15 +164,25 @@ void addTrajectory(CLI::App& app, Common& common, Commands& out) {
   out.push_back({c, [&common, t] { return runTrajectory(common, *t); }});
 
   auto l = std::make_shared<LoopsArgs>();
-  c = app.add_subcommand("loops", "List the verified loops of a map's pose graph (json, csv or g2o)");
+  c = app.add_subcommand("loops", "List the verified loops of a map's pose graph (json or csv)");
   addCommon(c, common);
   c->add_option("--map", l->map, "Map")->required();
   c->add_option("--robot", l->robot, "Only loops with an end in this robot's scans");
-  c->add_option("--format", l->format,
-                "json (one object per line), csv, or g2o (VERTEX_SE3:QUAT at optimised poses, EDGE_SE3:QUAT per loop)")
-      ->capture_default_str();
+  c->add_option("--format", l->format, "json (one object per line) or csv")->capture_default_str();
   c->add_option("--out", l->out, "Output file (default: standard output)");
   out.push_back({c, [&common, l] { return runLoops(common, *l); }});
+
+  auto e = std::make_shared<ExportArgs>();
+  c = app.add_subcommand("export",
+                         "Write a map's whole pose graph, as the server weighs it, for another back-end (g2o or json)");
+  addCommon(c, common);
+  c->add_option("--map", e->map, "Map")->required();
+  c->add_option("--robot", e->robots, "Only these robots' scans (repeatable; default: every robot)");
+  c->add_option("--format", e->format,
+                "g2o (graph.g2o, graph.ids.csv naming each vertex, graph.left_out.csv) or json (graph.json)")
+      ->capture_default_str();
+  c->add_option("--out", e->out, "Output directory (created)")->required();
+  out.push_back({c, [&common, e] { return runExport(common, *e); }});
 }
 
 }  // namespace sglc::cli

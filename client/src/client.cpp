@@ -352,6 +352,23 @@ std::vector<v1::LoopEdge> Client::getLoops(const std::string& map, const std::st
   return out;
 }
 
+std::vector<Client::ExportedFile> Client::exportGraph(const v1::ExportGraphRequest& request, v1::ExportSummary* summary,
+                                                      const CallOptions& call) const {
+  grpc::ClientContext context;
+  core_->prepare(&context, call, false);
+  auto reader = core_->graph->ExportGraph(&context, request);
+  std::vector<ExportedFile> files;
+  v1::ExportChunk chunk;
+  while (reader->Read(&chunk)) {
+    if (chunk.has_summary() && summary) *summary = chunk.summary();
+    if (files.empty() || files.back().name != chunk.file()) files.push_back({chunk.file(), {}});
+    files.back().data += chunk.data();
+  }
+  const grpc::Status status = reader->Finish();
+  if (!status.ok()) throw RpcError("PoseGraph.ExportGraph", status);
+  return files;
+}
+
 v1::GetSessionFramesResponse Client::getSessionFrames(const std::string& map, const CallOptions& call) const {
   v1::GetSessionFramesRequest request;
   request.set_map(map);

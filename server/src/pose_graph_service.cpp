@@ -1,11 +1,14 @@
 // The PoseGraph service's handlers: optimised poses, session frames and the loops of a map's pose graph
 // (WatchMap, a stream, is in streams.cpp).
+#include <algorithm>
 #include <map>
 #include <optional>
+#include <sstream>
 
 #include "call.hpp"
 #include "rpc_error.hpp"
 #include "service.hpp"
+#include "sglc/posegraph/graph_export.hpp"
 #include "sglc/wire/geometry_codec.hpp"
 
 namespace sglc::server {
@@ -147,6 +150,56 @@ grpc::Status PoseGraphService::GetSessionFrames(grpc::ServerContext* ctx, const 
       const auto f = frames.find({s.robot, s.name});
       o->set_connected(f != frames.end() && f->second.connected);
       wire::toTransform(f != frames.end() ? f->second.T_map_session : Mat4d::Identity(), o->mutable_t_map_session());
+    }
+  });
+}
+
+grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::ExportGraphRequest* req,
+                                           grpc::ServerWriter<v1::ExportChunk>* writer) {
+  return run(ctx, {"ExportGraph", req->map(), ""}, [&](CallLog&) {
+    requireMap(state_, ctx, req->map());
+    const std::string format = req->format().empty() ? "g2o" : req->format();
+    if (format != "g2o" && format != "json")
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "format must be g2o or json, not '" + format + "'");
+    std::vector<std::string> robots(req->robots().begin(), req->robots().end());
+    auto& store = state_.store();
+    for (const auto& r : robots) {
+      checkFilterName("robots[]", r);
+      if (store.listSessions(req->map(), r).empty())
+        throw RpcError(grpc::StatusCode::NOT_FOUND, "map '" + req->map() + "' has no robot '" + r + "'");
+    }
+    const auto* graph = state_.graph();
+    if (!graph) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is stopping");
+    const auto g = posegraph::exportGraph(store, req->map(), graph->options(), robots);
+    std::vector<std::pair<std::string, std::ostringstream>> files;
+    if (format == "g2o") {
+      files.emplace_back("graph.g2o", std::ostringstream());
+      files.emplace_back("graph.ids.csv", std::ostringstream());
+      files.emplace_back("graph.left_out.csv", std::ostringstream());
+      posegraph::writeG2o(g, files[0].second, files[1].second);
+      posegraph::writeLeftOutCsv(g, files[2].second);
+    } else {
+      files.emplace_back("graph.json", std::ostringstream());
+      posegraph::writeGraphJson(g, files[0].second);
+    }
+    v1::ExportChunk chunk;
+    auto* summary = chunk.mutable_summary();
+    summary->set_nodes(static_cast<std::int64_t>(g.nodes.size()));
+    const auto loops = std::count_if(g.edges.begin(), g.edges.end(), [](const auto& e) { return e.loop_id != 0; });
+    summary->set_loop_edges(loops);
+    summary->set_odometry_edges(static_cast<std::int64_t>(g.edges.size()) - loops);
+    summary->set_loops_left_out(static_cast<std::int64_t>(g.left_out.size()));
+    summary->set_graph_version(g.graph_version);
+    constexpr std::size_t kChunk = 1 << 20;
+    for (auto& [name, stream] : files) {
+      const std::string data = stream.str();
+      for (std::size_t at = 0; at == 0 || at < data.size(); at += kChunk) {
+        chunk.set_file(name);
+        chunk.set_data(data.substr(at, kChunk));
+        if (ctx->IsCancelled() || !writer->Write(chunk))
+          throw RpcError(grpc::StatusCode::CANCELLED, "export cancelled");
+        chunk.Clear();
+      }
     }
   });
 }

@@ -140,6 +140,8 @@ class PoseGraphService final : public PoseGraphBase {
   grpc::Status GetLoops(grpc::ServerContext* ctx, const v1::GetLoopsRequest* req, v1::GetLoopsResponse* resp) override;
   grpc::ServerWriteReactor<grpc::ByteBuffer>* WatchMap(grpc::CallbackServerContext* ctx,
                                                        const grpc::ByteBuffer* req) override;
+  grpc::Status ExportGraph(grpc::ServerContext* ctx, const v1::ExportGraphRequest* req,
+                           grpc::ServerWriter<v1::ExportChunk>* writer) override;
 
  private:
   ServiceState& state_;

@@ -36,34 +36,6 @@ std::vector<std::vector<std::string>> linesOf(const std::string& text) {
   return out;
 }
 
-TEST(ExportFormats, G2oVerticesEdgesAndInformationOrder) {
-  v1::ScanPose p;
-  p.set_scan_id(7);
-  Mat4d T = Mat4d::Identity();
-  T(1, 3) = 2.5;
-  wire::toTransform(T, p.mutable_t_map_scan());
-  std::ostringstream out;
-  // Scan 9 has no pose: written at the identity and counted.
-  EXPECT_EQ(writeLoopsG2o({edge(1, 7, 9, true), edge(2, 9, 7, false)}, {p}, out), 1u);
-  const auto lines = linesOf(out.str());
-  ASSERT_EQ(lines.size(), 4u);
-  EXPECT_EQ(lines[0][0], "VERTEX_SE3:QUAT");
-  EXPECT_EQ(lines[0][1], "7");
-  EXPECT_EQ(std::stod(lines[0][3]), 2.5);
-  EXPECT_EQ(lines[1][1], "9");
-  ASSERT_EQ(lines[2].size(), 3u + 7u + 21u);
-  EXPECT_EQ(lines[2][0], "EDGE_SE3:QUAT");
-  EXPECT_EQ(lines[2][1], "7");
-  EXPECT_EQ(lines[2][2], "9");
-  // Upper triangle, row by row: (0,0) at 10, (3,3) is entry 15 (= 40 x 4 for the quaternion's half angle).
-  EXPECT_DOUBLE_EQ(std::stod(lines[2][10]), 10.0);
-  EXPECT_DOUBLE_EQ(std::stod(lines[2][10 + 15]), 160.0);
-  EXPECT_DOUBLE_EQ(std::stod(lines[2][10 + 1]), 0.0);
-  // Without information: sigma 0.1 m -> 100, 1 deg -> (180/pi)^2, times 4.
-  EXPECT_DOUBLE_EQ(std::stod(lines[3][10]), 100.0);
-  EXPECT_NEAR(std::stod(lines[3][10 + 15]), 4 * (180 / M_PI) * (180 / M_PI), 1e-3);
-}
-
 TEST(ExportFormats, CsvQuotesNamesAndKeepsFullPrecision) {
   std::ostringstream out;
   writeLoopsCsv({edge(5, 1, 2, false)}, out);

@@ -462,7 +462,7 @@ def test_config_file(tmp):
 
 
 def check_exports(s, tmp, est, n, loops):
-    """sglc trajectory --format tum and sglc loops in every format agree with the server's poses and loops."""
+    """sglc trajectory --format tum, sglc loops and sglc export agree with the server's poses and loops."""
     tum = os.path.join(tmp, "a.tum")
     subprocess.run([CLI, "trajectory", "--server", s.addr, "--map", "m", "--robot", "a", "--format", "tum",
                     "--out", tum], check=True, stdout=subprocess.DEVNULL, timeout=60)
@@ -502,18 +502,45 @@ def check_exports(s, tmp, est, n, loops):
     csv_rows = list(csv.DictReader(io.StringIO(
         subprocess.run(cli + ["csv"], check=True, capture_output=True, text=True, timeout=60).stdout)))
     assert len(csv_rows) == loops and int(csv_rows[-1]["candidate_scan"]) == edges[-1].candidate.scan_id
-    g2o = subprocess.run(cli + ["g2o"], check=True, capture_output=True, text=True, timeout=60).stdout.splitlines()
+    bad = subprocess.run(cli + ["g2o"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode != 0 and "sglc export --map m --format g2o" in bad.stderr, bad.stderr
+
+    # The whole graph as the server weighs it: every scan with odometry a vertex (frame order, named in
+    # graph.ids.csv), odometry edges within sessions, one edge per loop.
+    out = os.path.join(tmp, "export")
+    r = subprocess.run([CLI, "export", "--server", s.addr, "--map", "m", "--format", "g2o", "--out", out],
+                       check=True, capture_output=True, text=True, timeout=60)
+    assert f"{loops} loops" in r.stderr and "warning" not in r.stderr, r.stderr
+    g2o = open(os.path.join(out, "graph.g2o")).read().splitlines()
     vertices = [l.split() for l in g2o if l.startswith("VERTEX_SE3:QUAT ")]
     g2o_edges = [l.split() for l in g2o if l.startswith("EDGE_SE3:QUAT ")]
-    assert len(g2o_edges) == loops and all(len(e) == 3 + 7 + 21 for e in g2o_edges)
-    ends = {e.query.scan_id for e in edges} | {e.candidate.scan_id for e in edges}
-    assert {int(v[1]) for v in vertices} == ends and all(len(v) == 9 for v in vertices)
-    with_info = next(e for e in edges if len(e.information) == 36)
-    row = next(r for r in g2o_edges if (int(r[1]), int(r[2])) == (with_info.query.scan_id, with_info.candidate.scan_id))
-    info = np.array(with_info.information).reshape(6, 6)
-    upper = [float(v) for v in row[10:]]
-    # g2o's order is (x, y, z, qx, qy, qz): translation entries as they are, rotation ones x4 (q ~ r / 2).
-    assert np.isclose(upper[0], info[0, 0], rtol=1e-6) and np.isclose(upper[15], 4 * info[3, 3], rtol=1e-6)
+    all_poses = s.graph.GetPoses(pb.GetPosesRequest(map="m")).poses
+    sessions = {(p.robot, p.session) for p in all_poses}
+    assert len(vertices) == len(all_poses) and [int(v[1]) for v in vertices] == list(range(len(all_poses)))
+    assert len(g2o_edges) == len(all_poses) - len(sessions) + loops
+    assert all(len(e) == 3 + 7 + 21 for e in g2o_edges) and all(len(v) == 9 for v in vertices)
+    ids = list(csv.DictReader(open(os.path.join(out, "graph.ids.csv"))))
+    by_scan = {p.scan_id: p for p in all_poses}
+    assert sorted(int(row["scan_id"]) for row in ids) == sorted(by_scan)
+    for row, v in zip(ids, vertices):  # each vertex at the server's pose of the scan it names
+        T = np.array(by_scan[int(row["scan_id"])].t_map_scan.m).reshape(4, 4)
+        assert (row["robot"], int(row["seq"])) == (by_scan[int(row["scan_id"])].robot, by_scan[int(row["scan_id"])].seq)
+        assert np.allclose([float(x) for x in v[2:5]], T[:3, 3], atol=1e-6)
+    assert [r_["robot"] for r_ in ids] == sorted(r_["robot"] for r_ in ids), "robots in order"
+    assert open(os.path.join(out, "graph.left_out.csv")).read().splitlines() == [
+        "loop_id,query_scan,candidate_scan,reason"]
+    r = subprocess.run([CLI, "export", "--server", s.addr, "--map", "m", "--format", "json", "--robot", "a",
+                        "--out", out], check=True, capture_output=True, text=True, timeout=60)
+    js = json.load(open(os.path.join(out, "graph.json")))
+    assert len(js["nodes"]) == n and {x["robot"] for x in js["nodes"]} == {"a"}
+    kinds = [e["kind"] for e in js["edges"]]
+    assert kinds.count("odometry") == n - 1 and 0 < kinds.count("loop") < loops
+    assert len(js["left_out"]) == loops - kinds.count("loop"), "loops to robot b are listed, not dropped"
+    assert all("robot 'b'" in x["reason"] for x in js["left_out"])
+    expect_code(grpc.StatusCode.INVALID_ARGUMENT,
+                lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", format="xml"))), "unknown format")
+    expect_code(grpc.StatusCode.NOT_FOUND,
+                lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", robots=["ghost"]))), "unknown robot")
 
 
 def test_pose_graph(tmp):

@@ -215,6 +215,13 @@ class Client {
   // Every verified loop of the map's pose graph (all pages), or those touching `robot`, in id order.
   std::vector<v1::LoopEdge> getLoops(const std::string& map, const std::string& robot = "",
                                      const CallOptions& call = {}) const;
+  // The map's pose graph as files (PoseGraph.ExportGraph): name -> contents, in the server's order; `summary`
+  // gets the counts when given.
+  struct ExportedFile {
+    std::string name, data;
+  };
+  std::vector<ExportedFile> exportGraph(const v1::ExportGraphRequest& request, v1::ExportSummary* summary = nullptr,
+                                        const CallOptions& call = {}) const;
 
  private:
   std::shared_ptr<const detail::ClientCore> core_;
