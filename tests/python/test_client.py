@@ -1,4 +1,5 @@
 """sglc.Client against a real sglc-server, with the real loop pair KITTI 00 000052-004501."""
+import json
 import os
 import subprocess
 import sys
@@ -296,3 +297,31 @@ def test_unavailable_is_retried_up_to_max_attempts():
             sglc.Client(f"127.0.0.1:{port}", max_attempts=6)
     finally:
         server.stop(0)
+
+
+def test_export_lists_every_loop(client, kitti):
+    """Client.export: the graph of the scans with odometry; a loop of a scan sent without odometry is listed
+    (loops() too), never dropped."""
+    p52, l52 = kitti("000052")
+    p4501, l4501 = kitti("004501")
+    client.create_map("exp")
+    client.ingest("exp", "a", "run", 0, p52, l52, odometry_pose=np.eye(4))
+    b = client.ingest("exp", "b", "run", 0, p4501, l4501, odometry_pose=np.eye(4), query=True)
+    assert any(x.verified for x in b.loops)
+    c = client.ingest("exp", "c", "run", 0, p4501, l4501, query=True)  # no odometry pose: no graph node
+    verified_c = sum(x.verified for x in c.loops)
+    assert verified_c >= 1
+    assert len(client.loops("exp")) == sum(x.verified for x in b.loops) + verified_c
+    files, summary = client.export("exp")
+    assert set(files) == {"graph.g2o", "graph.ids.csv", "graph.left_out.csv"}
+    assert summary["nodes"] == 2 and summary["loop_edges"] >= 1 and summary["loops_left_out"] == verified_c
+    g2o = files["graph.g2o"].decode().splitlines()
+    assert sum(line.startswith("VERTEX_SE3:QUAT ") for line in g2o) == 2
+    left = files["graph.left_out.csv"].decode().splitlines()
+    assert len(left) == 1 + verified_c and all("no odometry pose" in row for row in left[1:])
+    js, _ = client.export("exp", format="json", robots=["a"])
+    assert [n["robot"] for n in json.loads(js["graph.json"])["nodes"]] == ["a"]
+    with pytest.raises(sglc.InvalidArgumentError, match="format"):
+        client.export("exp", format="xml")
+    with pytest.raises(sglc.NotFoundError):
+        client.export("nosuchmap")

@@ -114,3 +114,23 @@ def test_threads_give_the_same_result(kitti):
     for t in threads:
         t.join()
     assert all(np.array_equal(out[k], ref[k % 2]) for k in range(8))
+
+
+def test_fingerprints_pickle(kitti):
+    """A fingerprint saved with pickle loads as the same fingerprint (descriptor, matches); a damaged one is a
+    ValueError, not a crash."""
+    import pickle
+    engine = sglc.Engine()
+    fp = engine.fingerprint(*kitti("000052"))
+    back = pickle.loads(pickle.dumps(fp))
+    assert np.array_equal(back.descriptor, fp.descriptor)
+    assert (back.nodes, back.num_points, back.label_source, back.warnings) == \
+        (fp.nodes, fp.num_points, fp.label_source, fp.warnings)
+    assert engine.match(fp, back).score == engine.match(fp, fp).score
+    blob, source, warnings = fp.__getstate__()
+    damaged = bytearray(blob)
+    damaged[len(damaged) // 2] ^= 0xFF
+    with pytest.raises(ValueError):
+        type(fp).__new__(type(fp)).__setstate__((bytes(damaged), source, warnings))
+    with pytest.raises(ValueError):
+        type(fp).__new__(type(fp)).__setstate__((blob, 99, warnings))

@@ -13,12 +13,14 @@
 #include <cstring>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "sglc/bag_drive.hpp"
 #include "sglc/config/engine_file.hpp"
 #include "sglc/deskew.hpp"
+#include "sglc/fingerprint.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/scan_file.hpp"
 #include "sglc/version.hpp"
@@ -220,6 +222,29 @@ PYBIND11_MODULE(_engine, m) {
   py::register_exception<sglc::InputError>(m, "InputError", PyExc_ValueError);
 
   py::class_<PyFingerprint, std::shared_ptr<PyFingerprint>>(m, "Fingerprint")
+      // Pickled as the engine's own serialisation (checksummed, versioned: sglc/fingerprint.hpp) with where its
+      // labels came from and its warnings; a damaged or foreign state is a ValueError.
+      .def(py::pickle(
+          [](const PyFingerprint& f) {
+            const auto blob = sglc::serialize(f.fingerprint);
+            return py::make_tuple(py::bytes(reinterpret_cast<const char*>(blob.data()), blob.size()),
+                                  static_cast<int>(f.report.label_source), f.report.warnings);
+          },
+          [](const py::tuple& t) {
+            if (t.size() != 3) throw sglc::InputError("Fingerprint state: expected 3 items");
+            const auto blob = t[0].cast<std::string>();
+            auto f = std::make_shared<PyFingerprint>();
+            f->fingerprint = sglc::deserialize(
+                std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(blob.data()), blob.size()));
+            const int source = t[1].cast<int>();
+            using Source = sglc::ScanReport::LabelSource;
+            if (source != static_cast<int>(Source::kProvided) && source != static_cast<int>(Source::kComputed) &&
+                source != static_cast<int>(Source::kCompleted))
+              throw sglc::InputError("Fingerprint state: unknown label source " + std::to_string(source));
+            f->report.label_source = static_cast<Source>(source);
+            f->report.warnings = t[2].cast<std::vector<std::string>>();
+            return f;
+          }))
       .def_property_readonly("nodes", [](const PyFingerprint& f) { return f.fingerprint.nodes.size(); })
       .def_property_readonly("num_points", [](const PyFingerprint& f) { return f.fingerprint.num_points; })
       .def_property_readonly("label_source",

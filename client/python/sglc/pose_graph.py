@@ -1,7 +1,9 @@
 """PoseGraph calls of sglc.Client: optimised poses, session frames, loops, and a watch on new solutions."""
 from __future__ import annotations
 
-from typing import List, Optional
+import os
+import re
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import grpc
 
@@ -76,6 +78,34 @@ class PoseGraphCalls:
         """The verified loops of the map's pose graph (with at least one end in `robot`'s scans if given)."""
         request = pb2.GetLoopsRequest(map=map, robot=robot, page_size=integer("page_size", page_size))
         return [LoopEdge.from_proto(e) for e in self._pages("GetLoops", request, "loops", timeout)]
+
+    def export(self, map: str, format: str = "g2o", robots: Sequence[str] = (), out_dir=None,
+               timeout: Optional[float] = None) -> Tuple[Dict[str, bytes], Dict[str, int]]:
+        """The map's pose graph as the server weighs it (PoseGraph.ExportGraph; client/README.md "export"):
+        ({file name: contents}, summary counts). format "g2o" gives graph.g2o, graph.ids.csv and
+        graph.left_out.csv, "json" graph.json. robots: only their scans (default every robot). With out_dir the
+        files are also written there (created)."""
+        request = pb2.ExportGraphRequest(map=map, format=format, robots=list(robots))
+        files: Dict[str, bytes] = {}
+        summary: Dict[str, int] = {}
+        try:
+            for chunk in self._graph.ExportGraph(request, timeout=self.timeout if timeout is None else timeout,
+                                                 metadata=self._metadata):
+                if chunk.HasField("summary"):
+                    summary = {f.name: getattr(chunk.summary, f.name) for f in chunk.summary.DESCRIPTOR.fields}
+                files[chunk.file] = files.get(chunk.file, b"") + chunk.data
+        except grpc.RpcError as e:
+            raise SglcError.from_rpc("PoseGraph.ExportGraph", e) from None
+        for name in files:  # names from the wire: plain file names only
+            if not re.fullmatch(r"[A-Za-z0-9_-][A-Za-z0-9._-]{0,63}", name):
+                raise InternalError("PoseGraph.ExportGraph", grpc.StatusCode.INTERNAL,
+                                    f"the server sent an export file named {name[:64]!r}")
+        if out_dir is not None:
+            os.makedirs(out_dir, exist_ok=True)
+            for name, data in files.items():
+                with open(os.path.join(out_dir, name), "wb") as f:
+                    f.write(data)
+        return files, summary
 
     def watch(self, map: str, after_version: int = 0, timeout: Optional[float] = None) -> MapWatch:
         """A MapWatch yielding each new pose-graph solution above after_version. timeout: of the whole stream
