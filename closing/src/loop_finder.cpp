@@ -186,11 +186,13 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   // view's, which its view context ranks and whose search is narrower.
   const auto background = pipeline_.backgroundCandidates(query);
   std::vector<std::optional<Verified>> verified(hits.size());
+  std::vector<const char*> outcome(hits.size(), nullptr);  // "" verified, else the reason; null: not checked
   exec.forEach(hits.size(), [&](std::size_t i) {
     exec.checkAlive();
     auto fp = store_.fingerprint(hits[i].scan_id);
     if (!fp) return;  // deleted meanwhile
     auto r = pipeline_.verify(query, *fp, i < background, view);
+    outcome[i] = r.is_loop ? "" : r.reason;
     if (!r.is_loop && !(ranking.include_rejected || ranking.known_loops)) return;
     Verified v;
     v.loop.scan_id = hits[i].scan_id;
@@ -203,6 +205,11 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   for (auto& v : verified)
     if (v) results.push_back(std::move(*v));
   timing->verify_ms = msSince(t0);
+  for (const char* o : outcome)
+    if (o && *o)
+      timing->refused.push_back(o);
+    else if (o)
+      ++timing->verified;
   // Loops first, by probability to a thousandth; the model cannot tell 0.9995 from 0.9999 apart in any
   // meaningful way, so among candidates it is that sure of the nearer pose ranks first (the revisit that shares
   // most with the query, its loop the shortest lever); then the scan id.

@@ -133,12 +133,37 @@ void declareStoreGauges(Metrics& m, const ServiceState& state) {
   m.gauge("sglc_maps", "Maps in the database", one([](const StoreSnapshot& s) { return double(s.stats.maps); }));
   m.gauge("sglc_map_scans", "Scans stored per map", perMap([](const storage::MapInfo& x) { return double(x.scans); }));
   m.gauge("sglc_map_robots", "Robots per map", perMap([](const storage::MapInfo& x) { return double(x.robots); }));
+  m.gauge("sglc_pose_graph_loops",
+          "Loops in each map's pose graph as of its last solve: state accepted, or rejected (discounted by the "
+          "robust loss as false)",
+          [snap, &state] {
+            return snap->read([&](const StoreSnapshot& s) {
+              std::vector<S> out;
+              const auto* graph = state.graph();
+              if (!graph) return out;
+              for (const auto& map : s.maps)
+                if (const auto e = graph->latest(map.name); e && !e->failed) {
+                  out.push_back({{{"map", map.name}, {"state", "accepted"}}, double(e->loops - e->rejected_loops)});
+                  out.push_back({{{"map", map.name}, {"state", "rejected"}}, double(e->rejected_loops)});
+                }
+              return out;
+            });
+          });
   m.gauge("sglc_index_entries", "Descriptors in the in-memory search indexes (all maps)",
           one([](const StoreSnapshot& s) { return double(s.stats.index_entries); }));
   m.gauge("sglc_db_bytes", "Size of the map database file (bytes)",
           one([](const StoreSnapshot& s) { return double(s.stats.db_bytes); }));
   m.gauge("sglc_fingerprint_cache_bytes", "Fingerprints held in the memory cache (bytes)",
           one([](const StoreSnapshot& s) { return s.stats.cache_mb * 1024.0 * 1024.0; }));
+}
+
+// A closed set of label values for the engine's refusal reasons (core/src/verification.cpp, landmarks).
+const char* reasonName(std::string_view reason) {
+  if (reason.rfind("loop probability below", 0) == 0) return "low_probability";
+  if (reason.find("narrow view") != std::string_view::npos) return "narrow_view";
+  if (reason.rfind("no pose hypothesis", 0) == 0) return "no_pose";
+  if (reason.find("max_translation") != std::string_view::npos) return "translation";
+  return "landmarks";
 }
 
 }  // namespace
@@ -150,6 +175,10 @@ std::unique_ptr<Metrics> newServerMetrics() {
   m->histogram(kStageSeconds,
                "Time per engine stage of an ingest or query (fingerprint, store, search, verify, "
                "refine), seconds");
+  m->counter(kScansIngested, "Scans stored (retries of stored scans not counted), by label source");
+  m->counter(kLoopCandidates,
+             "Loop candidates verified: result verified, or refused with the reason (low_probability, no_pose, "
+             "narrow_view, landmarks, translation)");
   m->histogram(kSolveSeconds,
                "Pose-graph solve time by result (converged, bounded, failed) and scope (local, global), seconds");
   return m;
@@ -195,6 +224,23 @@ void observeSolve(Metrics& m, const posegraph::GraphEvent& event) {
   const char* result = event.failed ? "failed" : event.converged ? "converged" : "bounded";
   m.observe(kSolveSeconds, {{"result", result}, {"scope", event.global ? "global" : "local"}},
             event.optimise_ms / 1000);
+}
+
+}  // namespace sglc::server
+
+namespace sglc::server {
+
+void countScan(Metrics& m, v1::LabelSource source) {
+  const char* name = source == v1::LABELS_COMPUTED    ? "computed"
+                     : source == v1::LABELS_COMPLETED ? "completed"
+                                                      : "provided";
+  m.add(kScansIngested, {{"label_source", name}});
+}
+
+void countCandidates(Metrics& m, const closing::QueryTiming& decided) {
+  if (decided.verified > 0) m.add(kLoopCandidates, {{"result", "verified"}, {"reason", ""}}, decided.verified);
+  for (const char* reason : decided.refused)
+    m.add(kLoopCandidates, {{"result", "refused"}, {"reason", reasonName(reason)}});
 }
 
 }  // namespace sglc::server

@@ -1,6 +1,7 @@
 // What the server measures for Prometheus (`--metrics-listen`): every RPC by method and status code (count
-// and duration), the engine's stage timings, pose-graph solve times, and, read at each scrape, the compute
-// queue, scan bytes in flight, map and index sizes, and the process's memory.
+// and duration), the engine's stage timings, scans stored by label source, loop candidates verified or refused
+// by reason, pose-graph solve times, and, read at each scrape, the compute queue, scan bytes in flight, map and
+// index sizes, each map's pose-graph loops accepted and rejected, and the process's memory.
 #pragma once
 
 #include <grpcpp/support/server_interceptor.h>
@@ -9,6 +10,7 @@
 #include <string>
 
 #include "metrics.hpp"
+#include "sglc/closing/loop_query.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/v1/sglc.pb.h"
 
@@ -21,6 +23,8 @@ inline constexpr const char* kRpcTotal = "sglc_rpc_requests_total";
 inline constexpr const char* kRpcSeconds = "sglc_rpc_duration_seconds";
 inline constexpr const char* kStageSeconds = "sglc_stage_duration_seconds";
 inline constexpr const char* kSolveSeconds = "sglc_pose_graph_solve_seconds";
+inline constexpr const char* kScansIngested = "sglc_scans_ingested_total";
+inline constexpr const char* kLoopCandidates = "sglc_loop_candidates_total";
 
 // A registry with the server's counter and histogram families declared (updated whether or not they are served).
 std::unique_ptr<Metrics> newServerMetrics();
@@ -32,5 +36,10 @@ std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> makeMetri
 void observeStages(Metrics& metrics, const v1::Timing& timing);
 // One pose-graph solve (result: converged, bounded or failed).
 void observeSolve(Metrics& metrics, const posegraph::GraphEvent& event);
+// A scan stored (not a retry of a stored one), by where its labels came from.
+void countScan(Metrics& metrics, v1::LabelSource source);
+// The candidates one ingest or query verified: verified, or refused by reason (a short name of the engine's
+// reason: low_probability, no_pose, narrow_view, landmarks, translation).
+void countCandidates(Metrics& metrics, const closing::QueryTiming& decided);
 
 }  // namespace sglc::server

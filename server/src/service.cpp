@@ -101,6 +101,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   wire::checkName("key.session", key.session());
   TokenTable::require(grant, key.map());
   auto input = ingestInput(req);
+  const bool input_query = input.query;
   state.usableMap(key.map());
   auto& store = state.store();
   MemoryBudget::Lease own;
@@ -124,6 +125,8 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   slot.release();
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
   const auto done = ingestor.commit(std::move(pending), scan);
+  if (!done.already_stored) countScan(state.metrics(), resp->label_source());
+  if (input_query) countCandidates(state.metrics(), done.timing.query);
 
   toWire(done.loops, resp->mutable_loops(), req.query_options().include_evidence());
   auto* timing = resp->mutable_timing();
@@ -189,6 +192,7 @@ grpc::Status LoopClosureService::Query(grpc::ServerContext* ctx, const v1::Query
     const auto options = fromWire(req->options());
     toWire(finder.find(*fp, who, options, executionOf(state_, ctx), &timing), resp->mutable_candidates(),
            req->options().include_evidence());
+    countCandidates(state_.metrics(), timing);
     toWire(timing, resp->mutable_timing());
     resp->mutable_timing()->set_total_ms(msSince(t_start));
     observeStages(state_.metrics(), resp->timing());

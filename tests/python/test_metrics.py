@@ -114,6 +114,53 @@ def test_scrape_counts_calls_stages_and_sizes(metrics_server, kitti):
     assert value(samples, "sglc_inflight_bytes_limit") > 0 and value(samples, "process_resident_memory_bytes") > 0
     assert value(samples, "sglc_build_info", version=sglc.__version__) == 1
 
+    # What the operators graph: scans by label source (the refused retry is not counted), loop candidates by
+    # outcome (the ingest query and the stored-scan query each verified the other robot's scan), the pose
+    # graph's loops per map.
+    ingested = "sglc_scans_ingested_total"
+    assert types[ingested] == "counter" and value(samples, ingested, label_source="provided") == 2
+    assert sum(v for (n, _), v in samples.items() if n == ingested) == 2
+    cands = "sglc_loop_candidates_total"
+    assert value(samples, cands, result="verified", reason="") == 2
+    refused = {dict(l)["reason"] for (n, l), v in samples.items() if n == cands and dict(l)["result"] == "refused"}
+    assert refused <= {"low_probability", "no_pose", "narrow_view", "landmarks", "translation"}, refused
+    assert value(samples, "sglc_pose_graph_loops", map="m", state="accepted") == 1
+    assert value(samples, "sglc_pose_graph_loops", map="m", state="rejected") == 0
+
+
+def test_dashboard_and_alerts_name_only_metrics_the_server_exports(metrics_server):
+    """Every metric the Grafana dashboard and the alert rules query is one the server declares, with the
+    labels they use; the rules pass promtool's own checks and unit tests."""
+    import json
+    import os
+    import shutil
+    from conftest import REPO
+    _, url = metrics_server
+    with urllib.request.urlopen(url, timeout=30) as r:
+        text = r.read().decode()
+    declared = {line.split(" ")[2]: line.split(" ")[3] for line in text.splitlines() if line.startswith("# TYPE ")}
+    labels_seen = {}
+    for line in text.splitlines():
+        m = SAMPLE.match(line)
+        if m:
+            labels_seen.setdefault(m.group(1), set()).update(k for k, _ in LABEL.findall(m.group(2) or ""))
+    dashboard = json.load(open(os.path.join(REPO, "deploy", "grafana", "sglc-dashboard.json")))
+    exprs = [t["expr"] for p in dashboard["panels"] for t in p["targets"]]
+    rules_path = os.path.join(REPO, "deploy", "prometheus", "sglc-alerts.yml")
+    exprs += re.findall(r"expr: >?\s*(.+?)(?=\n\s+(?:for|labels):)", open(rules_path).read(), re.S)
+    assert len(exprs) >= 20, exprs
+    for expr in exprs:
+        for name in re.findall(r"\b((?:sglc|process)_[a-z_]+)", expr):
+            base = re.sub(r"_(bucket|count|sum)$", "", name) if name.endswith(("_bucket", "_count", "_sum")) else name
+            assert base in declared, f"{name} in {expr!r} is no metric of the server"
+            if name != base:
+                assert declared[base] == "histogram", name
+    promtool = shutil.which("promtool")
+    assert promtool, "promtool is missing (Debian's prometheus package: run scripts/install-deps.sh)"
+    for args in (["check", "rules", rules_path], ["test", "rules", os.path.join(REPO, "tests", "deploy", "sglc-alerts.test.yml")]):
+        done = subprocess.run([promtool, *args], capture_output=True, text=True, timeout=60)
+        assert done.returncode == 0, f"promtool {' '.join(args)}: {done.stdout}{done.stderr}"
+
 
 def test_other_paths_and_methods(metrics_server):
     _, url = metrics_server

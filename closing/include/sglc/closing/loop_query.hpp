@@ -57,9 +57,11 @@ struct FoundLoop {
                       // information
 };
 
-// Milliseconds spent per stage.
+// Milliseconds spent per stage, and what verification decided about the candidates it checked.
 struct QueryTiming {
   double search_ms = 0, verify_ms = 0, refine_ms = 0;
+  int verified = 0;
+  std::vector<const char*> refused;  // the engine's reason for each refused candidate (static strings)
 };
 
 // How the caller runs independent items and abandons work: parallel_for(n, fn) runs fn(i) for every i in
