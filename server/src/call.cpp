@@ -92,7 +92,8 @@ grpc::Status statusOf(std::exception_ptr error, std::string* detail) {
 
 grpc::Status logCall(const grpc::ServerContextBase& ctx, const CallLog& log, const grpc::Status& status,
                      const std::string& detail) {
-  nlohmann::ordered_json line = {{"method", log.method},
+  nlohmann::ordered_json line = {{"event", "rpc"},
+                                 {"method", log.method},
                                  {"map", bounded(log.map, kMaxStatusMessageBytes)},
                                  {"robot", bounded(log.robot, kMaxStatusMessageBytes)},
                                  {"code", wire::statusCodeName(status.error_code())},

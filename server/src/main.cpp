@@ -263,6 +263,7 @@ int main(int argc, char** argv) {
       std::cout << sglc::config::dumpYaml(sglc::server::settingsTable(), shown);
       return 0;
     }
+    spdlog::set_level(settings.log_level);
     return serve(sglc::server::resolved(settings), signals);
   } catch (const sglc::storage::StorageError& e) {
     // The operator starting the server is told what the database said too (clients never are).

@@ -50,6 +50,12 @@ void addServer(Table<Settings>& t) {
                         "database, var/backups for PostgreSQL)"));
   t.add(field<Settings>(SGLC_KEY(shutdown_grace_s), closed(0, 3600),
                         "on SIGTERM, calls in flight get this long to finish (s)"));
+  t.add(choice<Settings>(SGLC_KEY(log_level),
+                         std::vector<std::pair<std::string, spdlog::level::level_enum>>{{"debug", spdlog::level::debug},
+                                                                                        {"info", spdlog::level::info},
+                                                                                        {"warn", spdlog::level::warn},
+                                                                                        {"error", spdlog::level::err}},
+                         "least severe log lines written (debug adds gRPC's own; warn keeps only problems)"));
   t.rule({"server.tls_cert", "server.tls_key"}, "given together",
          [](const Settings& s) { return s.tls_cert.empty() == s.tls_key.empty(); });
 }

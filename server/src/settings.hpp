@@ -3,6 +3,8 @@
 // the server flags all assign through it; `--dump-config` and docs/CONFIGURATION.md are written from it.
 #pragma once
 
+#include <spdlog/common.h>
+
 #include <string>
 #include <utility>
 #include <vector>
@@ -27,7 +29,8 @@ struct Settings {
   std::string tls_cert, tls_key, tokens;
   std::string backup_dir;  // empty: "backups" beside the database
   double shutdown_grace_s = 10;
-  double max_inflight_mb = 1024;  // scan memory in flight (wire bytes x 3)
+  spdlog::level::level_enum log_level = spdlog::level::info;  // lines below it are not written
+  double max_inflight_mb = 1024;                              // scan memory in flight (wire bytes x 3)
   StreamLimits streams;
   Config engine;
   storage::StoreOptions store;

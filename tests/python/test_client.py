@@ -325,3 +325,29 @@ def test_export_lists_every_loop(client, kitti):
         client.export("exp", format="xml")
     with pytest.raises(sglc.NotFoundError):
         client.export("nosuchmap")
+
+
+def test_every_log_line_has_an_event_and_the_level_filters(tmp_path):
+    """Each JSON log line names its event (RPC lines "rpc"); --log-level warn keeps failed calls only."""
+    from conftest import start_server
+    for level, expect_ok_lines in (("info", True), ("warn", False)):
+        d = tmp_path / level
+        d.mkdir()
+        proc, address, _ = start_server(d, ["--log-level", level])
+        try:
+            with sglc.Client(address, timeout=60) as c:
+                c.create_map("m")
+                with pytest.raises(sglc.NotFoundError):
+                    c.list_robots("nosuch")
+        finally:
+            proc.terminate()
+            proc.wait(timeout=60)
+        lines = [json.loads(line) for f in sorted(d.glob("server*.log")) for line in f.read_text().splitlines()
+                 if line.startswith("{")]
+        assert lines and all("event" in line for line in lines), [x for x in lines if "event" not in x][:3]
+        rpcs = [x for x in lines if x["event"] == "rpc"]
+        assert any(x["method"] == "ListRobots" and x["code"] == "NOT_FOUND" and x["level"] == "warning" for x in rpcs)
+        assert any(x["method"] == "CreateMap" and x["code"] == "OK" for x in rpcs) == expect_ok_lines, level
+    r = subprocess.run([os.path.join(os.environ.get("SGLC_BUILD_DIR", ""), "bin", "sglc-server"), "--log-level", "loud",
+                        "--dump-config"], capture_output=True, text=True, timeout=60)
+    assert r.returncode != 0 and "log_level" in r.stderr, r.stderr
