@@ -351,3 +351,14 @@ def test_every_log_line_has_an_event_and_the_level_filters(tmp_path):
     r = subprocess.run([os.path.join(os.environ.get("SGLC_BUILD_DIR", ""), "bin", "sglc-server"), "--log-level", "loud",
                         "--dump-config"], capture_output=True, text=True, timeout=60)
     assert r.returncode != 0 and "log_level" in r.stderr, r.stderr
+
+
+def test_the_default_address_is_sglc_server(monkeypatch):
+    monkeypatch.setenv("SGLC_SERVER", "127.0.0.1:1")
+    with sglc.Client(max_attempts=1) as c:  # port 1: nobody listens
+        assert c.address == "127.0.0.1:1"
+        with pytest.raises(sglc.UnavailableError):
+            c.list_maps(timeout=10)
+    monkeypatch.delenv("SGLC_SERVER")
+    with sglc.Client() as c:
+        assert c.address == "127.0.0.1:50051"

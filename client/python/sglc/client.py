@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import os
 from typing import Iterable, Iterator, Optional, Sequence, Union
 
 import grpc
@@ -51,7 +52,8 @@ def _retry_service_config(max_attempts: int) -> str:
 class Client(AdminCalls, PoseGraphCalls):
     """Connects to an SGLC server.
 
-    address: "host:port". token: bearer token, sent as ``authorization: Bearer <token>``.
+    address: "host:port" (default: $SGLC_SERVER, else 127.0.0.1:50051, as for the sglc command).
+    token: bearer token, sent as ``authorization: Bearer <token>``.
     tls_root_certs: PEM bytes, or a path to a PEM file, to use TLS; None for plain TCP.
     timeout: default deadline of each call in seconds (None: none). chunk_bytes: scans whose packed size
     exceeds this are sent with IngestChunked. max_attempts (1..5): a call that fails with UNAVAILABLE (the
@@ -64,13 +66,15 @@ class Client(AdminCalls, PoseGraphCalls):
     the channel.
     """
 
-    def __init__(self, address: str = "127.0.0.1:50051", token: Optional[str] = None,
+    def __init__(self, address: Optional[str] = None, token: Optional[str] = None,
                  tls_root_certs: Union[bytes, str, None] = None, timeout: Optional[float] = 30.0,
                  chunk_bytes: int = DEFAULT_CHUNK_BYTES, max_attempts: int = 5):
         if chunk_bytes < packing.POINT_BYTES + packing.LABEL_BYTES:
             raise ValueError("chunk_bytes must hold at least one point (16 bytes)")
         if not 1 <= max_attempts <= 5:
             raise ValueError("max_attempts must be 1..5")
+        if address is None:
+            address = os.environ.get("SGLC_SERVER") or "127.0.0.1:50051"
         self.address = address
         self.timeout = timeout
         self.chunk_bytes = chunk_bytes
