@@ -161,6 +161,9 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
     const std::string format = req->format().empty() ? "g2o" : req->format();
     if (format != "g2o" && format != "json")
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "format must be g2o or json, not '" + format + "'");
+    if (req->robots_size() > 1000)
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
+                     "robots lists " + std::to_string(req->robots_size()) + " names; at most 1000");
     std::vector<std::string> robots(req->robots().begin(), req->robots().end());
     auto& store = state_.store();
     for (const auto& r : robots) {

@@ -541,6 +541,10 @@ def check_exports(s, tmp, est, n, loops):
                 lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", format="xml"))), "unknown format")
     expect_code(grpc.StatusCode.NOT_FOUND,
                 lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", robots=["ghost"]))), "unknown robot")
+    expect_code(grpc.StatusCode.INVALID_ARGUMENT,
+                lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", robots=["a"] * 1001))), "1001 robots")
+    expect_code(grpc.StatusCode.INVALID_ARGUMENT,
+                lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", robots=["a\nb"]))), "a bad name")
 
 
 def test_pose_graph(tmp):
