@@ -121,7 +121,8 @@ void checkFileName(const std::string& name) {
 }
 
 int runExport(const Common& common, const ExportArgs& a) {
-  if (a.format != "g2o" && a.format != "json") throw UsageError("--format must be g2o or json");
+  if (a.format != "g2o" && a.format != "json" && a.format != "mcap")
+    throw UsageError("--format must be g2o, json or mcap");
   const sc::Client client = connectClient(common);
   v1::ExportGraphRequest request;
   request.set_map(a.map);
@@ -145,7 +146,10 @@ int runExport(const Common& common, const ExportArgs& a) {
   if (summary.loops_left_out() > 0)
     std::cerr << "sglc: warning: " << summary.loops_left_out()
               << " verified loops cannot join the graph (an end without odometry pose, or another robot's); listed in "
-              << (a.format == "g2o" ? "graph.left_out.csv" : "the JSON's left_out") << "\n";
+              << (a.format == "g2o"    ? "graph.left_out.csv"
+                  : a.format == "json" ? "the JSON's left_out"
+                                       : "--format json")
+              << "\n";
   return 0;
 }
 
@@ -173,13 +177,15 @@ void addTrajectory(CLI::App& app, Common& common, Commands& out) {
   out.push_back({c, [&common, l] { return runLoops(common, *l); }});
 
   auto e = std::make_shared<ExportArgs>();
-  c = app.add_subcommand("export",
-                         "Write a map's whole pose graph, as the server weighs it, for another back-end (g2o or json)");
+  c = app.add_subcommand(
+      "export",
+      "Write a map's whole pose graph, as the server weighs it, for another back-end (g2o, json) or Foxglove (mcap)");
   addCommon(c, common);
   c->add_option("--map", e->map, "Map")->required();
   c->add_option("--robot", e->robots, "Only these robots' scans (repeatable; default: every robot)");
   c->add_option("--format", e->format,
-                "g2o (graph.g2o, graph.ids.csv naming each vertex, graph.left_out.csv) or json (graph.json)")
+                "g2o (graph.g2o, graph.ids.csv naming each vertex, graph.left_out.csv), json (graph.json) or mcap "
+                "(graph.mcap, for Foxglove)")
       ->capture_default_str();
   c->add_option("--out", e->out, "Output directory (created)")->required();
   out.push_back({c, [&common, e] { return runExport(common, *e); }});

@@ -159,8 +159,8 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
   return run(ctx, {"ExportGraph", req->map(), ""}, [&](CallLog&) {
     requireMap(state_, ctx, req->map());
     const std::string format = req->format().empty() ? "g2o" : req->format();
-    if (format != "g2o" && format != "json")
-      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "format must be g2o or json, not '" + format + "'");
+    if (format != "g2o" && format != "json" && format != "mcap")
+      throw RpcError(grpc::StatusCode::INVALID_ARGUMENT, "format must be g2o, json or mcap, not '" + format + "'");
     if (req->robots_size() > 1000)
       throw RpcError(grpc::StatusCode::INVALID_ARGUMENT,
                      "robots lists " + std::to_string(req->robots_size()) + " names; at most 1000");
@@ -181,9 +181,12 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
       files.emplace_back("graph.left_out.csv", std::ostringstream());
       posegraph::writeG2o(g, files[0].second, files[1].second);
       posegraph::writeLeftOutCsv(g, files[2].second);
-    } else {
+    } else if (format == "json") {
       files.emplace_back("graph.json", std::ostringstream());
       posegraph::writeGraphJson(g, files[0].second);
+    } else {
+      files.emplace_back("graph.mcap", std::ostringstream());
+      posegraph::writeGraphMcap(g, files[0].second);
     }
     v1::ExportChunk chunk;
     auto* summary = chunk.mutable_summary();

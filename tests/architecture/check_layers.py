@@ -63,7 +63,7 @@ LAYERS = {
     # One JSON object per log line.
     "log": (["log"], {"log"}, {"json", "spdlog"}),
     # Each map's pose graph: the map database's graph tables and Ceres.
-    "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph"}, {"eigen", "ceres", "spdlog", "json"}),
+    "posegraph": (["posegraph"], {"types", "storage", "log", "posegraph", "io"}, {"eigen", "ceres", "spdlog", "json"}),
     "wire": (["proto/include", "proto/src"], {"types", "proto", "wire"}, {"eigen", "grpc", "protobuf"}),
     # json: the loop exports (export_formats.cpp) that the command line and other C++ clients share.
     "client": (["client/include", "client/src"], {"types", "proto", "wire", "client"}, {"eigen", "grpc", "protobuf", "json"}),

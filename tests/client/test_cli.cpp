@@ -58,7 +58,7 @@ TEST(CliErrors, CommandLineMistakes) {
   expectOneLineError({"backup"}, "NAME");
   expectOneLineError({"loops", "--map", "m", "--format", "xml"}, "--format must be json or csv");
   expectOneLineError({"loops", "--map", "m", "--format", "g2o"}, "sglc export --map m --format g2o");
-  expectOneLineError({"export", "--map", "m", "--format", "xml", "--out", "d"}, "--format must be g2o or json");
+  expectOneLineError({"export", "--map", "m", "--format", "xml", "--out", "d"}, "--format must be g2o, json or mcap");
   expectOneLineError({"trajectory", "--map", "m", "--robot", "r", "--out", "x", "--format", "g2o"}, "kitti or tum");
   expectOneLineError({"create-map"}, "MAP");
   expectOneLineError({"stats", "--top-k", "3"}, "--top-k");

@@ -537,6 +537,26 @@ def check_exports(s, tmp, est, n, loops):
     assert kinds.count("odometry") == n - 1 and 0 < kinds.count("loop") < loops
     assert len(js["left_out"]) == loops - kinds.count("loop"), "loops to robot b are listed, not dropped"
     assert all("robot 'b'" in x["reason"] for x in js["left_out"])
+    # MCAP for Foxglove, read back by @mcap/core (streaming with CRCs, and indexed through the summary).
+    subprocess.run([CLI, "export", "--server", s.addr, "--map", "m", "--format", "mcap", "--out", out], check=True,
+                   capture_output=True, timeout=60)
+    interop = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "interop")
+    assert shutil.which("node") and os.path.isdir(os.path.join(interop, "node_modules", "@mcap", "core")), \
+        "node or tests/interop/node_modules is missing: run scripts/install-deps.sh"
+    got = json.loads(subprocess.run(["node", os.path.join(interop, "read_mcap.mjs"), os.path.join(out, "graph.mcap")],
+                                    check=True, capture_output=True, text=True, timeout=120).stdout)
+    assert got["indexed"]["schemas"] == ["foxglove.PosesInFrame", "foxglove.SceneUpdate"]
+    assert got["indexed"]["channels"] == ["/sglc/loops", "/sglc/odometry/a", "/sglc/odometry/b",
+                                          "/sglc/trajectory/a", "/sglc/trajectory/b"]
+    for robot in ("a", "b"):
+        traj = got["messages"][f"/sglc/trajectory/{robot}"][0]["data"]
+        mine = [p for p in all_poses if p.robot == robot]
+        assert traj["frame_id"] == "map" and len(traj["poses"]) == len(mine)
+        T = np.array(mine[-1].t_map_scan.m).reshape(4, 4)
+        last = traj["poses"][-1]["position"]
+        assert np.allclose([last["x"], last["y"], last["z"]], T[:3, 3], atol=1e-6)
+    scene = got["messages"]["/sglc/loops"][0]["data"]["entities"]
+    assert sum(len(e["lines"][0]["points"]) for e in scene) == 2 * loops
     expect_code(grpc.StatusCode.INVALID_ARGUMENT,
                 lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", format="xml"))), "unknown format")
     expect_code(grpc.StatusCode.NOT_FOUND,

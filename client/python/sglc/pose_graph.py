@@ -83,8 +83,8 @@ class PoseGraphCalls:
                timeout: Optional[float] = None) -> Tuple[Dict[str, bytes], Dict[str, int]]:
         """The map's pose graph as the server weighs it (PoseGraph.ExportGraph; client/README.md "export"):
         ({file name: contents}, summary counts). format "g2o" gives graph.g2o, graph.ids.csv and
-        graph.left_out.csv, "json" graph.json. robots: only their scans (default every robot). With out_dir the
-        files are also written there (created)."""
+        graph.left_out.csv, "json" graph.json, "mcap" graph.mcap (Foxglove). robots: only their scans
+        (default every robot). With out_dir the files are also written there (created)."""
         request = pb2.ExportGraphRequest(map=map, format=format, robots=list(robots))
         files: Dict[str, bytes] = {}
         summary: Dict[str, int] = {}
