@@ -31,7 +31,12 @@ std::optional<Twist> constantVelocity(const storage::MapStore& store, const Inge
   }
   const TimedPose before{*previous->stamp, *previous->odometry_pose};
   const TimedPose now{*in.stamp, *in.odometry_pose};
-  return sweepTwist(&before, now, nullptr);
+  const Twist twist = sweepTwist(&before, now, nullptr);
+  if (const auto error = twistError(twist); !error.empty()) {
+    *why = "the motion from the session's previous scan (seq " + std::to_string(previous->seq) + "): " + error;
+    return std::nullopt;
+  }
+  return twist;
 }
 
 }  // namespace

@@ -1,9 +1,24 @@
 #include "sglc/deskew.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <string>
 
 namespace sglc {
+
+std::string twistError(const Twist& twist) {
+  if (!twist.linear.allFinite() || !twist.angular.allFinite()) return "the twist is not finite";
+  char buf[160];
+  if (const double v = twist.linear.stableNorm(); v > kMaxSweepSpeed) {
+    std::snprintf(buf, sizeof buf, "the twist's speed %.6g m/s exceeds %.6g m/s", v, kMaxSweepSpeed);
+    return buf;
+  }
+  if (const double w = twist.angular.stableNorm(); w > kMaxSweepTurnRate) {
+    std::snprintf(buf, sizeof buf, "the twist's turn rate %.6g rad/s exceeds %.6g rad/s", w, kMaxSweepTurnRate);
+    return buf;
+  }
+  return "";
+}
 
 Twist twistBetween(const Mat4d& from, const Mat4d& to, double dt) {
   if (!(dt > 0) || !std::isfinite(dt))
@@ -36,7 +51,7 @@ void deskew(Points& points, const std::vector<float>& times, const Twist& twist)
   if (times.size() != points.size())
     throw InputError("de-skew: " + std::to_string(times.size()) + " point times for " + std::to_string(points.size()) +
                      " points");
-  if (!twist.linear.allFinite() || !twist.angular.allFinite()) throw InputError("de-skew: the twist is not finite");
+  if (const auto error = twistError(twist); !error.empty()) throw InputError("de-skew: " + error);
   // Every time is checked before any point moves: a refused scan is left as it was.
   for (std::size_t i = 0; i < times.size(); ++i)
     if (!std::isfinite(times[i]) || std::abs(times[i]) > 1.0f)

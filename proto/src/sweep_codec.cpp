@@ -81,6 +81,7 @@ ScanSweep decodeSweep(std::string_view point_times, const v1::Twist& twist, std:
   if (twist.linear_size() + twist.angular_size() > 0) {
     if (sweep.point_times.empty()) throw WireError("scan.twist is set but scan.point_times is empty");
     sweep.twist = Twist{vector3(twist.linear(), "linear"), vector3(twist.angular(), "angular")};
+    if (const auto error = twistError(*sweep.twist); !error.empty()) throw WireError("scan.twist: " + error);
   }
   return sweep;
 }

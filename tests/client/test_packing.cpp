@@ -355,6 +355,13 @@ TEST(Sweep, BadTimesAndTwistsSayWhatIsWrong) {
   auto nan = twist;
   nan.set_angular(1, std::numeric_limits<double>::quiet_NaN());
   EXPECT_NE(sweepError(times, nan, 10).find("angular is not finite"), std::string::npos);
+  // Finite but no vehicle's: a unit mistake would send every point off to infinity.
+  auto fast = twist;
+  fast.set_linear(0, 1e38);
+  EXPECT_NE(sweepError(times, fast, 10).find("speed"), std::string::npos) << sweepError(times, fast, 10);
+  auto spin = twist;
+  spin.set_angular(2, 200.0);
+  EXPECT_NE(sweepError(times, spin, 10).find("turn rate"), std::string::npos) << sweepError(times, spin, 10);
 
   // The client refuses what the server would.
   sc::IngestOptions options;

@@ -110,6 +110,7 @@ TEST_F(SweepUndoTest, WithoutAMotionTheScanStaysAsSentAndSaysWhy) {
       {"previous without a pose", input(25, 11.1, along(3.0)), "seq 20) has no stamp or odometry pose"},
       {"previous too long before", input(40, 26.5, along(9.5)), "6.5"},
       {"previous after it in time", input(35, 19.0, along(9.5)), "-1.0"},
+      {"an odometry jump of 2 km in 1 s", input(31, 21.0, along(2009.0)), "exceeds 1000 m/s"},
   };
   for (const auto& c : cases) {
     auto scan = twoPoints();

@@ -62,5 +62,15 @@ TEST(Deskew, BadTimesAreRefused) {
   Twist bad;
   bad.linear.x() = std::nan("");
   EXPECT_THROW(deskew(p, {0.0f, 0.0f}, bad), InputError);
+  // Finite but beyond any vehicle: 1e38 m/s would send the points to infinity.
+  Twist fast;
+  fast.linear.x() = 1e38;
+  EXPECT_NE(twistError(fast).find("speed"), std::string::npos) << twistError(fast);
+  EXPECT_THROW(deskew(p, {0.05f, 0.0f}, fast), InputError);
+  Twist spin;
+  spin.angular.z() = kMaxSweepTurnRate * 1.01;
+  EXPECT_NE(twistError(spin).find("turn rate"), std::string::npos);
+  spin.angular.z() = kMaxSweepTurnRate;
+  EXPECT_EQ(twistError(spin), "");
   EXPECT_EQ(p[1], Vec3f(4, 5, 6));  // untouched by the refusals
 }

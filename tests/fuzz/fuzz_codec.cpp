@@ -231,6 +231,7 @@ TEST(Fuzz, ServerCodec) {
           if (sweep.twist && (t.empty() || !sweep.twist->linear.allFinite() || !sweep.twist->angular.allFinite() ||
                               c.twist.linear_size() != 3 || c.twist.angular_size() != 3))
             v.fail("accepted a twist without times, not finite, or not of 3 + 3 values");
+          if (sweep.twist && !twistError(*sweep.twist).empty()) v.fail("accepted a twist beyond the limits");
           break;
         }
         default: {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "sglc/types.hpp"
@@ -15,6 +16,12 @@ struct Twist {
   Eigen::Vector3d linear = Eigen::Vector3d::Zero();
   Eigen::Vector3d angular = Eigen::Vector3d::Zero();
 };
+
+// The fastest motion a sweep is de-skewed with: 1000 m/s and 100 rad/s (about 16 turns a second). Beyond
+// them a twist is a unit mistake or a jump of the odometry, not a vehicle.
+inline constexpr double kMaxSweepSpeed = 1000.0, kMaxSweepTurnRate = 100.0;
+// Why a twist cannot de-skew a sweep (not finite, or beyond the limits above), or "" when it can.
+std::string twistError(const Twist& twist);
 
 // The constant twist that moves the sensor from pose `from` to pose `to` (both sensor -> world) in `dt`
 // seconds: the rotation's axis-angle and the translation (in `from`'s axes), each divided by dt. Throws
@@ -43,7 +50,8 @@ Twist sweepTwist(const TimedPose* previous, const TimedPose& current, const Time
 Mat4d motionAt(const Twist& twist, double t);
 
 // Moves each point i from the sensor's frame at times[i] into its frame at the stamp: p <- motionAt(t_i) p.
-// Throws InputError when the sizes differ or a time is not finite or beyond 1 s of the stamp.
+// Throws InputError when the sizes differ, a time is not finite or beyond 1 s of the stamp, or the twist has a
+// twistError.
 void deskew(Points& points, const std::vector<float>& times, const Twist& twist);
 
 }  // namespace sglc

@@ -26,7 +26,8 @@ void packSweep(const ScanSweep& sweep, v1::Scan* out);
 
 // What a server accepts for a scan of `point_count` points: times absent or exactly one per point, each finite
 // and within 1 s of the stamp (the message names the first bad one); a twist that is absent (no values) or
-// carries 3 + 3 finite values. A twist without times is refused: it would do nothing.
+// carries 3 + 3 finite values within sglc::kMaxSweepSpeed and kMaxSweepTurnRate. A twist without times is
+// refused: it would do nothing.
 ScanSweep decodeSweep(std::string_view point_times, const v1::Twist& twist, std::size_t point_count);
 
 }  // namespace sglc::wire
