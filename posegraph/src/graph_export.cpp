@@ -12,6 +12,7 @@
 #include "map_graph.hpp"
 #include "relative_pose_error.hpp"
 #include "sglc/mcap_writer.hpp"
+#include "sglc/posegraph/foxglove_scene.hpp"
 #include "sglc/rigid.hpp"
 #include "sglc/version.hpp"
 
@@ -131,6 +132,7 @@ ExportedGraph exportGraph(const storage::MapStore& store, const std::string& map
     e.information = e.weight * informationOf(sqrt_info);
     e.loop_id = l.id;
     e.probability = l.probability;
+    e.score = l.score;
     g.edges.push_back(e);
   }
   return g;
@@ -207,111 +209,19 @@ void writeGraphJson(const ExportedGraph& graph, std::ostream& out) {
 }  // namespace sglc::posegraph
 
 namespace sglc::posegraph {
-namespace {
-
-using Json = nlohmann::ordered_json;
-
-// Short JSON Schemas of the Foxglove message types used (Foxglove identifies them by name; these say their shape).
-const char* const kVector3 =
-    R"({"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}})";
-const char* const kTime = R"({"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}})";
-
-std::string posesInFrameSchema() {
-  return std::string(R"({"title":"foxglove.PosesInFrame","type":"object","properties":{"timestamp":)") + kTime +
-         R"(,"frame_id":{"type":"string"},"poses":{"type":"array","items":{"type":"object","properties":{"position":)" +
-         kVector3 +
-         R"(,"orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},)"
-         R"("z":{"type":"number"},"w":{"type":"number"}}}}}}}})";
-}
-
-std::string sceneUpdateSchema() {
-  return std::string(R"({"title":"foxglove.SceneUpdate","type":"object","properties":{"deletions":{"type":"array"},)"
-                     R"("entities":{"type":"array","items":{"type":"object","properties":{"timestamp":)") +
-         kTime + R"(,"frame_id":{"type":"string"},"id":{"type":"string"},"lifetime":)" + kTime +
-         R"(,"frame_locked":{"type":"boolean"},"metadata":{"type":"array"},"lines":{"type":"array"}}}}}})";
-}
-
-Json timeOf(std::uint64_t ns) { return {{"sec", ns / 1000000000ULL}, {"nsec", ns % 1000000000ULL}}; }
-
-Json poseJson(const Mat4d& T) {
-  const Eigen::Quaterniond q = Eigen::Quaterniond(Eigen::Matrix3d(T.topLeftCorner<3, 3>())).normalized();
-  return {{"position", {{"x", T(0, 3)}, {"y", T(1, 3)}, {"z", T(2, 3)}}},
-          {"orientation", {{"x", q.x()}, {"y", q.y()}, {"z", q.z()}, {"w", q.w()}}}};
-}
-
-Json pointJson(const Mat4d& T) { return {{"x", T(0, 3)}, {"y", T(1, 3)}, {"z", T(2, 3)}}; }
-
-}  // namespace
-
 void writeGraphMcap(const ExportedGraph& graph, std::ostream& out) {
-  std::uint64_t stamp_ns = 0;
-  for (const auto& n : graph.nodes)
-    if (n.stamp && *n.stamp > 0 && *n.stamp < 1.8e10)
-      stamp_ns = std::max(stamp_ns, static_cast<std::uint64_t>(*n.stamp * 1e9));
+  const auto stamp_ns = newestStampNs(graph);
   McapWriter mcap(out, "", std::string("sglc ") + kVersion);
-  const auto poses_schema = mcap.addSchema("foxglove.PosesInFrame", "jsonschema", posesInFrameSchema());
-  const auto scene_schema = mcap.addSchema("foxglove.SceneUpdate", "jsonschema", sceneUpdateSchema());
-  std::map<std::string, std::vector<std::size_t>> by_robot;
-  for (std::size_t i = 0; i < graph.nodes.size(); ++i) by_robot[graph.nodes[i].robot].push_back(i);
-  // The map frame of each session: pose = frame * odometry for every node, so frame = pose * odometry^-1 of its
-  // first node (exact for scans not yet optimised; for optimised ones, the odometry as placed at the first).
-  for (const auto& [robot, idx] : by_robot) {
-    Json trajectory = {{"timestamp", timeOf(stamp_ns)}, {"frame_id", "map"}, {"poses", Json::array()}};
-    Json odometry = trajectory;
-    const ExportedGraph::Node* first = nullptr;
-    Mat4d frame = Mat4d::Identity();
-    for (const auto i : idx) {
-      const auto& n = graph.nodes[i];
-      if (!first || first->session != n.session) {
-        first = &n;
-        frame = n.pose * n.odometry.inverse();
-      }
-      trajectory["poses"].push_back(poseJson(n.pose));
-      odometry["poses"].push_back(poseJson(frame * n.odometry));
-    }
-    const auto t = mcap.addChannel(poses_schema, "/sglc/trajectory/" + robot, "json", {{"robot", robot}});
-    const auto o = mcap.addChannel(poses_schema, "/sglc/odometry/" + robot, "json", {{"robot", robot}});
-    mcap.addMessage(t, stamp_ns, trajectory.dump());
-    mcap.addMessage(o, stamp_ns, odometry.dump());
+  std::map<std::string, std::uint16_t> schema_ids;
+  for (const auto& t : foxgloveScene(graph, stamp_ns)) {
+    auto schema = schema_ids.find(t.schema_name);
+    if (schema == schema_ids.end())
+      schema =
+          schema_ids.emplace(t.schema_name, mcap.addSchema(t.schema_name, "jsonschema", foxgloveSchema(t.schema_name)))
+              .first;
+    const auto channel = mcap.addChannel(schema->second, "/sglc/" + t.topic, "json");
+    mcap.addMessage(channel, stamp_ns, t.message);
   }
-  Json intra = Json::array(), inter = Json::array();
-  for (const auto& e : graph.edges) {
-    if (!e.loop_id) continue;
-    auto& list = graph.nodes[e.from].robot == graph.nodes[e.to].robot ? intra : inter;
-    list.push_back(pointJson(graph.nodes[e.from].pose));
-    list.push_back(pointJson(graph.nodes[e.to].pose));
-  }
-  Json entities = Json::array();
-  for (const auto& [id, points, colour] :
-       {std::tuple<const char*, const Json*, Json>{
-            "intra-robot loops", &intra, {{"r", 0.1}, {"g", 0.7}, {"b", 0.2}, {"a", 1.0}}},
-        std::tuple<const char*, const Json*, Json>{
-            "inter-robot loops", &inter, {{"r", 0.9}, {"g", 0.1}, {"b", 0.1}, {"a", 1.0}}}}) {
-    Json line = {{"type", 2},  // LINE_LIST
-                 {"pose", poseJson(Mat4d::Identity())},
-                 {"thickness", 2.0},
-                 {"scale_invariant", true},
-                 {"points", *points},
-                 {"color", colour},
-                 {"colors", Json::array()},
-                 {"indices", Json::array()}};
-    entities.push_back({{"timestamp", timeOf(stamp_ns)},
-                        {"frame_id", "map"},
-                        {"id", id},
-                        {"lifetime", timeOf(0)},
-                        {"frame_locked", false},
-                        {"metadata", Json::array({{{"key", "loops"}, {"value", std::to_string(points->size() / 2)}}})},
-                        {"arrows", Json::array()},
-                        {"cubes", Json::array()},
-                        {"spheres", Json::array()},
-                        {"cylinders", Json::array()},
-                        {"lines", Json::array({line})},
-                        {"triangles", Json::array()},
-                        {"texts", Json::array()},
-                        {"models", Json::array()}});
-  }
-  const auto loops = mcap.addChannel(scene_schema, "/sglc/loops", "json");
-  mcap.addMessage(loops, stamp_ns, Json({{"deletions", Json::array()}, {"entities", entities}}).dump());
   mcap.finish();
 }
 

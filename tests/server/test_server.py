@@ -10,13 +10,10 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
-import traceback
 
 try:
     import grpc
@@ -36,45 +33,14 @@ sys.path.insert(0, STUBS)
 from sglc.v1 import sglc_pb2 as pb  # noqa: E402
 from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import harness  # noqa: E402
+from harness import Server, expect_code, free_port  # noqa: E402,F401
+
+harness.configure(SERVER, pb, rpc)
+
 SEQ = os.path.join(DATA, "semantickitti_scans", "sequences", "00")
 HAVE_DATA = os.path.isdir(SEQ)
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Server:
-    def __init__(self, db, extra=()):
-        self.port = free_port()
-        self.addr = f"127.0.0.1:{self.port}"
-        self.log = open(db + ".log", "ab")
-        self.proc = subprocess.Popen([SERVER, "--db", db, "--listen", self.addr, "--sync-normal", *extra],
-                                     stdout=self.log, stderr=subprocess.STDOUT)
-        self.channel = grpc.insecure_channel(self.addr)
-        grpc.channel_ready_future(self.channel).result(timeout=30)
-        self.admin = rpc.MapAdminStub(self.channel)
-        self.loop = rpc.LoopClosureStub(self.channel)
-        self.graph = rpc.PoseGraphStub(self.channel)
-        # Serving once the database is loaded.
-        for _ in range(300):
-            try:
-                self.admin.ListMaps(pb.ListMapsRequest(), timeout=5)
-                break
-            except grpc.RpcError as e:
-                if e.code() not in (grpc.StatusCode.UNAVAILABLE,):
-                    break
-                time.sleep(0.05)
-
-    def stop(self, sig=signal.SIGTERM):
-        self.channel.close()
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            self.proc.wait(timeout=60)
-        self.log.close()
-        return self.proc.returncode
 
 
 def load_scan(frame):
@@ -109,16 +75,6 @@ def pose_error(T, G):
 
 def key(robot, seq, session="run", m="m"):
     return pb.ScanKey(map=m, robot=robot, session=session, seq=seq)
-
-
-def expect_code(code, fn, what):
-    try:
-        fn()
-    except grpc.RpcError as e:
-        assert e.code() == code, f"{what}: expected {code}, got {e.code()}: {e.details()}"
-        assert e.details(), f"{what}: the status has no message"
-        return e.details()
-    raise AssertionError(f"{what}: expected {code}, the call succeeded")
 
 
 # ------------------------------------------------------------------------------------------------ tests
@@ -545,8 +501,8 @@ def check_exports(s, tmp, est, n, loops):
         "node or tests/interop/node_modules is missing: run scripts/install-deps.sh"
     got = json.loads(subprocess.run(["node", os.path.join(interop, "read_mcap.mjs"), os.path.join(out, "graph.mcap")],
                                     check=True, capture_output=True, text=True, timeout=120).stdout)
-    assert got["indexed"]["schemas"] == ["foxglove.PosesInFrame", "foxglove.SceneUpdate"]
-    assert got["indexed"]["channels"] == ["/sglc/loops", "/sglc/odometry/a", "/sglc/odometry/b",
+    assert got["indexed"]["schemas"] == ["foxglove.PosesInFrame", "foxglove.SceneUpdate", "sglc.LoopList"]
+    assert got["indexed"]["channels"] == ["/sglc/loop_list", "/sglc/loops", "/sglc/odometry/a", "/sglc/odometry/b",
                                           "/sglc/trajectory/a", "/sglc/trajectory/b"]
     for robot in ("a", "b"):
         traj = got["messages"][f"/sglc/trajectory/{robot}"][0]["data"]
@@ -557,6 +513,10 @@ def check_exports(s, tmp, est, n, loops):
         assert np.allclose([last["x"], last["y"], last["z"]], T[:3, 3], atol=1e-6)
     scene = got["messages"]["/sglc/loops"][0]["data"]["entities"]
     assert sum(len(e["lines"][0]["points"]) for e in scene) == 2 * loops
+    listed = got["messages"]["/sglc/loop_list"][0]["data"]["loops"]
+    assert len(listed) == loops and all(0 < lp["score"] and 0 <= lp["weight"] <= 1 for lp in listed)
+    assert {lp["inter_robot"] for lp in listed} == {True, False}
+    assert all(lp["inter_robot"] == (lp["from"]["robot"] != lp["to"]["robot"]) for lp in listed)
     expect_code(grpc.StatusCode.INVALID_ARGUMENT,
                 lambda: list(s.graph.ExportGraph(pb.ExportGraphRequest(map="m", format="xml"))), "unknown format")
     expect_code(grpc.StatusCode.NOT_FOUND,
@@ -699,25 +659,7 @@ def test_pose_graph(tmp):
 def main():
     tests = [test_inter_robot_loop_and_restart, test_known_loop_pose, test_unlabelled_scans, test_bad_inputs, test_tokens, test_concurrent_clients, test_config_file,
              test_pose_graph]
-    passed = failed = 0
-    for t in tests:
-        tmp = tempfile.mkdtemp(prefix="sglc-server-test-")
-        try:
-            print(f"{t.__name__}:")
-            t(tmp)
-            passed += 1
-            print("  ok")
-        except Exception:  # noqa: BLE001
-            failed += 1
-            traceback.print_exc()
-            for log in [f for f in os.listdir(tmp) if f.endswith(".log")]:
-                print(f"--- {log} (last lines)")
-                print("".join(open(os.path.join(tmp, log), errors="replace").readlines()[-15:]))
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-    print(f"{passed} passed, {failed} failed")
-    sys.exit(1 if failed else 0)
-
+    harness.run(tests, "sglc-server-test-")
 
 if __name__ == "__main__":
     main()

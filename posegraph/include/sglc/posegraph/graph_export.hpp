@@ -37,6 +37,7 @@ struct ExportedGraph {
     Mat6d information = Mat6d::Identity();
     std::int64_t loop_id = 0;  // 0: odometry
     std::optional<double> probability;
+    double score = 0;  // the loop's verification score
     double weight = 1.0;
   };
   struct LeftOut {
@@ -60,11 +61,8 @@ ExportedGraph exportGraph(const storage::MapStore& store, const std::string& map
 void writeG2o(const ExportedGraph& graph, std::ostream& g2o, std::ostream& ids);
 // The loops left out, as CSV "loop_id,query_scan,candidate_scan,reason".
 void writeLeftOutCsv(const ExportedGraph& graph, std::ostream& out);
-// MCAP in Foxglove's own schemas (JSON messages, JSON Schema), which Foxglove shows without configuration:
-// per robot `/sglc/trajectory/<robot>` (foxglove.PosesInFrame, its scans at their poses in frame "map") and
-// `/sglc/odometry/<robot>` (the same scans' odometry, through each session's map frame, as the robot sent it);
-// `/sglc/loops` (foxglove.SceneUpdate: line lists of the loops, intra-robot green and inter-robot red, with their
-// counts as metadata). Stamped with the newest scan stamp (0 without stamps).
+// MCAP in Foxglove's own schemas (JSON messages, JSON Schema), which Foxglove shows without configuration: the
+// topics of foxgloveScene (foxglove_scene.hpp) under "/sglc/", stamped with the newest scan stamp (0 without).
 void writeGraphMcap(const ExportedGraph& graph, std::ostream& out);
 // One JSON document: nodes, edges (information as 36 values, the optimiser's convention) and left_out loops.
 void writeGraphJson(const ExportedGraph& graph, std::ostream& out);
