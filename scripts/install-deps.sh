@@ -37,6 +37,9 @@ PACKAGES=(
   # (tests/interop/write_bag.mjs); Debian's ROS 1 bag writer for the ROS 1 test bags (write_ros1_bag.py)
   libzstd-dev liblz4-dev libbz2-dev lz4
   python3-rosbag python3-roslz4 python3-sensor-msgs python3-nav-msgs python3-tf2-msgs
+  # the live view's page is tested in a real browser: Debian's Chromium, driven by playwright-core
+  # (tests/interop; playwright downloads no browser of its own)
+  chromium
 )
 
 # Node.js and npm run the test bags' writers (tests/interop). A machine with its own Node.js keeps it; without
@@ -51,7 +54,7 @@ npm_packages() {
   want=$(sha256sum "$dir/package-lock.json" | cut -d' ' -f1)
   if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
     echo "install-deps: npm ci in $dir"
-    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    (cd "$dir" && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error)
     echo "$want" >"$stamp"
   fi
 }

@@ -24,6 +24,8 @@
 #include "sglc/log/json_lines.hpp"
 #include "sglc/log/log_line.hpp"
 #include "sglc/version.hpp"
+#include "viz_hub.hpp"
+#include "viz_server.hpp"
 
 namespace {
 
@@ -176,6 +178,11 @@ int serve(const Settings& s, sigset_t& signals) {
   configure(builder, s, quota, state->metrics());
   sglc::server::IoPoller io_poller(builder);    // see io_poller.hpp
   auto metrics_http = serveMetrics(s, *state);  // before the server starts: a bad address stops nothing
+  std::unique_ptr<sglc::server::VizServer> viz;
+  if (!s.viz_listen.empty()) {
+    viz = std::make_unique<sglc::server::VizServer>(s.viz_listen, state->tokens(), &state->metrics());
+    spdlog::info("{}", sglc::logging::logLine({{"event", "viz"}, {"address", s.viz_listen}, {"port", viz->port()}}));
+  }
   std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
   if (!server || port == 0) {
     if (server) server->Shutdown();  // before its completion queues go
@@ -196,6 +203,15 @@ int serve(const Settings& s, sigset_t& signals) {
   const auto solves = graph->subscribe([&metrics = state->metrics()](const std::string&, const auto& event) {
     sglc::server::observeSolve(metrics, event);
   });
+  std::unique_ptr<sglc::server::VizHub> hub;
+  if (viz) {
+    sglc::server::VizHubOptions options;
+    options.min_interval = std::chrono::milliseconds(static_cast<long>(s.viz_interval_s * 1000));
+    hub = std::make_unique<sglc::server::VizHub>(
+        *store, *graph, options, [v = viz.get()](sglc::server::VizUpdate u) { v->publish(std::move(u)); });
+    viz->onDemand([h = hub.get()](const sglc::server::VizDemand& d) { h->setDemand(d); });
+    state->attachViz(hub.get());
+  }
   state->attach(store.get(), graph.get());
   health->SetServingStatus(true);
 
@@ -212,8 +228,12 @@ int serve(const Settings& s, sigset_t& signals) {
                    std::chrono::milliseconds(static_cast<long>(s.shutdown_grace_s * 1000)));
   server->Wait();
   io_poller.stop();
+  state->attachViz(nullptr);
+  if (viz) viz->onDemand(nullptr);
+  hub.reset();
   metrics_http.http.reset();  // its gauges read the store: no scrape or refresh may outlive it
   metrics_http.refresher.reset();
+  viz.reset();  // after the scrapes: a gauge reads it
   state->detach();
   graph.reset();
   store.reset();

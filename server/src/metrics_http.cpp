@@ -19,6 +19,7 @@
 #include <thread>
 
 #include "connection_slots.hpp"
+#include "net_address.hpp"
 
 namespace sglc::server {
 namespace {
@@ -33,30 +34,6 @@ using Server = MetricsHttpServer;
 constexpr std::chrono::milliseconds kWriteTimeout{5000};
 constexpr std::chrono::milliseconds kFreshPoll{20};
 constexpr std::chrono::milliseconds kAcceptBackoff{100};
-
-// Splits "host:port" ("[::1]:9090" for IPv6); throws when there is no port.
-std::pair<std::string, std::string> hostPort(const std::string& address) {
-  const auto colon = address.rfind(':');
-  if (colon == std::string::npos || colon + 1 == address.size())
-    throw std::runtime_error("metrics address '" + address + "' is not host:port");
-  const std::string port = address.substr(colon + 1);
-  if (port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos || std::stoi(port) > 65535)
-    throw std::runtime_error("metrics address '" + address + "': port must be a number 0..65535");
-  std::string host = address.substr(0, colon);
-  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
-  return {host, port};
-}
-
-// One peer, for the per-peer limit: an IPv4 address (also when it comes IPv4-mapped), or an IPv6 /64 (what one
-// host or site is given).
-std::string peerKey(const asio::ip::address& a) {
-  if (!a.is_v6()) return a.to_string();
-  const auto v6 = a.to_v6();
-  if (v6.is_v4_mapped()) return asio::ip::make_address_v4(asio::ip::v4_mapped, v6).to_string();
-  auto bytes = v6.to_bytes();
-  std::fill(bytes.begin() + 8, bytes.end(), 0);
-  return asio::ip::address_v6(bytes).to_string() + "/64";
-}
 
 std::string response(int code, const char* reason, const std::string& body, bool head_only,
                      const char* type = "text/plain; charset=utf-8") {
@@ -198,7 +175,7 @@ class Session : public std::enable_shared_from_this<Session> {
 }  // namespace
 
 void MetricsHttpServer::Impl::listen(const std::string& address) {
-  const auto [host, service] = hostPort(address);
+  const auto [host, service] = hostPort(address, "metrics");
   beast::error_code ec;
   tcp::resolver resolver(io);
   const auto found = resolver.resolve(host, service, tcp::resolver::passive | tcp::resolver::numeric_service, ec);

@@ -23,6 +23,7 @@
 #include "sglc/wire/geometry_codec.hpp"
 #include "sglc/wire/scan_codec.hpp"
 #include "sglc/wire/sweep_codec.hpp"
+#include "viz_hub.hpp"
 
 namespace sglc::server {
 namespace {
@@ -126,6 +127,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   checkAlive(ctx);  // past this point the scan is stored and the call succeeds
   const auto done = ingestor.commit(std::move(pending), scan);
   if (!done.already_stored) countScan(state.metrics(), resp->label_source());
+  if (auto* viz = state.viz(); viz && !done.already_stored) viz->scanStored(key.map(), done.scan_id, scan.points);
   if (input_query) countCandidates(state.metrics(), done.timing.query);
 
   toWire(done.loops, resp->mutable_loops(), req.query_options().include_evidence());

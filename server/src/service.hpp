@@ -35,6 +35,8 @@ struct ServiceLimits {
 };
 
 // State shared by both services. The store is attached once it is loaded; until then calls get UNAVAILABLE.
+class VizHub;
+
 class ServiceState {
  public:
   ServiceState(Pipeline pipeline, TokenTable tokens, ServiceLimits limits)
@@ -55,6 +57,8 @@ class ServiceState {
     store_.store(nullptr);
     graph_.store(nullptr);
   }
+  // The live view's hub (sglc-server --viz-listen), told of every stored scan; null: none.
+  void attachViz(VizHub* viz) { viz_.store(viz); }
   storage::MapStore& store() const;  // throws RpcError(UNAVAILABLE) while loading
   // The map, when this server's fingerprints may be added to it and compared with its own (MapSettingsGuard):
   // every ingest and query asks here. NOT_FOUND, FAILED_PRECONDITION, or UNAVAILABLE while loading.
@@ -70,6 +74,7 @@ class ServiceState {
   StreamRegistry& streams() const { return *streams_; }
   Metrics& metrics() const { return *metrics_; }           // served with --metrics-listen
   GraphOptimiser* graph() const { return graph_.load(); }  // null: no pose graph (tests, loading)
+  VizHub* viz() const { return viz_.load(); }
 
  private:
   Pipeline pipeline_;
@@ -83,6 +88,7 @@ class ServiceState {
   std::unique_ptr<Metrics> metrics_ = newServerMetrics();
   std::atomic<storage::MapStore*> store_{nullptr};
   std::atomic<GraphOptimiser*> graph_{nullptr};
+  std::atomic<VizHub*> viz_{nullptr};
 };
 
 // Unary methods run on gRPC's sync thread pool; the streams are callback reactors on raw bytes (streams.cpp)

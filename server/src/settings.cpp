@@ -23,6 +23,12 @@ void addServer(Table<Settings>& t) {
   t.add(field<Settings>(SGLC_KEY(metrics_listen), {},
                         "serve Prometheus metrics over HTTP at host:port/metrics (empty: off; no TLS, no tokens: "
                         "keep it on loopback or a trusted network)"));
+  t.add(field<Settings>(SGLC_KEY(viz_listen), {},
+                        "serve the live view at host:port: the Foxglove WebSocket protocol, and a page for any "
+                        "browser at / (empty: off; no TLS: keep it on loopback or put a TLS proxy in front; the "
+                        "token file applies)"));
+  t.add(field<Settings>(SGLC_KEY(viz_interval_s), closed(0.05, 60),
+                        "seconds between two rebuilds of one map's live view (each reads the whole graph)"));
   t.add(field<Settings>(SGLC_KEY(threads), closed(0, 256), "compute threads (0: the machine's cores)"));
   t.add(field<Settings>(SGLC_KEY(max_calls), closed(1, 4096),
                         "unary calls served at once (open streams hold no thread); beyond: RESOURCE_EXHAUSTED"));

@@ -21,9 +21,11 @@ namespace sglc::server {
 struct Settings {
   std::string db = "var/sglc.db";
   std::string listen = "127.0.0.1:50051";
-  std::string metrics_listen;  // host:port of the Prometheus endpoint; empty: none
-  int threads = 0;             // compute threads; 0 = the machine's cores
-  int max_calls = 256;         // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
+  std::string metrics_listen;   // host:port of the Prometheus endpoint; empty: none
+  std::string viz_listen;       // host:port of the live view (Foxglove WebSocket and page); empty: none
+  double viz_interval_s = 0.5;  // a map's live view is rebuilt at most this often
+  int threads = 0;              // compute threads; 0 = the machine's cores
+  int max_calls = 256;          // calls in flight (open streams included); beyond it gRPC answers RESOURCE_EXHAUSTED
   double max_message_mb = 64;
   std::uint64_t max_points = kMaxScanPoints;  // the scan file readers' cap too
   std::string tls_cert, tls_key, tokens;
