@@ -143,6 +143,11 @@ int runExport(const Common& common, const ExportArgs& a) {
   std::cerr << "map " << a.map << " (graph version " << summary.graph_version() << "): " << summary.nodes()
             << " scans, " << summary.odometry_edges() << " odometry edges, " << summary.loop_edges() << " loops -> "
             << a.out << "\n";
+  if (a.format == "mcap" && summary.keyframes() == 0 && summary.nodes() > 0)
+    std::cerr << "sglc: note: no keyframe points in graph.mcap: the server keeps a scan's points only when it "
+                 "was ingested with --store-raw\n";
+  else if (a.format == "mcap")
+    std::cerr << summary.keyframes() << " keyframes' points in graph.mcap\n";
   if (summary.loops_left_out() > 0)
     std::cerr << "sglc: warning: " << summary.loops_left_out()
               << " verified loops cannot join the graph (an end without odometry pose, or another robot's); listed in "

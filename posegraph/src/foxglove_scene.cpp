@@ -7,8 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <tuple>
-
-#include "sglc/voxel_map.hpp"
+#include <unordered_set>
 
 namespace sglc::posegraph {
 namespace {

@@ -209,7 +209,7 @@ void writeGraphJson(const ExportedGraph& graph, std::ostream& out) {
 }  // namespace sglc::posegraph
 
 namespace sglc::posegraph {
-void writeGraphMcap(const ExportedGraph& graph, std::ostream& out) {
+std::size_t writeGraphMcap(const ExportedGraph& graph, std::ostream& out, const ScanPoints& points, double voxel_m) {
   const auto stamp_ns = newestStampNs(graph);
   McapWriter mcap(out, "", std::string("sglc ") + kVersion);
   std::map<std::string, std::uint16_t> schema_ids;
@@ -222,7 +222,31 @@ void writeGraphMcap(const ExportedGraph& graph, std::ostream& out) {
     const auto channel = mcap.addChannel(schema->second, "/sglc/" + t.topic, "json");
     mcap.addMessage(channel, stamp_ns, t.message);
   }
+  std::size_t keyframes = 0;
+  if (points) {
+    constexpr std::size_t kMaxKeyframePoints = 100000;
+    std::map<std::string, std::uint16_t> channels;
+    for (const auto& n : graph.nodes) {
+      const auto cloud = points(n.scan_id);
+      if (!cloud) continue;
+      auto channel = channels.find(n.robot);
+      if (channel == channels.end()) {
+        if (!schema_ids.count("foxglove.PointCloud"))
+          schema_ids["foxglove.PointCloud"] =
+              mcap.addSchema("foxglove.PointCloud", "jsonschema", foxgloveSchema("foxglove.PointCloud"));
+        channel = channels
+                      .emplace(n.robot, mcap.addChannel(schema_ids["foxglove.PointCloud"],
+                                                        "/sglc/keyframes/" + topicName(n.robot), "json"))
+                      .first;
+      }
+      const auto at =
+          n.stamp && *n.stamp > 0 && *n.stamp < 1.8e10 ? static_cast<std::uint64_t>(*n.stamp * 1e9) : stamp_ns;
+      mcap.addMessage(channel->second, at, foxglovePointCloud(*cloud, n.pose, at, voxel_m, kMaxKeyframePoints));
+      ++keyframes;
+    }
+  }
   mcap.finish();
+  return keyframes;
 }
 
 }  // namespace sglc::posegraph

@@ -175,6 +175,7 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
     if (!graph) throw RpcError(grpc::StatusCode::UNAVAILABLE, "the pose graph is loading or the server is stopping");
     const auto g = posegraph::exportGraph(store, req->map(), graph->options(), robots);
     std::vector<std::pair<std::string, std::ostringstream>> files;
+    std::size_t keyframes = 0;
     if (format == "g2o") {
       files.emplace_back("graph.g2o", std::ostringstream());
       files.emplace_back("graph.ids.csv", std::ostringstream());
@@ -186,7 +187,13 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
       posegraph::writeGraphJson(g, files[0].second);
     } else {
       files.emplace_back("graph.mcap", std::ostringstream());
-      posegraph::writeGraphMcap(g, files[0].second);
+      // Keyframe points where the map kept them (store_raw), read one scan at a time.
+      keyframes = posegraph::writeGraphMcap(g, files[0].second, [&](std::int64_t scan_id) -> std::optional<Points> {
+        checkAlive(ctx);
+        auto raw = store.rawScan(scan_id);
+        if (!raw) return std::nullopt;
+        return std::move(raw->points);
+      });
     }
     v1::ExportChunk chunk;
     auto* summary = chunk.mutable_summary();
@@ -196,6 +203,7 @@ grpc::Status PoseGraphService::ExportGraph(grpc::ServerContext* ctx, const v1::E
     summary->set_odometry_edges(static_cast<std::int64_t>(g.edges.size()) - loops);
     summary->set_loops_left_out(static_cast<std::int64_t>(g.left_out.size()));
     summary->set_graph_version(g.graph_version);
+    summary->set_keyframes(static_cast<std::int64_t>(keyframes));
     constexpr std::size_t kChunk = 1 << 20;
     for (auto& [name, stream] : files) {
       const std::string data = stream.str();

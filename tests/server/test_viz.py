@@ -7,7 +7,6 @@ The page's screenshot is kept as ARTEFACT_DIR/viz_page.png. Exit 77 when grpcio/
 import json
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import urllib.request
@@ -29,6 +28,8 @@ from harness import Server  # noqa: E402
 
 harness.configure(SERVER, pb, rpc)
 INTEROP = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "interop")
+sys.path.insert(0, INTEROP)
+from stalled_viewer import stalled_viewer  # noqa: E402
 
 
 def node(script, *args, timeout=240, check=True):
@@ -51,9 +52,9 @@ def simulate(tmp):
     return seq
 
 
-def ingest(s, seq, robot, frames, m="m", token=None):
+def ingest(s, seq, robot, frames, m="m", token=None, extra=()):
     cmd = [CLI, "ingest", "--server", s.addr, "--map", m, "--robot", robot, "--session", robot, "--frames", frames,
-           "--query", "--no-progress", seq]
+           "--query", "--no-progress", *extra, seq]
     if token:
         cmd += ["--token", token]
     subprocess.run(cmd, check=True, capture_output=True, timeout=600)
@@ -129,9 +130,21 @@ def test_live_view(tmp):
         # A deleted map's topics are unadvertised: a new viewer is offered none of them.
         s.admin.DeleteMap(pb.DeleteMapRequest(map="m"))
         s.admin.CreateMap(pb.CreateMapRequest(name="other"))
-        ingest(s, seq, "c", "0:3", m="other")
+        ingest(s, seq, "c", "0:3", m="other", extra=["--store-raw"])
         _, got = node("viz_client.mjs", f"ws://127.0.0.1:{port}/", "--poses", 3)
         assert all(c["topic"].startswith("/sglc/other/") for c in got["channels"]), got["channels"]
+
+        # The MCAP export has the live view's topics, and the keyframes' points of scans stored with --store-raw.
+        out = os.path.join(tmp, "export")
+        done = subprocess.run([CLI, "export", "--server", s.addr, "--map", "other", "--format", "mcap", "--out", out],
+                              check=True, capture_output=True, text=True, timeout=120)
+        assert "3 keyframes' points" in done.stderr, done.stderr
+        r = subprocess.run(["node", os.path.join(INTEROP, "read_mcap.mjs"), os.path.join(out, "graph.mcap")],
+                           check=True, capture_output=True, text=True, timeout=120)
+        mcap = json.loads(r.stdout)
+        clouds = [m["data"] for m in mcap["messages"]["/sglc/keyframes/c"]]
+        assert len(clouds) == 3 and all(c["point_stride"] == 12 and len(c["data"]) > 1000 for c in clouds)
+        assert "foxglove.PointCloud" in mcap["indexed"]["schemas"]
     finally:
         assert s.stop() == 0
 
@@ -178,12 +191,8 @@ def test_tokens_and_hostile_viewers(tmp):
         assert code == 2 and got["error"] == "HTTP 400" and "foxglove.websocket.v1" in got["body"]
 
         # A viewer that stops reading never holds up ingest: the drive is stored, and a new viewer sees it all.
-        stalled = socket.create_connection(("127.0.0.1", s.logged_port("viz")), timeout=30)
-        stalled.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-        stalled.sendall(b"GET /?token=admin-token-123 HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\n"
-                        b"Connection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
-                        b"Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n")
-        assert b"101" in stalled.recv(12)
+        stalled, subscribed = stalled_viewer(s.logged_port("viz"), "/sglc/m/", token="admin-token-123")
+        assert len(subscribed) == 6, subscribed
         ingest(s, seq, "r2", "0:239", m="m", token="admin-token-123")
         _, got = node("viz_client.mjs", ws + "?token=admin-token-123", "--prefix", "/sglc/m/", "--poses", 244)
         assert got["topics"]["/sglc/m/trajectory/r2"]["last"]["poses"] == 239

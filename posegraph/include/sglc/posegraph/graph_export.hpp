@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <ostream>
 #include <string>
@@ -63,7 +64,12 @@ void writeG2o(const ExportedGraph& graph, std::ostream& g2o, std::ostream& ids);
 void writeLeftOutCsv(const ExportedGraph& graph, std::ostream& out);
 // MCAP in Foxglove's own schemas (JSON messages, JSON Schema), which Foxglove shows without configuration: the
 // topics of foxgloveScene (foxglove_scene.hpp) under "/sglc/", stamped with the newest scan stamp (0 without).
-void writeGraphMcap(const ExportedGraph& graph, std::ostream& out);
+// `points`, when set, gives a scan's points in its own frame (nullopt: none kept): each node's go out on
+// "/sglc/keyframes/<robot>" as foxglove.PointCloud at its pose, one point per voxel of `voxel_m`, stamped with the
+// scan's stamp. Returns the number of keyframes written.
+using ScanPoints = std::function<std::optional<Points>(std::int64_t scan_id)>;
+std::size_t writeGraphMcap(const ExportedGraph& graph, std::ostream& out, const ScanPoints& points = {},
+                           double voxel_m = 1.0);
 // One JSON document: nodes, edges (information as 36 values, the optimiser's convention) and left_out loops.
 void writeGraphJson(const ExportedGraph& graph, std::ostream& out);
 
