@@ -36,10 +36,12 @@ PORT=${SGLC_DEMO_PORT:-$(/usr/bin/python3 -c 'import socket; s = socket.socket()
 export SGLC_SERVER="127.0.0.1:$PORT"   # every sglc command below talks to it
 phase 4 "starting sglc-server on $SGLC_SERVER (SGLC_SERVER=$SGLC_SERVER; map database $WORK/map.db)"
 "$B/bin/sglc-server" --db "$WORK/map.db" --listen "$SGLC_SERVER" --set pose_graph.global_interval_s=2 \
-  > "$WORK/server.log" 2>&1 &
+  --viz-listen "127.0.0.1:${SGLC_DEMO_VIZ_PORT:-0}" > "$WORK/server.log" 2>&1 &
 SERVER=$!
 trap 'kill -TERM $SERVER 2>/dev/null; wait $SERVER 2>/dev/null || true' EXIT
 for _ in $(seq 300); do "$B/bin/sglc" health >/dev/null 2>&1 && break; sleep 0.1; done
+VIZ=$(sed -n 's/.*"event":"viz".*"port":\([0-9]*\).*/\1/p' "$WORK/server.log")
+echo "   watch it live: http://127.0.0.1:$VIZ/ in a browser, or ws://127.0.0.1:$VIZ in Foxglove"
 N=$(ls "$WORK/seq/velodyne" | wc -l)
 HALF=$((N / 2))
 phase 5 "ingesting $N scans with their drifting odometry: alpha = 0..$((HALF - 1)), bravo = $HALF..$((N - 1))"

@@ -46,7 +46,8 @@ def value(samples, name, **labels):
 
 @pytest.fixture(scope="module")
 def metrics_server(tmp_path_factory):
-    proc, address, args = start_server(tmp_path_factory.mktemp("metrics"), ["--metrics-listen", "127.0.0.1:{port}"])
+    proc, address, args = start_server(tmp_path_factory.mktemp("metrics"),
+                                       ["--metrics-listen", "127.0.0.1:{port}", "--viz-listen", "127.0.0.1:0"])
     yield address, f"http://{args[1]}/metrics"
     proc.terminate()
     proc.wait(timeout=60)
