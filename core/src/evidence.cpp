@@ -65,23 +65,19 @@ PairView pairView(const Fingerprint& query, const Fingerprint& candidate, const 
   v.narrow = v.field_deg < config.verify.background_min_view_deg;
   v.both_narrow = std::max(q, c) < config.verify.background_min_view_deg;
   if (!v.narrow) return v;
-  const auto contextOf = [&](const Fingerprint& fp) {
-    return viewContext(fp.background, fp.background_cell, config.view_search, fp.labeller_structure);
-  };
-  ViewContext own;
+  std::shared_ptr<const ViewContext> own;
   const ViewContext* query_context = known.context;
   if (!query_context) {
-    own = contextOf(query);
-    query_context = &own;
+    own = viewContextOf(query, config.view_search);
+    query_context = own.get();
   }
+  const auto other = viewContextOf(candidate, config.view_search);
   if (v.query_saw_less) {
-    const auto other = contextOf(candidate);
-    v.context = known.matcher ? known.matcher->match(other) : matchViews(*query_context, other);
+    v.context = known.matcher ? known.matcher->match(*other) : matchViews(*query_context, *other);
     v.field = query_context->field();
   } else {
-    const auto narrow = contextOf(candidate);
-    v.context = matchViews(narrow, *query_context);
-    v.field = narrow.field();
+    v.context = matchViews(*other, *query_context);
+    v.field = other->field();
   }
   return v;
 }

@@ -67,6 +67,7 @@ class Reader {
 void Fingerprint::finalize() {
   node_descriptors = nodeDescriptors(nodes, layout, d_max, d_i);
   plane_index = PlaneIndex(planes, plane_voxel);
+  view_memo.clear();
 }
 
 std::vector<std::uint8_t> serialize(const Fingerprint& fp) {

@@ -231,7 +231,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
 
 double ViewRanking::similarity(const Fingerprint& fp) const {
   if (!active_) return 0.0;
-  return matcher_->match(viewContext(fp.background, fp.background_cell, *config_, fp.labeller_structure)).similarity;
+  return matcher_->match(*viewContextOf(fp, *config_)).similarity;
 }
 
 bool Pipeline::isNarrow(const Fingerprint& scan) const {
@@ -243,8 +243,7 @@ ViewRanking Pipeline::viewRanking(const Fingerprint& query) const {
   r.query_ = &query;
   r.span_deg_ = viewSpanDeg(query.background, query.background_cell);
   if (r.span_deg_ >= config_.verify.background_min_view_deg) return r;  // a full view
-  r.context_ = std::make_shared<const ViewContext>(
-      viewContext(query.background, query.background_cell, config_.view_search, query.labeller_structure));
+  r.context_ = viewContextOf(query, config_.view_search);
   r.matcher_ = std::make_shared<const ViewMatcher>(*r.context_);
   r.config_ = &config_.view_search;
   r.active_ = config_.view_search.enabled && r.context_->seesStructure();

@@ -31,6 +31,24 @@ Row rotated(const Row& r, int shift) {
 
 }  // namespace
 
+std::shared_ptr<const ViewContext> viewContextOf(const Fingerprint& fp, const ViewSearchConfig& config) {
+  // The settings that shape the context (FNV-1a over their bytes).
+  std::uint64_t key = 1469598103934665603ULL;
+  const auto mix = [&key](const auto& value) {
+    const auto* bytes = reinterpret_cast<const unsigned char*>(&value);
+    for (std::size_t i = 0; i < sizeof value; ++i) key = (key ^ bytes[i]) * 1099511628211ULL;
+  };
+  mix(config.rings);
+  mix(config.max_range_m);
+  mix(fp.background_cell);
+  mix(fp.labeller_structure);
+  if (auto kept = fp.view_memo.find(key)) return kept;
+  auto made = std::make_shared<const ViewContext>(
+      viewContext(fp.background, fp.background_cell, config, fp.labeller_structure));
+  fp.view_memo.keep(key, made);
+  return made;
+}
+
 ViewContext viewContext(const std::vector<BevCell>& cells, double cell, const ViewSearchConfig& config, bool merged) {
   if (config.rings < 1 || !(config.max_range_m > kMinRangeM) || !(cell > 0))
     throw InputError("view context: rings must be >= 1, max_range_m above 2 m and the cell size positive");

@@ -226,3 +226,42 @@ TEST(ViewContext, OddCellsAreHarmless) {
 
 }  // namespace
 }  // namespace sglc
+
+namespace sglc {
+namespace {
+
+bool sameContext(const ViewContext& a, const ViewContext& b) {
+  const auto rowsEqual = [](const std::vector<ViewContext::Row>& x, const std::vector<ViewContext::Row>& y) {
+    return std::equal(x.begin(), x.end(), y.begin(), y.end(),
+                      [](const auto& p, const auto& q) { return p.lo == q.lo && p.hi == q.hi; });
+  };
+  return rowsEqual(a.building, b.building) && rowsEqual(a.vegetation, b.vegetation) && a.seen.lo == b.seen.lo &&
+         a.seen.hi == b.seen.hi && a.merged == b.merged;
+}
+
+TEST(ViewContext, KeptWithTheFingerprintForItsSettingsOnly) {
+  Fingerprint fp;
+  fp.background_cell = static_cast<float>(kCell);
+  fp.background = viewOf(makePlace(3), 0.4);
+  const ViewSearchConfig cfg;
+  const auto first = viewContextOf(fp, cfg);
+  EXPECT_TRUE(sameContext(*first, viewContext(fp.background, fp.background_cell, cfg)));
+  EXPECT_EQ(viewContextOf(fp, cfg).get(), first.get());  // kept: not computed again
+  ViewSearchConfig other = cfg;
+  other.rings = 20;
+  const auto fewer = viewContextOf(fp, other);  // other settings: computed for them, never the kept one
+  EXPECT_EQ(fewer->rings(), 20);
+  EXPECT_EQ(viewContextOf(fp, cfg)->rings(), cfg.rings);
+  // A copy starts empty (it may be changed), and finalize() forgets what the stored data gave.
+  Fingerprint copy = fp;
+  copy.background = viewOf(makePlace(4), 0.0);
+  EXPECT_TRUE(sameContext(*viewContextOf(copy, cfg), viewContext(copy.background, copy.background_cell, cfg)));
+  fp.labeller_structure = true;  // part of the key: merged classes
+  EXPECT_TRUE(viewContextOf(fp, cfg)->merged);
+  fp.background = copy.background;
+  fp.finalize();
+  EXPECT_TRUE(sameContext(*viewContextOf(fp, cfg), viewContext(fp.background, fp.background_cell, cfg, true)));
+}
+
+}  // namespace
+}  // namespace sglc

@@ -13,6 +13,7 @@
 #include "sglc/descriptors.hpp"
 #include "sglc/graph.hpp"
 #include "sglc/registration.hpp"
+#include "sglc/view_context_memo.hpp"
 
 namespace sglc {
 
@@ -42,6 +43,8 @@ struct Fingerprint {
   // Derived on construction and on load (not serialised): node descriptors and the plane lookup.
   Eigen::MatrixXf node_descriptors;
   PlaneIndex plane_index;
+  // The view context, on first use (viewContextOf in view_context.hpp).
+  ViewContextMemo view_memo;
 
   InstanceView instance(int node) const {
     return {instance_points.data() + instance_offsets[node],

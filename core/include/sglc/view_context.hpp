@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "sglc/background.hpp"
@@ -42,6 +43,10 @@ bool isNarrowView(const Fingerprint& fp, double min_view_deg);
 // config.rings rings.
 ViewContext viewContext(const std::vector<BevCell>& cells, double cell, const ViewSearchConfig& config,
                         bool merged = false);
+
+// viewContext of a fingerprint's background, kept with the fingerprint (Fingerprint::view_memo) for these
+// settings: computed once however many queries compare with it. Thread-safe.
+std::shared_ptr<const ViewContext> viewContextOf(const Fingerprint& fp, const ViewSearchConfig& config);
 
 struct ViewMatch {
   // Of the grid cells in the sectors `narrow` saw where either context has structure, the share where both
