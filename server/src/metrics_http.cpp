@@ -33,7 +33,6 @@ using Server = MetricsHttpServer;
 
 constexpr std::chrono::milliseconds kWriteTimeout{5000};
 constexpr std::chrono::milliseconds kFreshPoll{20};
-constexpr std::chrono::milliseconds kAcceptBackoff{100};
 
 std::string response(int code, const char* reason, const std::string& body, bool head_only,
                      const char* type = "text/plain; charset=utf-8") {
@@ -55,8 +54,6 @@ struct MetricsHttpServer::Impl {
   Impl(MetricsSource s, Limits l)
       : source(std::move(s)), limits(l), slots(limits.max_connections, limits.max_per_peer) {}
 
-  void listen(const std::string& address);
-  void accept();
   void admit(tcp::socket socket);
 
   const MetricsSource source;
@@ -174,82 +171,18 @@ class Session : public std::enable_shared_from_this<Session> {
 
 }  // namespace
 
-void MetricsHttpServer::Impl::listen(const std::string& address) {
-  const auto [host, service] = hostPort(address, "metrics");
-  beast::error_code ec;
-  tcp::resolver resolver(io);
-  const auto found = resolver.resolve(host, service, tcp::resolver::passive | tcp::resolver::numeric_service, ec);
-  if (ec) throw std::runtime_error("metrics address '" + address + "': " + ec.message());
-  std::string why = "no address";
-  for (const auto& entry : found) {
-    beast::error_code failed;
-    acceptor.open(entry.endpoint().protocol(), failed);
-    if (!failed) acceptor.set_option(asio::socket_base::reuse_address(true), failed);
-    if (!failed) acceptor.bind(entry.endpoint(), failed);
-    if (!failed) acceptor.listen(asio::socket_base::max_listen_connections, failed);
-    if (!failed) {
-      port = acceptor.local_endpoint().port();
-      return;
-    }
-    why = failed.message();
-    acceptor.close(failed);
-  }
-  throw std::runtime_error("cannot serve metrics on " + address + ": " + why);
-}
-
-void MetricsHttpServer::Impl::accept() {
-  acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
-    if (ec == asio::error::operation_aborted) return;
-    if (ec) {  // out of descriptors (the connection stays queued), or an aborted one: pause, then go on
-      backoff.expires_after(kAcceptBackoff);
-      backoff.async_wait([this](beast::error_code e) {
-        if (!e) accept();
-      });
-      return;
-    }
-    try {
-      admit(std::move(socket));
-    } catch (const std::exception&) {
-      // Out of memory for this connection: it is closed; the server goes on accepting.
-    }
-    accept();
-  });
-}
-
 void MetricsHttpServer::Impl::admit(tcp::socket socket) {
-  beast::error_code ec;
-  const auto peer = socket.remote_endpoint(ec);
-  if (ec) return;
-  const auto admission = slots.admit(peerKey(peer.address()));
-  if (!admission) return;  // every slot is busy answering: closed here, unanswered
-  for (const auto id : admission->evicted)
-    if (const auto it = sessions.find(id); it != sessions.end())
-      if (const auto evicted = it->second.lock()) evicted->evict();
-  std::shared_ptr<Session> session;
-  try {
-    session = std::make_shared<Session>(std::move(socket), *this, admission->id);
-  } catch (...) {
-    slots.leave(admission->id);
-    throw;
-  }
-  sessions[admission->id] = session;
-  session->start();
+  // Refused when every slot is busy answering: closed here, unanswered.
+  admitConnection(slots, sessions, std::move(socket),
+                  [this](tcp::socket s, auto id) { return std::make_shared<Session>(std::move(s), *this, id); });
 }
 
 MetricsHttpServer::MetricsHttpServer(const std::string& address, MetricsSource source, Limits limits)
     : impl_(std::make_unique<Impl>(std::move(source), limits)) {
-  impl_->listen(address);
-  impl_->accept();
-  impl_->thread = std::thread([impl = impl_.get()] {
-    for (;;) {
-      try {
-        impl->io.run();
-        return;
-      } catch (const std::exception&) {
-        // A handler failed (out of memory rendering an answer): that connection is dropped, the others go on.
-      }
-    }
-  });
+  impl_->port = listenOn(impl_->acceptor, address, "metrics");
+  acceptForever(impl_->acceptor, impl_->backoff,
+                [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
+  impl_->thread = runIo(impl_->io);
 }
 
 MetricsHttpServer::~MetricsHttpServer() {

@@ -48,7 +48,6 @@ constexpr const char* kSubprotocol = "foxglove.websocket.v1";
 constexpr const char* kConnections = "sglc_viz_connections_total";
 constexpr const char* kMessages = "sglc_viz_messages_total";
 constexpr std::chrono::milliseconds kWriteTimeout{10000};
-constexpr std::chrono::milliseconds kAcceptBackoff{100};
 constexpr std::size_t kMaxRequestBytes = 8192;
 
 std::string httpResponse(int code, const char* reason, const std::string& body, const char* type,
@@ -112,8 +111,6 @@ struct VizServer::Impl {
     std::uint64_t stamp_ns = 0;
   };
 
-  void listen(const std::string& address);
-  void accept();
   void admit(tcp::socket socket);
   void apply(VizUpdate update);
   // Adds the channel (advertised to the viewers allowed its map) or returns the one there is.
@@ -174,7 +171,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
     http::async_read_header(stream_, buffer_, parser_,
                             [self = shared_from_this()](beast::error_code ec, std::size_t) { self->onHead(ec); });
   }
-  void close() {
+  // Closes the connection (its slot went to a newcomer, or it fell behind).
+  void evict() {
     beast::error_code ignored;
     if (ws_)
       beast::get_lowest_layer(*ws_).socket().close(ignored);
@@ -191,7 +189,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     if (control_.size() >= server_.limits.max_control) {
       server_.count(kConnections, "dropped_slow");
       open_ = false;
-      close();
+      evict();
       return;
     }
     control_.push_back(std::move(text));
@@ -411,7 +409,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
       self->writing_ = false;
       if (ec) {
         self->open_ = false;
-        self->close();
+        self->evict();
         return;
       }
       if (self->sent_data_) self->server_.count(kMessages, "sent");
@@ -570,69 +568,11 @@ void VizServer::Impl::demandChanged() {
   if (listener) listener(now);
 }
 
-void VizServer::Impl::listen(const std::string& address) {
-  const auto [host, service] = hostPort(address, "live view");
-  beast::error_code ec;
-  tcp::resolver resolver(io);
-  const auto found = resolver.resolve(host, service, tcp::resolver::passive | tcp::resolver::numeric_service, ec);
-  if (ec) throw std::runtime_error("live view address '" + address + "': " + ec.message());
-  std::string why = "no address";
-  for (const auto& entry : found) {
-    beast::error_code failed;
-    acceptor.open(entry.endpoint().protocol(), failed);
-    if (!failed) acceptor.set_option(asio::socket_base::reuse_address(true), failed);
-    if (!failed) acceptor.bind(entry.endpoint(), failed);
-    if (!failed) acceptor.listen(asio::socket_base::max_listen_connections, failed);
-    if (!failed) {
-      port = acceptor.local_endpoint().port();
-      return;
-    }
-    why = failed.message();
-    acceptor.close(failed);
-  }
-  throw std::runtime_error("cannot serve the live view on " + address + ": " + why);
-}
-
-void VizServer::Impl::accept() {
-  acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
-    if (ec == asio::error::operation_aborted) return;
-    if (ec) {
-      backoff.expires_after(kAcceptBackoff);
-      backoff.async_wait([this](beast::error_code e) {
-        if (!e) accept();
-      });
-      return;
-    }
-    try {
-      admit(std::move(socket));
-    } catch (const std::exception&) {
-      // Out of memory for this connection: it is closed; the server goes on accepting.
-    }
-    accept();
-  });
-}
-
 void VizServer::Impl::admit(tcp::socket socket) {
-  beast::error_code ec;
-  const auto peer = socket.remote_endpoint(ec);
-  if (ec) return;
-  const auto admission = slots.admit(peerKey(peer.address()));
-  if (!admission) {
-    count(kConnections, "refused");
-    return;
-  }
-  for (const auto id : admission->evicted)
-    if (const auto it = connections.find(id); it != connections.end())
-      if (const auto evicted = it->second.lock()) evicted->close();
-  std::shared_ptr<Connection> conn;
-  try {
-    conn = std::make_shared<Connection>(std::move(socket), *this, admission->id);
-  } catch (...) {
-    slots.leave(admission->id);
-    throw;
-  }
-  connections[admission->id] = conn;
-  conn->start();
+  const bool admitted = admitConnection(slots, connections, std::move(socket), [this](tcp::socket s, auto id) {
+    return std::make_shared<Connection>(std::move(s), *this, id);
+  });
+  if (!admitted) count(kConnections, "refused");
 }
 
 VizServer::VizServer(const std::string& address, const TokenTable& tokens, Metrics* metrics, Limits limits)
@@ -647,18 +587,10 @@ VizServer::VizServer(const std::string& address, const TokenTable& tokens, Metri
       return std::vector<Metrics::Sample>{{{}, static_cast<double>(impl->viewers.load())}};
     });
   }
-  impl_->listen(address);
-  impl_->accept();
-  impl_->thread = std::thread([impl = impl_.get()] {
-    for (;;) {
-      try {
-        impl->io.run();
-        return;
-      } catch (const std::exception&) {
-        // A handler failed (out of memory): that connection is dropped, the others go on.
-      }
-    }
-  });
+  impl_->port = listenOn(impl_->acceptor, address, "the live view");
+  acceptForever(impl_->acceptor, impl_->backoff,
+                [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
+  impl_->thread = runIo(impl_->io);
 }
 
 VizServer::~VizServer() {

@@ -1,7 +1,7 @@
 """What the end-to-end server tests share: a real sglc-server on a free loopback port, status checks, and the
 runner that gives each test a temporary directory and shows its servers' logs when it fails.
 
-configure(SERVER_BINARY, sglc_pb2, sglc_pb2_grpc) first (the stubs are generated into the build tree)."""
+pb, rpc = configure(SERVER_BINARY, PYTHON_STUB_DIR) first: it imports the generated sglc.v1 stubs."""
 import os
 import shutil
 import signal
@@ -17,9 +17,13 @@ import grpc
 _binary = pb = rpc = None
 
 
-def configure(binary, pb_module, rpc_module):
+def configure(binary, stubs):
+    """The server binary the tests start, and the stubs' directory; returns the modules (sglc_pb2, sglc_pb2_grpc)."""
     global _binary, pb, rpc
-    _binary, pb, rpc = binary, pb_module, rpc_module
+    sys.path.insert(0, stubs)
+    from sglc.v1 import sglc_pb2, sglc_pb2_grpc
+    _binary, pb, rpc = binary, sglc_pb2, sglc_pb2_grpc
+    return pb, rpc
 
 
 def free_port():

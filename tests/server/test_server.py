@@ -29,15 +29,11 @@ except ImportError:
         sys.exit(77)
 
 SERVER, STUBS, DATA, SIM, CLI = sys.argv[1:6]
-sys.path.insert(0, STUBS)
-from sglc.v1 import sglc_pb2 as pb  # noqa: E402
-from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 from harness import Server, expect_code, free_port  # noqa: E402,F401
 
-harness.configure(SERVER, pb, rpc)
+pb, rpc = harness.configure(SERVER, STUBS)
 
 SEQ = os.path.join(DATA, "semantickitti_scans", "sequences", "00")
 HAVE_DATA = os.path.isdir(SEQ)

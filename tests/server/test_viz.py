@@ -18,15 +18,11 @@ except ImportError as e:
     sys.exit(77)
 
 SERVER, STUBS, SIM, CLI, ARTEFACTS = sys.argv[1:6]
-sys.path.insert(0, STUBS)
-from sglc.v1 import sglc_pb2 as pb  # noqa: E402
-from sglc.v1 import sglc_pb2_grpc as rpc  # noqa: E402
-
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import harness  # noqa: E402
 from harness import Server  # noqa: E402
 
-harness.configure(SERVER, pb, rpc)
+pb, rpc = harness.configure(SERVER, STUBS)
 INTEROP = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "interop")
 sys.path.insert(0, INTEROP)
 from stalled_viewer import stalled_viewer  # noqa: E402
