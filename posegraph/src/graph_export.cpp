@@ -225,8 +225,10 @@ std::size_t writeGraphMcap(const ExportedGraph& graph, std::ostream& out, const 
   std::size_t keyframes = 0;
   if (points) {
     constexpr std::size_t kMaxKeyframePoints = 100000;
+    std::size_t bytes = 0;
     std::map<std::string, std::uint16_t> channels;
     for (const auto& n : graph.nodes) {
+      if (bytes >= kMaxKeyframeBytes) break;  // the file stays a size one can download and open
       const auto cloud = points(n.scan_id);
       if (!cloud) continue;
       auto channel = channels.find(n.robot);
@@ -241,7 +243,9 @@ std::size_t writeGraphMcap(const ExportedGraph& graph, std::ostream& out, const 
       }
       const auto at =
           n.stamp && *n.stamp > 0 && *n.stamp < 1.8e10 ? static_cast<std::uint64_t>(*n.stamp * 1e9) : stamp_ns;
-      mcap.addMessage(channel->second, at, foxglovePointCloud(*cloud, n.pose, at, voxel_m, kMaxKeyframePoints));
+      const auto message = foxglovePointCloud(*cloud, n.pose, at, voxel_m, kMaxKeyframePoints);
+      mcap.addMessage(channel->second, at, message);
+      bytes += message.size();
       ++keyframes;
     }
   }

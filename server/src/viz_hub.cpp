@@ -44,30 +44,29 @@ VizHub::~VizHub() {
 void VizHub::setDemand(const VizDemand& demand) {
   {
     std::lock_guard lock(mutex_);
-    if (viewers_ == 0 && demand.viewers > 0) {
-      built_.clear();
-      try {
-        for (const auto& m : store_.listMaps()) dirty_.insert(m.name);
-      } catch (const std::exception& e) {
-        spdlog::warn("{}", logging::logLine({{"event", "viz_error"}, {"error", e.what()}}));
-      }
-    }
+    // From none to some viewers: every map is shown afresh (listed on the hub's thread: this is the server's).
+    if (viewers_ == 0 && demand.viewers > 0) list_maps_ = true;
     viewers_ = demand.viewers;
     watched_ = demand.viewers > 0;
-    wants_keyframes_ = demand.viewers > 0 && demand.keyframes;
-    if (!wants_keyframes_) keyframes_.clear();
+    keyframe_maps_ = demand.viewers > 0 ? demand.keyframe_maps : std::set<std::string>{};
+    wants_keyframes_ = !keyframe_maps_.empty();
+    std::erase_if(keyframes_, [this](const auto& k) { return !keyframe_maps_.count(k.first); });
   }
   wake_.notify_all();
 }
 
 void VizHub::scanStored(const std::string& map, std::int64_t scan_id, const Points& points) {
   if (!watched_.load(std::memory_order_relaxed)) return;
-  std::optional<Keyframe> keyframe;
-  if (wants_keyframes_.load(std::memory_order_relaxed)) keyframe = Keyframe{scan_id, points};  // copied unlocked
+  bool copy = false;
   {
     std::lock_guard lock(mutex_);
     dirty_.insert(map);
-    if (keyframe) keyframes_[map] = std::move(*keyframe);
+    copy = keyframe_maps_.count(map) > 0;
+  }
+  if (copy) {
+    Keyframe keyframe{scan_id, points};  // copied without the lock
+    std::lock_guard lock(mutex_);
+    if (keyframe_maps_.count(map)) keyframes_[map] = std::move(keyframe);
   }
   wake_.notify_all();
 }
@@ -76,43 +75,62 @@ void VizHub::scanStored(const std::string& map, std::int64_t scan_id, const Poin
 void VizHub::graphEvent(const std::string& map, const posegraph::GraphEvent& event) {
   // A deletion always goes out (the server forgets the map's topics even when nobody watches).
   if (!event.deleted && !watched_.load(std::memory_order_relaxed)) return;
-  {
-    std::lock_guard lock(mutex_);
-    if (event.deleted) {
-      dirty_.erase(map);
-      keyframes_.erase(map);
-      built_.erase(map);
-    } else {
-      dirty_.insert(map);
-    }
-  }
-  wake_.notify_all();
   VizUpdate update;
   update.map = map;
   update.deleted = event.deleted;
   if (!event.deleted)
     update.messages.push_back(message("events", "sglc.MapEvent", posegraph::foxgloveMapEvent(event), nowNs()));
-  sink_(std::move(update));
+  {
+    // Published under the lock, as rebuilds are: a rebuild that read the map before its deletion is dropped
+    // (generation) or went out before it, never after.
+    std::lock_guard lock(mutex_);
+    if (event.deleted) {
+      ++generation_[map];
+      dirty_.erase(map);
+      keyframes_.erase(map);
+    } else {
+      dirty_.insert(map);
+    }
+    sink_(std::move(update));  // posts: never blocks
+  }
+  wake_.notify_all();
 }
 
 void VizHub::run() {
   std::unique_lock lock(mutex_);
   for (;;) {
-    // The next map due: changed, and last rebuilt at least min_interval ago.
+    if (stopping_) return;
+    if (list_maps_ && viewers_ > 0) {
+      list_maps_ = false;
+      lock.unlock();
+      std::vector<std::string> names;
+      try {
+        for (const auto& m : store_.listMaps()) names.push_back(m.name);
+      } catch (const std::exception& e) {
+        spdlog::warn("{}", logging::logLine({{"event", "viz_error"}, {"error", e.what()}}));
+      }
+      lock.lock();
+      dirty_.insert(names.begin(), names.end());
+      continue;
+    }
+    // The next map due: changed, and last rebuilt at least min_interval ago; of those, the one rebuilt longest
+    // ago (never: first), so that every changed map gets its turn.
     const auto now = Clock::now();
     std::optional<std::string> due;
+    auto due_built = Clock::time_point::max();
     auto next = Clock::time_point::max();
     if (viewers_ > 0)
       for (const auto& map : dirty_) {
         const auto built = built_.find(map);
-        const auto at = built == built_.end() ? now : built->second + options_.min_interval;
-        if (at <= now) {
+        const auto last = built == built_.end() ? Clock::time_point::min() : built->second;
+        const auto at = built == built_.end() ? now : last + options_.min_interval;
+        if (at > now) {
+          next = std::min(next, at);
+        } else if (!due || last < due_built) {
           due = map;
-          break;
+          due_built = last;
         }
-        next = std::min(next, at);
       }
-    if (stopping_) return;
     if (!due) {
       if (next == Clock::time_point::max())
         wake_.wait(lock);
@@ -122,28 +140,31 @@ void VizHub::run() {
     }
     dirty_.erase(*due);
     built_[*due] = now;
+    const auto generation = generation_[*due];
     std::optional<Keyframe> keyframe;
     if (const auto k = keyframes_.find(*due); k != keyframes_.end()) {
       keyframe = std::move(k->second);
       keyframes_.erase(k);
     }
     lock.unlock();
+    std::optional<VizUpdate> update;
     try {
-      rebuild(*due, keyframe);
+      update = rebuild(*due, keyframe);
     } catch (const std::exception& e) {
       spdlog::warn("{}", logging::logLine({{"event", "viz_error"}, {"map", *due}, {"error", e.what()}}));
     }
     lock.lock();
+    // Deleted while it was read: the deletion went out already, and this picture of it must not follow.
+    if (update && generation_[*due] == generation) sink_(std::move(*update));
   }
 }
 
-void VizHub::rebuild(const std::string& map, const std::optional<Keyframe>& keyframe) {
+VizUpdate VizHub::rebuild(const std::string& map, const std::optional<Keyframe>& keyframe) {
   VizUpdate update;
   update.map = map;
   if (!store_.findMap(map)) {
     update.deleted = true;
-    sink_(std::move(update));
-    return;
+    return update;
   }
   const auto graph = posegraph::exportGraph(store_, map, graph_.options());
   const auto stamp_ns = posegraph::newestStampNs(graph);
@@ -160,7 +181,7 @@ void VizHub::rebuild(const std::string& map, const std::optional<Keyframe>& keyf
                     stamp_ns));
         break;
       }
-  sink_(std::move(update));
+  return update;
 }
 
 }  // namespace sglc::server

@@ -43,8 +43,8 @@ class VizHub {
   // From the server: who is watching. From no viewers to some, every map is rebuilt.
   void setDemand(const VizDemand& demand);
   // Ingest stored a scan of `map`: the map is rebuilt. `points` (the scan's, in its own frame) are copied only
-  // while a viewer subscribes to keyframes: then the map's keyframe topic shows the newest scan at its pose
-  // (a scan without an odometry pose has none and is not shown). Returns at once when no viewer is connected.
+  // while a viewer subscribes to the map's keyframe topic: then the map's keyframe topic shows the newest scan at its
+  // pose (a scan without an odometry pose has none and is not shown). Returns at once when no viewer is connected.
   void scanStored(const std::string& map, std::int64_t scan_id, const Points& points);
 
  private:
@@ -53,21 +53,25 @@ class VizHub {
     Points points;
   };
   void run();
-  void rebuild(const std::string& map, const std::optional<Keyframe>& keyframe);
+  // Builds the map's update (without the lock); returns it to be published if the map was not deleted meanwhile.
+  VizUpdate rebuild(const std::string& map, const std::optional<Keyframe>& keyframe);
   void graphEvent(const std::string& map, const posegraph::GraphEvent& event);
 
   const storage::MapStore& store_;
   posegraph::GraphOptimiser& graph_;
   const VizHubOptions options_;
   const Sink sink_;
-  std::atomic<bool> watched_{false}, wants_keyframes_{false};
+  std::atomic<bool> watched_{false}, wants_keyframes_{false};  // wants_keyframes_: keyframe_maps_ not empty
 
   std::mutex mutex_;
   std::condition_variable wake_;
   bool stopping_ = false;
   int viewers_ = 0;
-  std::set<std::string> dirty_;                                         // maps to rebuild
-  std::map<std::string, Keyframe> keyframes_;                           // the newest offered, per map
+  std::set<std::string> keyframe_maps_;              // maps whose keyframes a viewer subscribes to
+  bool list_maps_ = false;                           // list the maps (viewers came): done on the hub's thread
+  std::set<std::string> dirty_;                      // maps to rebuild
+  std::map<std::string, std::uint64_t> generation_;  // per map, bumped by its deletion
+  std::map<std::string, Keyframe> keyframes_;        // the newest offered, per map
   std::map<std::string, std::chrono::steady_clock::time_point> built_;  // last rebuild per map
   std::uint64_t subscription_ = 0;
   std::thread thread_;

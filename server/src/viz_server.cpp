@@ -47,7 +47,7 @@ using Json = nlohmann::json;
 constexpr const char* kSubprotocol = "foxglove.websocket.v1";
 constexpr const char* kConnections = "sglc_viz_connections_total";
 constexpr const char* kMessages = "sglc_viz_messages_total";
-constexpr std::chrono::milliseconds kWriteTimeout{10000};
+constexpr std::chrono::milliseconds kWriteTimeout{30000};  // one message to a viewer
 constexpr std::size_t kMaxRequestBytes = 8192;
 
 std::string httpResponse(int code, const char* reason, const std::string& body, const char* type,
@@ -132,8 +132,8 @@ struct VizServer::Impl {
   std::map<std::string, std::map<std::string, std::uint32_t>> by_map;  // map -> relative topic -> channel id
   std::uint32_t next_channel = 1;
   std::atomic<int> viewers{0};
-  int keyframe_subscriptions = 0;
   VizDemand told;
+  bool told_once = false;
   std::mutex listener_mutex;
   std::function<void(const VizDemand&)> listener;
   asio::io_context io{1};
@@ -151,7 +151,7 @@ using Server = VizServer::Impl;
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
   Connection(tcp::socket socket, Server& server, ConnectionSlots::Id id)
-      : stream_(std::move(socket)), server_(server), id_(id) {
+      : stream_(std::move(socket)), server_(server), id_(id), write_timer_(stream_.get_executor()) {
     parser_.header_limit(kMaxRequestBytes);
   }
   ~Connection() {
@@ -159,7 +159,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
     server_.connections.erase(id_);
     if (ws_) {
       --server_.viewers;
-      server_.keyframe_subscriptions -= keyframeSubscriptions();
       server_.demandChanged();
     }
   }
@@ -182,7 +181,13 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
   bool viewer() const { return ws_ && open_; }
   const TokenTable::Grant& grant() const { return grant_; }
-
+  // The maps whose keyframe topic this viewer subscribes to, added to `maps`.
+  void keyframeMaps(std::set<std::string>* maps) const {
+    for (const auto& [channel, sub] : subscription_of_)
+      if (const auto c = server_.channels.find(channel);
+          c != server_.channels.end() && c->second.relative == "keyframe")
+        maps->insert(c->second.map);
+  }
   // Protocol messages (advertise, status, ...), in order; a viewer too far behind on them is dropped.
   void sendText(std::string text) {
     if (!viewer()) return;
@@ -209,7 +214,6 @@ class Connection : public std::enable_shared_from_this<Connection> {
     for (const auto id : ids) {
       const auto sub = subscription_of_.find(id);
       if (sub == subscription_of_.end()) continue;
-      if (isKeyframe(id)) --server_.keyframe_subscriptions;
       subscriptions_.erase(sub->second);
       subscription_of_.erase(sub);
       data_.erase(id);
@@ -282,16 +286,14 @@ class Connection : public std::enable_shared_from_this<Connection> {
       res.set(http::field::sec_websocket_protocol, kSubprotocol);
       res.set(http::field::server, std::string("sglc-server ") + kVersion);
     }));
-    ++server_.viewers;
-    open_ = true;
+    ++server_.viewers;  // counted from here: the destructor uncounts every connection with ws_
+    // open_ (frames may be written) only once the handshake is done: before, Beast would write as a client.
     ws_->async_accept(request, [self = shared_from_this()](beast::error_code e) { self->onAccepted(e); });
   }
 
   void onAccepted(beast::error_code ec) {
-    if (ec) {
-      open_ = false;
-      return;
-    }
+    if (ec) return;
+    open_ = true;
     server_.count(kConnections, "accepted");
     server_.demandChanged();
     sendText(Json({{"op", "serverInfo"},
@@ -320,7 +322,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   }
 
   void status(int level, const std::string& message) {
-    sendText(Json({{"op", "status"}, {"level", level}, {"message", message}}).dump());
+    // The message may quote a client's text cut anywhere: invalid UTF-8 is replaced, never thrown on.
+    sendText(Json({{"op", "status"}, {"level", level}, {"message", message}})
+                 .dump(-1, ' ', false, Json::error_handler_t::replace));
   }
 
   void onMessage() {
@@ -365,10 +369,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
       }
       subscriptions_[sub] = channel_id;
       subscription_of_[channel_id] = sub;
-      if (isKeyframe(channel_id)) {
-        ++server_.keyframe_subscriptions;
-        server_.demandChanged();
-      }
+      if (isKeyframe(channel_id)) server_.demandChanged();
       sendData(c->second);
     }
   }
@@ -382,13 +383,11 @@ class Connection : public std::enable_shared_from_this<Connection> {
         status(1, "no subscription " + s.dump().substr(0, 32));
         continue;
       }
-      if (isKeyframe(it->second)) {
-        --server_.keyframe_subscriptions;
-        server_.demandChanged();
-      }
+      const bool keyframe = isKeyframe(it->second);
       data_.erase(it->second);
       subscription_of_.erase(it->second);
       subscriptions_.erase(it);
+      if (keyframe) server_.demandChanged();
     }
   }
 
@@ -396,17 +395,23 @@ class Connection : public std::enable_shared_from_this<Connection> {
     const auto c = server_.channels.find(channel);
     return c != server_.channels.end() && c->second.relative == "keyframe";
   }
-  int keyframeSubscriptions() const {
-    int n = 0;
-    for (const auto& [channel, sub] : subscription_of_) n += isKeyframe(channel) ? 1 : 0;
-    return n;
-  }
 
   // One write at a time: protocol messages first, then the data waiting, channel after channel.
   void writeNext() {
     if (writing_ || !viewer()) return;
+    // A write that does not finish within kWriteTimeout (a viewer that reads nothing but keeps sending, which
+    // keeps the idle timeout from firing) drops the viewer.
+    write_timer_.expires_after(kWriteTimeout);
+    write_timer_.async_wait([weak = weak_from_this()](beast::error_code ec) {
+      const auto self = weak.lock();
+      if (ec || !self || !self->writing_) return;
+      self->server_.count(kConnections, "dropped_slow");
+      self->open_ = false;
+      self->evict();
+    });
     auto done = [self = shared_from_this()](beast::error_code ec, std::size_t) {
       self->writing_ = false;
+      self->write_timer_.cancel();
       if (ec) {
         self->open_ = false;
         self->evict();
@@ -469,6 +474,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::string text_;
   Pending in_flight_;
   std::array<unsigned char, 13> header_{};
+  asio::steady_timer write_timer_;
 };
 
 }  // namespace
@@ -508,11 +514,12 @@ void VizServer::Impl::removeChannels(const std::vector<std::uint32_t>& ids) {
   if (ids.empty()) return;
   for (const auto& [cid, weak] : connections) {
     const auto conn = weak.lock();
-    if (!conn || !conn->viewer()) continue;
+    if (!conn) continue;
+    conn->channelsRemoved(ids);  // also one dropped but not yet gone: its keyframe subscriptions end here
+    if (!conn->viewer()) continue;
     Json gone = Json::array();
     for (const auto id : ids)
       if (conn->grant().allows(channels.at(id).map)) gone.push_back(id);
-    conn->channelsRemoved(ids);
     if (!gone.empty()) conn->sendText(Json({{"op", "unadvertise"}, {"channelIds", gone}}).dump());
   }
   for (const auto id : ids) {
@@ -561,9 +568,12 @@ void VizServer::Impl::apply(VizUpdate update) {
 }
 
 void VizServer::Impl::demandChanged() {
-  const VizDemand now{viewers.load(), keyframe_subscriptions > 0};
-  if (now.viewers == told.viewers && now.keyframes == told.keyframes) return;
+  VizDemand now{viewers.load(), {}};
+  for (const auto& [id, weak] : connections)
+    if (const auto conn = weak.lock(); conn && conn->viewer()) conn->keyframeMaps(&now.keyframe_maps);
+  if (told_once && now.viewers == told.viewers && now.keyframe_maps == told.keyframe_maps) return;
   told = now;
+  told_once = true;
   std::lock_guard lock(listener_mutex);
   if (listener) listener(now);
 }
@@ -577,7 +587,8 @@ void VizServer::Impl::admit(tcp::socket socket) {
 
 VizServer::VizServer(const std::string& address, const TokenTable& tokens, Metrics* metrics, Limits limits)
     : impl_(std::make_unique<Impl>(tokens, metrics, limits)) {
-  if (metrics) {
+  impl_->port = listenOn(impl_->acceptor, address, "the live view");
+  if (metrics) {  // after the bind: a gauge must not outlive a server that failed to start
     metrics->counter(kConnections,
                      "Live-view WebSocket connections by result: accepted, unauthenticated, bad_request (no "
                      "foxglove.websocket.v1), refused (no free slot), dropped_slow (too far behind)");
@@ -587,7 +598,6 @@ VizServer::VizServer(const std::string& address, const TokenTable& tokens, Metri
       return std::vector<Metrics::Sample>{{{}, static_cast<double>(impl->viewers.load())}};
     });
   }
-  impl_->port = listenOn(impl_->acceptor, address, "the live view");
   acceptForever(impl_->acceptor, impl_->backoff,
                 [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
   impl_->thread = runIo(impl_->io);
@@ -612,7 +622,7 @@ void VizServer::onDemand(std::function<void(const VizDemand&)> listener) {
   }
   // The demand as it is now, to the new listener (viewers may have come before it).
   asio::post(impl_->io, [impl = impl_.get()] {
-    impl->told.viewers = -1;
+    impl->told_once = false;
     impl->demandChanged();
   });
 }

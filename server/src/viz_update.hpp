@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -27,8 +28,8 @@ struct VizUpdate {
 
 // What the viewers ask for, as the server tells the hub.
 struct VizDemand {
-  int viewers = 0;         // connected: none, and the hub builds nothing
-  bool keyframes = false;  // some viewer subscribes to a keyframe topic
+  int viewers = 0;                      // connected: none, and the hub builds nothing
+  std::set<std::string> keyframe_maps;  // maps whose keyframe topic some viewer subscribes to
 };
 
 }  // namespace sglc::server

@@ -42,7 +42,8 @@ std::uint64_t newestStampNs(const ExportedGraph& graph);
 std::vector<FoxgloveTopic> foxgloveScene(const ExportedGraph& graph, std::uint64_t stamp_ns);
 
 // foxglove.PointCloud of `points` (in the scan's frame) at `pose` in frame "map", keeping the first point of each
-// voxel of `voxel_m` (> 0) in input order, points beyond 500 km dropped, at most `max_points`.
+// voxel of `voxel_m` (> 0) in input order, at most `max_points` (the first voxels in scan order). Points farther
+// than min(500 km, 2^19 voxels) on any axis are dropped (210 km at 0.4 m).
 std::string foxglovePointCloud(const Points& points, const Mat4d& pose, std::uint64_t stamp_ns, double voxel_m,
                                std::size_t max_points);
 

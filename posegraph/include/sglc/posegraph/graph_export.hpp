@@ -66,7 +66,8 @@ void writeLeftOutCsv(const ExportedGraph& graph, std::ostream& out);
 // topics of foxgloveScene (foxglove_scene.hpp) under "/sglc/", stamped with the newest scan stamp (0 without).
 // `points`, when set, gives a scan's points in its own frame (nullopt: none kept): each node's go out on
 // "/sglc/keyframes/<robot>" as foxglove.PointCloud at its pose, one point per voxel of `voxel_m`, stamped with the
-// scan's stamp. Returns the number of keyframes written.
+// scan's stamp, in node order until kMaxKeyframeBytes of them are written. Returns the number of keyframes written.
+inline constexpr std::size_t kMaxKeyframeBytes = std::size_t{256} << 20;
 using ScanPoints = std::function<std::optional<Points>(std::int64_t scan_id)>;
 std::size_t writeGraphMcap(const ExportedGraph& graph, std::ostream& out, const ScanPoints& points = {},
                            double voxel_m = 1.0);
