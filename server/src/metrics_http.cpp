@@ -62,11 +62,7 @@ struct MetricsHttpServer::Impl {
   // after it: declared before it, so they outlive it).
   ConnectionSlots slots;
   std::map<ConnectionSlots::Id, std::weak_ptr<Session>> sessions;
-  asio::io_context io{1};
-  tcp::acceptor acceptor{io};
-  asio::steady_timer backoff{io};
-  int port = 0;
-  std::thread thread;
+  TcpEndpoint net;  // last: its connections use the members above
 };
 
 namespace {
@@ -179,17 +175,11 @@ void MetricsHttpServer::Impl::admit(tcp::socket socket) {
 
 MetricsHttpServer::MetricsHttpServer(const std::string& address, MetricsSource source, Limits limits)
     : impl_(std::make_unique<Impl>(std::move(source), limits)) {
-  impl_->port = listenOn(impl_->acceptor, address, "metrics");
-  acceptForever(impl_->acceptor, impl_->backoff,
-                [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
-  impl_->thread = runIo(impl_->io);
+  impl_->net.start(address, "metrics", [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
 }
 
-MetricsHttpServer::~MetricsHttpServer() {
-  impl_->io.stop();
-  impl_->thread.join();
-}
+MetricsHttpServer::~MetricsHttpServer() { impl_->net.stop(); }
 
-int MetricsHttpServer::port() const { return impl_->port; }
+int MetricsHttpServer::port() const { return impl_->net.port(); }
 
 }  // namespace sglc::server

@@ -37,6 +37,38 @@ std::thread runIo(boost::asio::io_context& io);
 // One peer: an IPv4 address (also when it comes IPv4-mapped), or an IPv6 /64 (what one host or site is given).
 std::string peerKey(const boost::asio::ip::address& a);
 
+// One small endpoint's I/O: an io_context on a thread of its own, its acceptor and the accept back-off. Declare it
+// after what its connections use: destroying it destroys the connections still open.
+class TcpEndpoint {
+ public:
+  TcpEndpoint() = default;
+  ~TcpEndpoint() { stop(); }
+  TcpEndpoint(const TcpEndpoint&) = delete;
+  TcpEndpoint& operator=(const TcpEndpoint&) = delete;
+
+  // Binds host:port (listenOn: throws naming `what`), accepts into `admit`, and starts the thread.
+  void start(const std::string& address, const std::string& what,
+             std::function<void(boost::asio::ip::tcp::socket)> admit) {
+    port_ = listenOn(acceptor_, address, what);
+    acceptForever(acceptor_, backoff_, std::move(admit));
+    thread_ = runIo(io);
+  }
+  // Stops the thread (handlers no longer run); once only.
+  void stop() {
+    io.stop();
+    if (thread_.joinable()) thread_.join();
+  }
+  int port() const { return port_; }
+
+  boost::asio::io_context io{1};
+
+ private:
+  boost::asio::ip::tcp::acceptor acceptor_{io};
+  boost::asio::steady_timer backoff_{io};
+  int port_ = 0;
+  std::thread thread_;
+};
+
 // Admits a connection into `slots` (its peer: peerKey of its address) and `open`: the connections whose slots it
 // took are told to evict(), then `make(socket, id)` gives its session (a shared_ptr to Session), which is kept
 // (weakly) and start()ed. Returns false when every slot is busy answering: the socket is closed unanswered.

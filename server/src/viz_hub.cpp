@@ -49,7 +49,6 @@ void VizHub::setDemand(const VizDemand& demand) {
     viewers_ = demand.viewers;
     watched_ = demand.viewers > 0;
     keyframe_maps_ = demand.viewers > 0 ? demand.keyframe_maps : std::set<std::string>{};
-    wants_keyframes_ = !keyframe_maps_.empty();
     std::erase_if(keyframes_, [this](const auto& k) { return !keyframe_maps_.count(k.first); });
   }
   wake_.notify_all();

@@ -61,7 +61,7 @@ class VizHub {
   posegraph::GraphOptimiser& graph_;
   const VizHubOptions options_;
   const Sink sink_;
-  std::atomic<bool> watched_{false}, wants_keyframes_{false};  // wants_keyframes_: keyframe_maps_ not empty
+  std::atomic<bool> watched_{false};  // viewers are connected
 
   std::mutex mutex_;
   std::condition_variable wake_;

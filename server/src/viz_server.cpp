@@ -136,11 +136,7 @@ struct VizServer::Impl {
   bool told_once = false;
   std::mutex listener_mutex;
   std::function<void(const VizDemand&)> listener;
-  asio::io_context io{1};
-  tcp::acceptor acceptor{io};
-  asio::steady_timer backoff{io};
-  int port = 0;
-  std::thread thread;
+  TcpEndpoint net;  // last: its connections use the members above
 };
 
 namespace {
@@ -587,32 +583,29 @@ void VizServer::Impl::admit(tcp::socket socket) {
 
 VizServer::VizServer(const std::string& address, const TokenTable& tokens, Metrics* metrics, Limits limits)
     : impl_(std::make_unique<Impl>(tokens, metrics, limits)) {
-  impl_->port = listenOn(impl_->acceptor, address, "the live view");
-  if (metrics) {  // after the bind: a gauge must not outlive a server that failed to start
+  if (metrics) {  // before the first connection counts
     metrics->counter(kConnections,
                      "Live-view WebSocket connections by result: accepted, unauthenticated, bad_request (no "
                      "foxglove.websocket.v1), refused (no free slot), dropped_slow (too far behind)");
     metrics->counter(kMessages,
                      "Live-view messages to viewers: sent, or skipped (a newer one of the topic came first)");
+  }
+  impl_->net.start(address, "the live view",
+                   [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
+  // After the bind: the gauge reads this server, which must not have failed to start.
+  if (metrics)
     metrics->gauge("sglc_viz_viewers", "Live-view WebSocket viewers connected", [impl = impl_.get()] {
       return std::vector<Metrics::Sample>{{{}, static_cast<double>(impl->viewers.load())}};
     });
-  }
-  acceptForever(impl_->acceptor, impl_->backoff,
-                [impl = impl_.get()](tcp::socket socket) { impl->admit(std::move(socket)); });
-  impl_->thread = runIo(impl_->io);
 }
 
-VizServer::~VizServer() {
-  impl_->io.stop();
-  impl_->thread.join();
-}
+VizServer::~VizServer() { impl_->net.stop(); }
 
-int VizServer::port() const { return impl_->port; }
+int VizServer::port() const { return impl_->net.port(); }
 int VizServer::viewers() const { return impl_->viewers.load(); }
 
 void VizServer::publish(VizUpdate update) {
-  asio::post(impl_->io, [impl = impl_.get(), u = std::move(update)]() mutable { impl->apply(std::move(u)); });
+  asio::post(impl_->net.io, [impl = impl_.get(), u = std::move(update)]() mutable { impl->apply(std::move(u)); });
 }
 
 void VizServer::onDemand(std::function<void(const VizDemand&)> listener) {
@@ -621,7 +614,7 @@ void VizServer::onDemand(std::function<void(const VizDemand&)> listener) {
     impl_->listener = std::move(listener);
   }
   // The demand as it is now, to the new listener (viewers may have come before it).
-  asio::post(impl_->io, [impl = impl_.get()] {
+  asio::post(impl_->net.io, [impl = impl_.get()] {
     impl->told_once = false;
     impl->demandChanged();
   });
