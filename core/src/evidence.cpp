@@ -104,11 +104,12 @@ double bandOverlap(const Fingerprint& query, const Fingerprint& candidate, const
   std::vector<bool> reached(query.planes.size(), false);
   const Eigen::Matrix3f R = T.topLeftCorner<3, 3>().cast<float>();
   const Vec3f t = T.topRightCorner<3, 1>().cast<float>();
+  const auto index = planeIndexOf(query, config.max_corr_m);
   for (const auto& p : candidate.planes) {
     if (p.centroid.z() > max_z) continue;
     ++in_candidate;
-    const int q = query.plane_index.nearest(query.planes, R * p.centroid + t, R * p.normal, config.max_corr_m,
-                                            config.min_normal_cosine);
+    const int q =
+        index->nearest(query.planes, R * p.centroid + t, R * p.normal, config.max_corr_m, config.min_normal_cosine);
     // Only the band's planes count on either side: the share stays within [0, 1].
     if (q < 0 || query.planes[static_cast<std::size_t>(q)].centroid.z() > max_z) continue;
     ++explained;

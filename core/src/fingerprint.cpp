@@ -66,8 +66,18 @@ class Reader {
 
 void Fingerprint::finalize() {
   node_descriptors = nodeDescriptors(nodes, layout, d_max, d_i);
-  plane_index = PlaneIndex(planes, plane_voxel);
   view_memo.clear();
+  plane_memo.clear();
+}
+
+std::shared_ptr<const PlaneIndex> planeIndexOf(const Fingerprint& fp, double radius) {
+  std::uint64_t key = 0;
+  static_assert(sizeof key == sizeof radius);
+  std::memcpy(&key, &radius, sizeof key);
+  if (auto kept = fp.plane_memo.find(key)) return kept;
+  auto made = std::make_shared<const PlaneIndex>(fp.planes, radius);
+  fp.plane_memo.keep(key, made);
+  return made;
 }
 
 std::vector<std::uint8_t> serialize(const Fingerprint& fp) {

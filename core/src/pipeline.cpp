@@ -168,7 +168,8 @@ void Pipeline::refine(const Fingerprint& query, const Fingerprint& candidate, Lo
   std::tuple<double, double, double> best{-1.0, 0.0, 0.0};
   if (r.refined) best = {evidence(r.T, r.fitness, r.rmse), r.fitness, -r.rmse};
   for (const auto& h : searchBevPose(query.background, candidate.background, query.background_cell, c.bev_search)) {
-    const auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, h.T, c.refine);
+    const auto ref =
+        refinePlanes(query.planes, *planeIndexOf(query, c.refine.max_corr_m), candidate.planes, {}, h.T, c.refine);
     if (ref.iterations == 0 || ref.correspondences < c.bev_search.min_correspondences) continue;
     const std::tuple<double, double, double> e{evidence(ref.T, ref.fitness, ref.rmse), ref.fitness, -ref.rmse};
     if (!(e > best)) continue;
@@ -201,13 +202,15 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
   }
   bool kept = false;
   if (c.refine.enabled) {
-    auto ref = refinePlanes(query.planes, query.plane_index, candidate.planes, anchor, T, c.refine);
+    auto ref =
+        refinePlanes(query.planes, *planeIndexOf(query, c.refine.max_corr_m), candidate.planes, anchor, T, c.refine);
     kept = ref.iterations > 0 && detail::movedWithin(T, ref.T, c.refine.max_shift_m, c.refine.max_turn_deg);
     // Guard: the fine stage led the planes to a loose fit (refine.max_rmse_m) where the planes alone, from the
     // pose before it, fit within that bar and explain at least as many planes: then the instance points locked
     // onto something else, and the fine stage's pose is dropped.
     if (kept && !anchor.empty() && ref.rmse > c.refine.max_rmse_m) {
-      auto alone = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, r.T, c.refine);
+      auto alone =
+          refinePlanes(query.planes, *planeIndexOf(query, c.refine.max_corr_m), candidate.planes, {}, r.T, c.refine);
       if (alone.iterations > 0 && alone.rmse <= c.refine.max_rmse_m && alone.fitness >= ref.fitness &&
           detail::movedWithin(r.T, alone.T, c.refine.max_shift_m, c.refine.max_turn_deg))
         ref = std::move(alone);
@@ -219,7 +222,7 @@ bool Pipeline::refinePose(const Fingerprint& query, const Fingerprint& candidate
       // Guard: the planes moved too far to trust; report how well they fit at the pose that stays.
       RefineConfig at = c.refine;
       at.max_iterations = 0;
-      ref = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, T, at);
+      ref = refinePlanes(query.planes, *planeIndexOf(query, c.refine.max_corr_m), candidate.planes, {}, T, at);
     }
     r.fitness = ref.fitness;
     r.rmse = ref.rmse;

@@ -334,45 +334,6 @@ IcpResult icpInstances(const std::vector<std::pair<InstanceView, InstanceView>>&
   return result;
 }
 
-PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double voxel) : map_(planes.size() + 1), voxel_(voxel) {
-  const double inv = 1.0 / voxel;
-  next_.assign(planes.size(), -1);
-  for (int i = static_cast<int>(planes.size()) - 1; i >= 0; --i) {
-    const Vec3f& c = planes[i].centroid;
-    bool inserted = false;
-    int& head =
-        map_.findOrInsert(packCell(static_cast<int>(std::floor(c.x() * inv)), static_cast<int>(std::floor(c.y() * inv)),
-                                   static_cast<int>(std::floor(c.z() * inv))),
-                          i, &inserted);
-    if (!inserted) {
-      next_[i] = head;
-      head = i;
-    }
-  }
-}
-
-int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
-                        double min_cos) const {
-  const double inv = 1.0 / voxel_;
-  const int reach = std::max(1, static_cast<int>(std::ceil(max_dist * inv)));
-  const int cx = static_cast<int>(std::floor(p.x() * inv)), cy = static_cast<int>(std::floor(p.y() * inv)),
-            cz = static_cast<int>(std::floor(p.z() * inv));
-  float best = static_cast<float>(max_dist * max_dist);
-  int arg = -1;
-  const float mc = static_cast<float>(min_cos);
-  for (int dx = -reach; dx <= reach; ++dx)
-    for (int dy = -reach; dy <= reach; ++dy)
-      for (int dz = -reach; dz <= reach; ++dz)
-        for (int i = map_.find(packCell(cx + dx, cy + dy, cz + dz)); i >= 0; i = next_[i]) {
-          const float d2 = (planes[i].centroid - p).squaredNorm();
-          if (d2 < best && std::abs(planes[i].normal.dot(n)) >= mc) {
-            best = d2;
-            arg = i;
-          }
-        }
-  return arg;
-}
-
 namespace {
 
 using Vec6 = Eigen::Matrix<double, 6, 1>;

@@ -59,7 +59,7 @@ void Pipeline::judge(const Fingerprint& query, const Fingerprint& candidate, con
   bool fitted = false;
   if (c.verify.fit_max_shift_m > 0 && c.refine.enabled &&
       nearAgreement(query, candidate, view, T0) >= kFitMinAgreement) {
-    planes = refinePlanes(query.planes, query.plane_index, candidate.planes, {}, T0, c.refine);
+    planes = refinePlanes(query.planes, *planeIndexOf(query, c.refine.max_corr_m), candidate.planes, {}, T0, c.refine);
     fitted =
         planes.iterations > 0 && detail::movedWithin(T0, planes.T, c.verify.fit_max_shift_m, c.verify.fit_max_turn_deg);
     if (fitted) r.T = planes.T;

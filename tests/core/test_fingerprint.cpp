@@ -86,9 +86,10 @@ void expectSameFingerprint(const Fingerprint& a, const Fingerprint& b) {
   ASSERT_EQ(a.node_descriptors.cols(), b.node_descriptors.cols());
   EXPECT_TRUE((a.node_descriptors.array() == b.node_descriptors.array()).all());
   // The plane lookups agree.
+  const auto ia = planeIndexOf(a, 1.0), ib = planeIndexOf(b, 1.0);
   for (std::size_t i = 0; i < a.planes.size(); ++i)
-    EXPECT_EQ(a.plane_index.nearest(a.planes, a.planes[i].centroid, a.planes[i].normal, 1.0, 0.9),
-              b.plane_index.nearest(b.planes, b.planes[i].centroid, b.planes[i].normal, 1.0, 0.9));
+    EXPECT_EQ(ia->nearest(a.planes, a.planes[i].centroid, a.planes[i].normal, 1.0, 0.9),
+              ib->nearest(b.planes, b.planes[i].centroid, b.planes[i].normal, 1.0, 0.9));
 }
 
 void expectExactRoundTrip(const Fingerprint& fp) {

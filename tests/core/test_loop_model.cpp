@@ -204,7 +204,8 @@ TEST(Evidence, IsStrongerAtTheTruePose) {
   const PairView view = pairView(a, b, p.config());
   EXPECT_FALSE(view.narrow);
   EXPECT_GE(view.field_deg, 300.0);
-  const auto planes = refinePlanes(a.planes, a.plane_index, b.planes, {}, T, p.config().refine);
+  const auto planes =
+      refinePlanes(a.planes, *planeIndexOf(a, p.config().refine.max_corr_m), b.planes, {}, T, p.config().refine);
   const Evidence at = measureEvidence(a, b, view, PoseSource::kLandmarks, planes.T, &planes, p.config());
   Mat4d off = T;
   off(1, 3) += 3.0;
@@ -232,8 +233,6 @@ TEST(Evidence, BandOverlapCountsTheBandOnBothSides) {
   // of all four (its sensor stood 3 m lower).
   query.planes = {wall(5, 0, 0), wall(5, 4, 3.5), wall(5, 8, 3.5), wall(5, 12, 3.5)};
   candidate.planes = {wall(5, 0, 0), wall(5, 4, 0.5), wall(5, 8, 0.5), wall(5, 12, 0.5)};
-  query.plane_index = PlaneIndex(query.planes, 1.0);
-  candidate.plane_index = PlaneIndex(candidate.planes, 1.0);
   RefineConfig rc;
   rc.max_corr_m = 4.0;
   Mat4d up = Mat4d::Identity();
@@ -242,7 +241,7 @@ TEST(Evidence, BandOverlapCountsTheBandOnBothSides) {
   // Without the lift only the plane at y = 0 meets a query band plane; the others reach planes above the band.
   EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, Mat4d::Identity(), 1.0, rc), 1.0);
   query.planes[0].centroid.y() = 30;  // the query's band plane elsewhere: nothing in the band is explained
-  query.plane_index = PlaneIndex(query.planes, 1.0);
+  query.plane_memo.clear();           // its planes changed: the lookup is built again
   EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, Mat4d::Identity(), 1.0, rc), 0.0);
   EXPECT_DOUBLE_EQ(bandOverlap(query, candidate, up, 1.0, rc), 0.0);
 }

@@ -759,7 +759,8 @@ TEST(SyntheticPipeline, ACorridorIsPinnedByWhatChangesAlongIt) {
     const Fingerprint fq = p.fingerprint(test::viewFrom(world, Mat4d::Identity()));
     const Fingerprint fc = p.fingerprint(test::viewFrom(world, T));
     ASSERT_TRUE(fq.nodes.empty());
-    const auto planes = refinePlanes(fq.planes, fq.plane_index, fc.planes, {}, T, p.config().refine);
+    const auto planes =
+        refinePlanes(fq.planes, *planeIndexOf(fq, p.config().refine.max_corr_m), fc.planes, {}, T, p.config().refine);
     EXPECT_LT(planes.horizontal_constraint, 0.5);
     EXPECT_NEAR(std::abs(planes.weak_shift.x()), 1.0, 0.01) << planes.weak_shift.transpose();
     const LoopResult r = p.match(fq, fc);

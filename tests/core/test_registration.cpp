@@ -400,22 +400,5 @@ TEST(RefinePlanes, TooFewPlanesKeepsStart) {
   EXPECT_TRUE(none.T.allFinite());
 }
 
-TEST(PlaneIndex, NearestRespectsDistanceAndNormal) {
-  std::vector<Plane> planes(3);
-  planes[0].centroid = Vec3f(0.2f, 0.2f, 0.2f);
-  planes[0].normal = Vec3f(0, 0, 1);
-  planes[1].centroid = Vec3f(0.4f, 0.2f, 0.2f);  // same voxel as plane 0
-  planes[1].normal = Vec3f(1, 0, 0);
-  planes[2].centroid = Vec3f(3.0f, 0.0f, 0.0f);
-  planes[2].normal = Vec3f(0, 0, -1);
-  const PlaneIndex index(planes, 1.0);
-  EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(0, 0, 1), 1.0, 0.9), 0);  // 1 is closer, wrong n
-  EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(1, 0, 0), 1.0, 0.9), 1);
-  EXPECT_EQ(index.nearest(planes, Vec3f(0.45f, 0.2f, 0.2f), Vec3f(-1, 0, 0), 1.0, 0.9), 1);  // |cos|
-  EXPECT_EQ(index.nearest(planes, Vec3f(2.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), 2);    // other voxel
-  EXPECT_EQ(index.nearest(planes, Vec3f(1.5f, 0.0f, 0.0f), Vec3f(0, 0, 1), 1.0, 0.9), -1);   // none within 1 m
-  EXPECT_EQ(PlaneIndex().nearest({}, Vec3f::Zero(), Vec3f::UnitZ(), 1.0, 0.9), -1);
-}
-
 }  // namespace
 }  // namespace sglc

@@ -180,10 +180,11 @@ void checkAccepted(const std::string& blob, const Fingerprint& fp, fuzz::Verdict
   else if (!fp.node_descriptors.allFinite())
     v.fail("node_descriptors has non-finite values");
   // The derived plane lookup finds only existing planes.
+  const auto index = planeIndexOf(fp, 1.0);
   for (std::size_t i = 0; i < fp.planes.size() && i < 64; ++i) {
-    const int k = fp.plane_index.nearest(fp.planes, fp.planes[i].centroid, fp.planes[i].normal, 1.0, 0.0);
+    const int k = index->nearest(fp.planes, fp.planes[i].centroid, fp.planes[i].normal, 1.0, 0.0);
     if (k < 0 || k >= static_cast<int>(fp.planes.size())) {
-      v.fail("plane_index.nearest does not find plane " + std::to_string(i) + " at its own centroid");
+      v.fail("the plane lookup does not find plane " + std::to_string(i) + " at its own centroid");
       break;
     }
   }

@@ -6,16 +6,20 @@
 
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <span>
 #include <vector>
 
 #include "sglc/background.hpp"
+#include "sglc/derived_memo.hpp"
 #include "sglc/descriptors.hpp"
 #include "sglc/graph.hpp"
+#include "sglc/plane_index.hpp"
 #include "sglc/registration.hpp"
-#include "sglc/view_context_memo.hpp"
 
 namespace sglc {
+
+struct ViewContext;
 
 struct Fingerprint {
   // Parameters the stored data depends on (kept so that a loaded fingerprint is self-describing).
@@ -40,11 +44,12 @@ struct Fingerprint {
   std::vector<float> descriptor;  // scan descriptor (layout.scanDim())
   std::uint32_t num_points = 0;   // points in the source scan
 
-  // Derived on construction and on load (not serialised): node descriptors and the plane lookup.
+  // Derived on construction and on load (not serialised): node descriptors.
   Eigen::MatrixXf node_descriptors;
-  PlaneIndex plane_index;
-  // The view context, on first use (viewContextOf in view_context.hpp).
-  ViewContextMemo view_memo;
+  // Derived on first use and kept: the view context (viewContextOf in view_context.hpp) and the plane lookup
+  // (planeIndexOf below). A stored scan that never serves as a query never builds its plane lookup.
+  DerivedMemo<ViewContext> view_memo;
+  DerivedMemo<PlaneIndex> plane_memo;
 
   InstanceView instance(int node) const {
     return {instance_points.data() + instance_offsets[node],
@@ -53,6 +58,10 @@ struct Fingerprint {
   // Recomputes the derived members from the stored ones.
   void finalize();
 };
+
+// The lookup of fp's planes within `radius` metres (PlaneIndex), built on first use and kept with fp for that
+// radius. Thread-safe.
+std::shared_ptr<const PlaneIndex> planeIndexOf(const Fingerprint& fp, double radius);
 
 // 2: the scan descriptor's edge histogram is soft-binned. 3: the background view holds only structure within
 // background_max_z of the sensor, and the descriptor's background part is the structure spectrum of that view

@@ -7,8 +7,8 @@
 #include "sglc/background.hpp"
 #include "sglc/config.hpp"
 #include "sglc/matching.hpp"
+#include "sglc/plane_index.hpp"
 #include "sglc/types.hpp"
-#include "sglc/voxel_map.hpp"
 
 namespace sglc {
 
@@ -73,21 +73,6 @@ struct RefineResult {
   // mostly a turn.
   Vec2d weak_shift = Vec2d::Zero();
   double weak_turn = 0.0;
-};
-
-// Plane lookup of one fingerprint: voxel -> plane (one plane per voxel at most). Built once, then read-only.
-class PlaneIndex {
- public:
-  PlaneIndex() = default;
-  PlaneIndex(const std::vector<Plane>& planes, double voxel);
-  // Nearest plane centroid to p within max_dist whose normal agrees with n (|cos| >= min_cos); -1 if none.
-  // `planes` must be the vector the index was built from.
-  int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist, double min_cos) const;
-
- private:
-  VoxelMap map_;
-  std::vector<int> next_;  // planes sharing a voxel (rare: a centroid snapped across a face)
-  double voxel_ = 1.0;
 };
 
 // Point-to-plane alignment of the candidate's plane centroids onto the query's planes (re-associated each
