@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <fstream>
+#include <sstream>
 #include <stdexcept>
 
 namespace sglc::bench {
@@ -50,6 +51,26 @@ ServerProcess::~ServerProcess() {
 }
 
 bool ServerProcess::alive() const { return ::waitpid(pid_, nullptr, WNOHANG) == 0; }
+
+CpuMs procCpuMs(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(in, line)) return {};
+  // Fields after the command name (which may hold spaces, so read from its closing parenthesis): state is
+  // field 3, utime and stime are fields 14 and 15, in clock ticks.
+  const auto close = line.rfind(')');
+  if (close == std::string::npos) return {};
+  std::istringstream rest(line.substr(close + 1));
+  std::string field;
+  double utime = -1, stime = -1;
+  for (int k = 3; k <= 15 && rest >> field; ++k) {
+    if (k == 14) utime = std::stod(field);
+    if (k == 15) stime = std::stod(field);
+  }
+  if (utime < 0 || stime < 0) return {};
+  const double tick_ms = 1000.0 / static_cast<double>(::sysconf(_SC_CLK_TCK));
+  return {utime * tick_ms, stime * tick_ms};
+}
 
 long procStatusKb(pid_t pid, const std::string& field) {
   std::ifstream in("/proc/" + std::to_string(pid) + "/status");

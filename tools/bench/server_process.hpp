@@ -27,6 +27,13 @@ class ServerProcess {
   pid_t pid_ = -1;
 };
 
+// CPU time a process has used so far, ms (user and system, /proc/<pid>/stat); both -1 when it cannot be read.
+struct CpuMs {
+  double user = -1, system = -1;
+  double total() const { return user + system; }
+};
+CpuMs procCpuMs(pid_t pid);
+
 // kB figures of /proc/<pid>/status ("VmRSS", "VmHWM"); -1 when the field is absent.
 long procStatusKb(pid_t pid, const std::string& field);
 

@@ -152,8 +152,30 @@ bool waitUntilServing(const client::Client& cl, const Server& server) {
   }
 }
 
+// The server's CPU time per keyframe over a stretch of work (process user + system time, so other work on the
+// machine does not count): added to `out` when sglc-bench started the server, left out otherwise.
+class ServerCpu {
+ public:
+  explicit ServerCpu(pid_t pid) : pid_(pid), start_(pid > 0 ? bench::procCpuMs(pid) : bench::CpuMs{}) {}
+  void report(ordered_json& out, std::size_t keyframes) const {
+    if (pid_ <= 0 || keyframes == 0 || start_.user < 0) return;
+    const auto now = bench::procCpuMs(pid_);
+    if (now.user < 0) return;
+    const auto per = [&](double a, double b) { return (a - b) / static_cast<double>(keyframes); };
+    out["server_cpu_ms_per_keyframe"] = per(now.total(), start_.total());
+    out["server_user_ms_per_keyframe"] = per(now.user, start_.user);
+    out["server_sys_ms_per_keyframe"] = per(now.system, start_.system);
+  }
+
+ private:
+  pid_t pid_;
+  bench::CpuMs start_;
+};
+
 // 1. The map: robot "map" stores its keyframes, no queries.
-ordered_json benchMapIngest(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames) {
+ordered_json benchMapIngest(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames,
+                            pid_t server) {
+  const ServerCpu cpu(server);
   const auto t0 = Clock::now();
   std::vector<double> lat;
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -161,14 +183,18 @@ ordered_json benchMapIngest(const client::Client& cl, const std::string& map, co
     cl.ingest(requestFor(frames[i], map, "map", "run", static_cast<std::int64_t>(i), false));
     lat.push_back(msSince(t1));
   }
-  return {{"scans", frames.size()},
-          {"p50_ms", percentile(lat, 0.5)},
-          {"p99_ms", percentile(lat, 0.99)},
-          {"keyframes_per_s", 1000.0 * static_cast<double>(frames.size()) / msSince(t0)}};
+  ordered_json out = {{"scans", frames.size()},
+                      {"p50_ms", percentile(lat, 0.5)},
+                      {"p99_ms", percentile(lat, 0.99)},
+                      {"keyframes_per_s", 1000.0 * static_cast<double>(frames.size()) / msSince(t0)}};
+  cpu.report(out, frames.size());
+  return out;
 }
 
 // 2. Round trip: robot "visitor" ingests and queries (top-5 verified, verified ones refined).
-ordered_json benchRoundTrip(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames) {
+ordered_json benchRoundTrip(const client::Client& cl, const std::string& map, const std::vector<Keyframe>& frames,
+                            pid_t server) {
+  const ServerCpu cpu(server);
   std::vector<double> lat, server_total, fingerprint, search, verify, refine, store;
   std::size_t with_loop = 0, refined = 0;
   for (std::size_t i = 0; i < frames.size(); ++i) {
@@ -188,23 +214,26 @@ ordered_json benchRoundTrip(const client::Client& cl, const std::string& map, co
     }
     with_loop += any;
   }
-  return {{"scans", frames.size()},
-          {"top_k", 5},
-          {"p50_ms", percentile(lat, 0.5)},
-          {"p99_ms", percentile(lat, 0.99)},
-          {"server_total_p50_ms", percentile(server_total, 0.5)},
-          {"server_fingerprint_p50_ms", percentile(fingerprint, 0.5)},
-          {"server_search_p50_ms", percentile(search, 0.5)},
-          {"server_verify_p50_ms", percentile(verify, 0.5)},
-          {"server_refine_p50_ms", percentile(refine, 0.5)},
-          {"server_store_p50_ms", percentile(store, 0.5)},
-          {"queries_with_a_loop", with_loop},
-          {"refined_loops", refined}};
+  ordered_json out = {{"scans", frames.size()},
+                      {"top_k", 5},
+                      {"p50_ms", percentile(lat, 0.5)},
+                      {"p99_ms", percentile(lat, 0.99)},
+                      {"server_total_p50_ms", percentile(server_total, 0.5)},
+                      {"server_fingerprint_p50_ms", percentile(fingerprint, 0.5)},
+                      {"server_search_p50_ms", percentile(search, 0.5)},
+                      {"server_verify_p50_ms", percentile(verify, 0.5)},
+                      {"server_refine_p50_ms", percentile(refine, 0.5)},
+                      {"server_store_p50_ms", percentile(store, 0.5)},
+                      {"queries_with_a_loop", with_loop},
+                      {"refined_loops", refined}};
+  cpu.report(out, frames.size());
+  return out;
 }
 
 // 3. One throughput run: `n` robots at once (one thread each, synchronous Ingest + query) for `seconds`.
 ordered_json benchThroughputRun(const client::Client& cl, const std::string& map, const Keyframes& keyframes, int n,
-                                double seconds) {
+                                double seconds, pid_t server) {
+  const ServerCpu cpu(server);
   std::atomic<std::int64_t> done{0}, failed{0};
   std::vector<std::vector<double>> lats(static_cast<std::size_t>(n));
   const auto deadline = Clock::now() + std::chrono::duration<double>(seconds);
@@ -230,13 +259,15 @@ ordered_json benchThroughputRun(const client::Client& cl, const std::string& map
   const double wall = msSince(t0) / 1000.0;
   std::vector<double> all;
   for (const auto& l : lats) all.insert(all.end(), l.begin(), l.end());
-  return {{"robots", n},
-          {"keyframes", done.load()},
-          {"failed", failed.load()},
-          {"seconds", wall},
-          {"keyframes_per_s", static_cast<double>(done) / wall},
-          {"p50_ms", percentile(all, 0.5)},
-          {"p99_ms", percentile(all, 0.99)}};
+  ordered_json out = {{"robots", n},
+                      {"keyframes", done.load()},
+                      {"failed", failed.load()},
+                      {"seconds", wall},
+                      {"keyframes_per_s", static_cast<double>(done) / wall},
+                      {"p50_ms", percentile(all, 0.5)},
+                      {"p99_ms", percentile(all, 0.99)}};
+  cpu.report(out, static_cast<std::size_t>(done.load()));
+  return out;
 }
 
 // 4. Server memory: 4 robots add scans (no queries) until the map holds `rss_scans`.
@@ -284,11 +315,12 @@ int main(int argc, char** argv) {
   cl.ensureMap(map);
   const bool started_here = static_cast<bool>(server.process);
   out["server"] = {{"address", server.address}, {"started_here", started_here}};
-  out["map_ingest_only"] = benchMapIngest(cl, map, keyframes.map);
-  out["round_trip"] = benchRoundTrip(cl, map, keyframes.visitor);
+  const pid_t pid = started_here ? server.process->pid() : -1;
+  out["map_ingest_only"] = benchMapIngest(cl, map, keyframes.map, pid);
+  out["round_trip"] = benchRoundTrip(cl, map, keyframes.visitor, pid);
   ordered_json runs = ordered_json::array();
   for (const int n : options.robot_counts)
-    if (n >= 1) runs.push_back(benchThroughputRun(cl, map, keyframes, n, options.seconds));
+    if (n >= 1) runs.push_back(benchThroughputRun(cl, map, keyframes, n, options.seconds, pid));
   out["throughput"] = runs;
   if (options.rss_scans > 0 && server.process)
     out["memory"] = benchMemory(cl, map, keyframes.map, options.rss_scans, *server.process);

@@ -1,5 +1,7 @@
 // The relocalization protocol: a map from one drive, queried by every frame of another drive through the same
 // world (later, or with another sensor), as a robot finds where it is in a map saved days earlier.
+#include <time.h>
+
 #include <algorithm>
 #include <fstream>
 #include <iomanip>
@@ -8,9 +10,17 @@
 #include "calibration.hpp"
 #include "progress.hpp"
 #include "protocols.hpp"
+#include "sglc/elapsed.hpp"
 
 namespace sglc::eval {
 namespace {
+
+// CPU time of the calling thread, ms.
+double threadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
 
 Eigen::Vector3d positionOf(const FrameSource& source, int frame) {
   if (!source.hasPose(frame)) throw InputError("frame " + std::to_string(frame) + " has no ground-truth pose");
@@ -35,6 +45,7 @@ struct Tally {
   std::vector<Decision> decisions;
   std::vector<std::vector<bool>> ranked;
   std::vector<RegistrationResult> poses;  // of the true verified top-1 candidates
+  std::vector<double> cpu_ms;             // each query's CPU time on this thread
   std::size_t verified_true = 0, verified_false = 0, in_band = 0;
 };
 
@@ -89,7 +100,9 @@ Tally queryAll(Run& run, const FrameSource& map, const LoopQuery& query, const S
   for (std::size_t q = 0; q < frames.size(); ++q) {
     auto [f, scan] = pre.next();
     StageTimes times;
+    const double cpu0 = threadCpuMs();
     const auto cands = run.backend.query(scan, query, &times);
+    t.cpu_ms.push_back(threadCpuMs() - cpu0);
     run.timings.add(times);
     judge(t, run, map, o, f, nearest[q], cands, rows, pose_rows);
     for (const auto& c : cands) {
@@ -138,6 +151,11 @@ void relocalizationProtocol(Run& run, const FrameSource& map, const LoopQuery& q
   s["negative_m"] = o.negative_m;
   registrationSummary(s, t.poses);
   s["rr_note"] = "pose errors of the verified top-1 candidates at the true place";
+  // A query's CPU time, fingerprint to refined poses: the whole query runs on this thread in process (a remote
+  // backend's server time is not in it, so it is left out there).
+  if (run.backend.name() == "in-process")
+    s["query_cpu"] = {
+        {"median_ms", percentile(t.cpu_ms, 0.5)}, {"p90_ms", percentile(t.cpu_ms, 0.9)}, {"n", t.cpu_ms.size()}};
 }
 
 }  // namespace sglc::eval
