@@ -1,4 +1,5 @@
 // sglc-server: the SGLC loop-closure service over gRPC, on a persistent SQLite map database.
+#include <dlfcn.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/grpcpp.h>
 #include <grpcpp/health_check_service_interface.h>
@@ -255,6 +256,13 @@ int main(int argc, char** argv) {
   // when freed instead of growing the heap (glibc's adaptive threshold would move them onto it after the first
   // free). Ordinary keyframes (~2 MB) stay on the heap: mmapping those too cost 3-5 ms per ingest in page faults.
   mallopt(M_MMAP_THRESHOLD, 16 << 20);
+  // OpenBLAS (the BLAS under FAISS and Ceres' sparse solver) runs a thread per core that spins on sched_yield
+  // after every call: that doubled the server's CPU per keyframe (68-77 ms against 35-39 ms with one BLAS
+  // thread, sglc-bench round trip). The server spreads its own work over the cores (ComputePool), so BLAS
+  // runs on the calling thread. Looked up at run time: another BLAS has no such call and needs none.
+  using SetBlasThreads = void (*)(int);
+  if (auto* set_threads = reinterpret_cast<SetBlasThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
+    set_threads(1);
   sglc::logging::useJsonLines();  // every log line one JSON object
   gpr_set_log_function(grpcLog);
   CLI::App app{"SGLC loop-closure service: gRPC (sglc.v1) on a persistent SQLite map database."};
