@@ -256,6 +256,12 @@ int main(int argc, char** argv) {
   // when freed instead of growing the heap (glibc's adaptive threshold would move them onto it after the first
   // free). Ordinary keyframes (~2 MB) stay on the heap: mmapping those too cost 3-5 ms per ingest in page faults.
   mallopt(M_MMAP_THRESHOLD, 16 << 20);
+  // Freed memory stays with the process between calls instead of going back at every free that leaves 128 kB
+  // at the top of an arena (glibc's default once the threshold above is set): each call's scan, message and
+  // engine buffers then touched fresh pages again, a third of the server's CPU in page faults (sglc-bench, ingest
+  // without a query: 12-17 -> 6-7 ms CPU per keyframe). After a burst, MemoryBudget::trim hands the memory back
+  // once the server is idle.
+  mallopt(M_TRIM_THRESHOLD, 256 << 20);
   // OpenBLAS (the BLAS under FAISS and Ceres' sparse solver) runs a thread per core that spins on sched_yield
   // after every call: that doubled the server's CPU per keyframe (68-77 ms against 35-39 ms with one BLAS
   // thread, sglc-bench round trip). The server spreads its own work over the cores (ComputePool), so BLAS
