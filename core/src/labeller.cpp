@@ -25,6 +25,17 @@ class Ground {
     half_ = static_cast<int>(std::ceil(c.max_range_m / c.ground_cell_m)) + 1;
     side_ = 2 * half_ + 1;
     const std::size_t n_cells = static_cast<std::size_t>(side_) * static_cast<std::size_t>(side_);
+    // Column corners per column (a division and a remainder per point otherwise).
+    corner_x_.resize(n_cells);
+    corner_y_.resize(n_cells);
+    for (std::size_t k = 0; k < n_cells; ++k) {
+      corner_x_[k] = static_cast<float>(static_cast<int>(k) % side_ - half_) * cell_;
+      corner_y_[k] = static_cast<float>(static_cast<int>(k) / side_ - half_) * cell_;
+    }
+    // A power-of-two cell divides exactly by multiplying with its inverse; any other is divided as it was.
+    int exponent = 0;
+    exact_inverse_ = std::frexp(cell_, &exponent) == 0.5f;
+    inv_cell_ = 1.0f / cell_;
     std::vector<float> low1(n_cells, kInf), low2(n_cells, kInf);  // two lowest points per column
     const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
     column_.assign(points.size(), -1);
@@ -105,8 +116,10 @@ class Ground {
 
  private:
   int index(const Vec3f& p) const {
-    const int x = std::clamp(detail::floorInt(p.x() / cell_) + half_, 0, side_ - 1);
-    const int y = std::clamp(detail::floorInt(p.y() / cell_) + half_, 0, side_ - 1);
+    const float fx = exact_inverse_ ? p.x() * inv_cell_ : p.x() / cell_;
+    const float fy = exact_inverse_ ? p.y() * inv_cell_ : p.y() / cell_;
+    const int x = std::clamp(detail::floorInt(fx) + half_, 0, side_ - 1);
+    const int y = std::clamp(detail::floorInt(fy) + half_, 0, side_ - 1);
     return cellAt(x, y);
   }
   int cellAt(int x, int y) const { return y * side_ + x; }
@@ -139,10 +152,13 @@ class Ground {
     return sol.cast<float>();
   }
 
-  float cornerX(int k) const { return static_cast<float>(k % side_ - half_) * cell_; }
-  float cornerY(int k) const { return static_cast<float>(k / side_ - half_) * cell_; }
+  float cornerX(int k) const { return corner_x_[static_cast<std::size_t>(k)]; }
+  float cornerY(int k) const { return corner_y_[static_cast<std::size_t>(k)]; }
 
   float cell_;
+  float inv_cell_ = 1.0f;
+  bool exact_inverse_ = false;
+  std::vector<float> corner_x_, corner_y_;
   int half_ = 0, side_ = 0;
   std::vector<int> column_;             // per point: its column, or -1 (out of range, non-finite)
   std::vector<Eigen::Vector3f> plane_;  // a, b, c of z = a x + b y + c
