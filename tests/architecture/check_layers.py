@@ -44,7 +44,7 @@ EXTERNAL = {"Eigen/": "eigen", "yaml-cpp/": "yaml", "zlib.h": "zlib", "grpcpp/":
 # Operating-system headers any module may use (the C++ standard headers have no ".h" and no "/").
 POSIX = {"unistd.h", "fcntl.h", "signal.h", "malloc.h", "errno.h", "arpa/inet.h", "netinet/in.h", "poll.h",
          "sys/file.h", "sys/resource.h", "sys/socket.h", "sys/wait.h", "sys/stat.h", "sys/types.h", "sys/mman.h",
-         "sys/time.h", "time.h", "dirent.h", "pthread.h", "netdb.h", "spawn.h", "endian.h"}
+         "sys/time.h", "time.h", "dirent.h", "pthread.h", "netdb.h", "spawn.h", "endian.h", "dlfcn.h"}
 
 # module: (source directories, project modules it may include, external libraries it may use)
 ALL = {"types", "core", "config", "io", "storage", "closing", "posegraph", "log", "proto", "wire", "client", "sim"}
