@@ -25,17 +25,7 @@ class Ground {
     half_ = static_cast<int>(std::ceil(c.max_range_m / c.ground_cell_m)) + 1;
     side_ = 2 * half_ + 1;
     const std::size_t n_cells = static_cast<std::size_t>(side_) * static_cast<std::size_t>(side_);
-    // Column corners per column (a division and a remainder per point otherwise).
-    corner_x_.resize(n_cells);
-    corner_y_.resize(n_cells);
-    for (std::size_t k = 0; k < n_cells; ++k) {
-      corner_x_[k] = static_cast<float>(static_cast<int>(k) % side_ - half_) * cell_;
-      corner_y_[k] = static_cast<float>(static_cast<int>(k) / side_ - half_) * cell_;
-    }
-    // A power-of-two cell divides exactly by multiplying with its inverse; any other is divided as it was.
-    int exponent = 0;
-    exact_inverse_ = std::frexp(cell_, &exponent) == 0.5f;
-    inv_cell_ = 1.0f / cell_;
+    setUpColumns(n_cells);
     std::vector<float> low1(n_cells, kInf), low2(n_cells, kInf);  // two lowest points per column
     const float r2 = static_cast<float>(c.max_range_m * c.max_range_m);
     column_.assign(points.size(), -1);
@@ -115,6 +105,20 @@ class Ground {
   }
 
  private:
+  // Column corners per column (a division and a remainder per point otherwise). A power-of-two cell divides
+  // exactly by multiplying with its inverse; any other is divided as it was.
+  void setUpColumns(std::size_t n_cells) {
+    corner_x_.resize(n_cells);
+    corner_y_.resize(n_cells);
+    for (std::size_t k = 0; k < n_cells; ++k) {
+      corner_x_[k] = static_cast<float>(static_cast<int>(k) % side_ - half_) * cell_;
+      corner_y_[k] = static_cast<float>(static_cast<int>(k) / side_ - half_) * cell_;
+    }
+    int exponent = 0;
+    exact_inverse_ = std::frexp(cell_, &exponent) == 0.5f;
+    inv_cell_ = 1.0f / cell_;
+  }
+
   int index(const Vec3f& p) const {
     const float fx = exact_inverse_ ? p.x() * inv_cell_ : p.x() / cell_;
     const float fy = exact_inverse_ ? p.y() * inv_cell_ : p.y() / cell_;
@@ -183,6 +187,99 @@ struct Object {
   std::uint32_t label = id::kVegetation;
 };
 
+// Points above the band around a place, and the columns holding them (canopy test for pole-like objects).
+std::pair<int, int> highAround(const VoxelMap& map, const std::vector<Column>& cols, float inv_cell, double x, double y,
+                               double radius) {
+  const int r = static_cast<int>(std::ceil(radius * inv_cell));
+  const int cx = detail::floorInt(static_cast<float>(x) * inv_cell),
+            cy = detail::floorInt(static_cast<float>(y) * inv_cell);
+  int count = 0, cells = 0;
+  for (int dy = -r; dy <= r; ++dy)
+    for (int dx = -r; dx <= r; ++dx) {
+      const int j = map.find(packCell(cx + dx, cy + dy, 0));
+      if (j >= 0 && cols[static_cast<std::size_t>(j)].high > 0) {
+        count += cols[static_cast<std::size_t>(j)].high;
+        ++cells;
+      }
+    }
+  return std::make_pair(count, cells);
+}
+
+// Each object's label from its footprint (extents of its band points) and height; vegetation when none fits.
+void classifyObjects(std::vector<Object>& objects, const VoxelMap& map, const std::vector<Column>& cols, float inv_cell,
+                     const LabellerConfig& c) {
+  for (auto& o : objects) {
+    if (o.n < 3) continue;  // a stray point or two: vegetation
+    const double mx = o.x / o.n, my = o.y / o.n;
+    Eigen::Matrix2d cov;
+    cov << o.xx / o.n - mx * mx, o.xy / o.n - mx * my, o.xy / o.n - mx * my, o.yy / o.n - my * my;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
+    // Extents of a uniform spread: sqrt(12) standard deviations; a column alone is one cell wide.
+    const double length = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[1], 0.0)), c.cell_m);
+    const double width = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[0], 0.0)), c.cell_m);
+    const double height = std::max<double>(o.h_max, o.top);
+    const bool grounded = o.h_min <= 0.7f;
+    if (length <= c.pole_max_width_m && height >= c.pole_min_height_m && grounded) {
+      // A trunk carries a canopy: many points above the band spread around it, beyond its own columns.
+      const auto [high, cells] = highAround(map, cols, inv_cell, mx, my, 2.0);
+      o.label = cells >= 12 && high >= 40 ? id::kTrunk : id::kPole;
+    } else if (length >= c.wall_min_length_m && width <= c.wall_max_width_m) {
+      o.label = height >= c.wall_min_height_m ? id::kBuilding : id::kFence;
+    } else if (length >= c.vehicle_min_length_m && length <= c.vehicle_max_length_m && width <= c.vehicle_max_width_m &&
+               o.h_max >= c.vehicle_min_height_m && o.top <= c.vehicle_max_height_m && grounded) {
+      o.label = id::kVehicle;
+    } else if (length >= 2 * c.wall_min_length_m && height >= c.wall_min_height_m) {
+      o.label = id::kBuilding;  // large and tall: a building's corner or front
+    }
+  }
+}
+
+// Objects: columns with band points linked within link_m (at least the 8 neighbours: sparse or downsampled clouds
+// leave gaps between the columns of one wall), with their columns and top; object_of[k] is column k's object (-1
+// for a column without band points).
+std::vector<Object> groupObjects(const std::vector<Column>& cols, const std::vector<std::pair<int, int>>& col_xy,
+                                 const VoxelMap& map, const LabellerConfig& c, std::vector<int>& object_of) {
+  const int reach = std::max(1, static_cast<int>(std::lround(c.link_m / c.cell_m)));
+  std::vector<int> parent(cols.size());
+  for (std::size_t k = 0; k < cols.size(); ++k) parent[k] = static_cast<int>(k);
+  for (std::size_t k = 0; k < cols.size(); ++k) {
+    if (!cols[k].low) continue;
+    const auto [cx, cy] = col_xy[k];
+    for (int dy = 0; dy <= reach; ++dy)
+      for (int dx = -reach; dx <= reach; ++dx) {
+        if (dy == 0 && dx <= 0) continue;  // each neighbour pair once
+        const int j = map.find(packCell(cx + dx, cy + dy, 0));
+        if (j < 0 || !cols[static_cast<std::size_t>(j)].low) continue;
+        const int a = findRoot(parent, static_cast<int>(k)), b = findRoot(parent, j);
+        if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
+      }
+  }
+  object_of.assign(cols.size(), -1);
+  std::vector<Object> objects;
+  for (std::size_t k = 0; k < cols.size(); ++k) {
+    if (!cols[k].low) continue;
+    const int root = findRoot(parent, static_cast<int>(k));
+    if (object_of[static_cast<std::size_t>(root)] < 0) {
+      object_of[static_cast<std::size_t>(root)] = static_cast<int>(objects.size());
+      objects.emplace_back();
+    }
+    object_of[k] = object_of[static_cast<std::size_t>(root)];
+    auto& o = objects[static_cast<std::size_t>(object_of[k])];
+    ++o.columns;
+    o.top = std::max(o.top, cols[k].high_max);
+  }
+  return objects;
+}
+
+// A point above the band over an object labelled `object`: the object's label where it continues upwards (walls,
+// poles; vehicles up to their height; a fence's upper part is a building), else vegetation.
+std::uint32_t aboveBandLabel(std::uint32_t object, float height, const LabellerConfig& c) {
+  if (object == id::kBuilding || object == id::kPole) return object;
+  if (object == id::kFence) return id::kBuilding;
+  if (object == id::kVehicle && height <= c.vehicle_max_height_m) return id::kVehicle;
+  return id::kVegetation;
+}
+
 }  // namespace
 
 std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig& c) {
@@ -228,37 +325,8 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
     col.high_max = std::max(col.high_max, h[i]);
   }
 
-  // Objects: columns with band points linked within link_m (at least the 8 neighbours): sparse or downsampled
-  // clouds leave gaps between the columns of one wall.
-  const int reach = std::max(1, static_cast<int>(std::lround(c.link_m / c.cell_m)));
-  std::vector<int> parent(cols.size());
-  for (std::size_t k = 0; k < cols.size(); ++k) parent[k] = static_cast<int>(k);
-  for (std::size_t k = 0; k < cols.size(); ++k) {
-    if (!cols[k].low) continue;
-    const auto [cx, cy] = col_xy[k];
-    for (int dy = 0; dy <= reach; ++dy)
-      for (int dx = -reach; dx <= reach; ++dx) {
-        if (dy == 0 && dx <= 0) continue;  // each neighbour pair once
-        const int j = map.find(packCell(cx + dx, cy + dy, 0));
-        if (j < 0 || !cols[static_cast<std::size_t>(j)].low) continue;
-        const int a = findRoot(parent, static_cast<int>(k)), b = findRoot(parent, j);
-        if (a != b) parent[static_cast<std::size_t>(std::max(a, b))] = std::min(a, b);
-      }
-  }
-  std::vector<int> object_of(cols.size(), -1);
-  std::vector<Object> objects;
-  for (std::size_t k = 0; k < cols.size(); ++k) {
-    if (!cols[k].low) continue;
-    const int root = findRoot(parent, static_cast<int>(k));
-    if (object_of[static_cast<std::size_t>(root)] < 0) {
-      object_of[static_cast<std::size_t>(root)] = static_cast<int>(objects.size());
-      objects.emplace_back();
-    }
-    object_of[k] = object_of[static_cast<std::size_t>(root)];
-    auto& o = objects[static_cast<std::size_t>(object_of[k])];
-    ++o.columns;
-    o.top = std::max(o.top, cols[k].high_max);
-  }
+  std::vector<int> object_of;
+  std::vector<Object> objects = groupObjects(cols, col_xy, map, c, object_of);
   for (std::size_t i = 0; i < n; ++i) {
     if (col_of[i] < 0 || h[i] > band) continue;
     auto& o = objects[static_cast<std::size_t>(object_of[static_cast<std::size_t>(col_of[i])])];
@@ -269,47 +337,7 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
     o.h_max = std::max(o.h_max, h[i]);
   }
 
-  // Points above the band around a place (canopy test for pole-like objects).
-  auto highAround = [&](double x, double y, double radius) {
-    const int r = static_cast<int>(std::ceil(radius * inv_cell));
-    const int cx = detail::floorInt(static_cast<float>(x) * inv_cell),
-              cy = detail::floorInt(static_cast<float>(y) * inv_cell);
-    int count = 0, cells = 0;
-    for (int dy = -r; dy <= r; ++dy)
-      for (int dx = -r; dx <= r; ++dx) {
-        const int j = map.find(packCell(cx + dx, cy + dy, 0));
-        if (j >= 0 && cols[static_cast<std::size_t>(j)].high > 0) {
-          count += cols[static_cast<std::size_t>(j)].high;
-          ++cells;
-        }
-      }
-    return std::make_pair(count, cells);
-  };
-
-  for (auto& o : objects) {
-    if (o.n < 3) continue;  // a stray point or two: vegetation
-    const double mx = o.x / o.n, my = o.y / o.n;
-    Eigen::Matrix2d cov;
-    cov << o.xx / o.n - mx * mx, o.xy / o.n - mx * my, o.xy / o.n - mx * my, o.yy / o.n - my * my;
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
-    // Extents of a uniform spread: sqrt(12) standard deviations; a column alone is one cell wide.
-    const double length = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[1], 0.0)), c.cell_m);
-    const double width = std::max(std::sqrt(12.0 * std::max(eig.eigenvalues()[0], 0.0)), c.cell_m);
-    const double height = std::max<double>(o.h_max, o.top);
-    const bool grounded = o.h_min <= 0.7f;
-    if (length <= c.pole_max_width_m && height >= c.pole_min_height_m && grounded) {
-      // A trunk carries a canopy: many points above the band spread around it, beyond its own columns.
-      const auto [high, cells] = highAround(mx, my, 2.0);
-      o.label = cells >= 12 && high >= 40 ? id::kTrunk : id::kPole;
-    } else if (length >= c.wall_min_length_m && width <= c.wall_max_width_m) {
-      o.label = height >= c.wall_min_height_m ? id::kBuilding : id::kFence;
-    } else if (length >= c.vehicle_min_length_m && length <= c.vehicle_max_length_m && width <= c.vehicle_max_width_m &&
-               o.h_max >= c.vehicle_min_height_m && o.top <= c.vehicle_max_height_m && grounded) {
-      o.label = id::kVehicle;
-    } else if (length >= 2 * c.wall_min_length_m && height >= c.wall_min_height_m) {
-      o.label = id::kBuilding;  // large and tall: a building's corner or front
-    }
-  }
+  classifyObjects(objects, map, cols, inv_cell, c);
 
   // Labels: band points take their object's; points above it their column's object where that continues
   // upwards (walls, poles; vehicles up to their height), else vegetation.
@@ -321,15 +349,7 @@ std::vector<std::uint32_t> labelScene(const Points& points, const LabellerConfig
       out[i] = objects[static_cast<std::size_t>(obj)].label;
       continue;
     }
-    std::uint32_t label = id::kVegetation;
-    if (obj >= 0) {
-      const auto l = objects[static_cast<std::size_t>(obj)].label;
-      if (l == id::kBuilding || l == id::kPole || l == id::kFence)
-        label = l == id::kFence ? id::kBuilding : l;
-      else if (l == id::kVehicle && h[i] <= c.vehicle_max_height_m)
-        label = id::kVehicle;
-    }
-    out[i] = label;
+    out[i] = aboveBandLabel(obj >= 0 ? objects[static_cast<std::size_t>(obj)].label : id::kVegetation, h[i], c);
   }
   return out;
 }
