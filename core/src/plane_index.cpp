@@ -24,6 +24,13 @@ PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : radius
   // Cells of the radius' size: a plane lies within the radius of at most the 3 x 3 x 3 cells around its own.
   const double cell = radius;
   inv_cell_ = 1.0 / cell;
+  // Cell coordinates must fit an int with room to spare (packCell wraps them, which only adds candidates).
+  constexpr double kMaxCell = 1 << 30;
+  for (const auto& plane : planes)
+    if (!plane.centroid.allFinite() ||
+        !((plane.centroid.cast<double>().cwiseAbs().maxCoeff() + radius) * inv_cell_ + 2 < kMaxCell))
+      throw InputError("plane index: a plane centroid is not finite, or too far out for a radius of " +
+                       std::to_string(radius) + " m");
   // Cells whose box is within the radius of a centroid, with a margin for rounding: an extra entry costs one
   // distance test, a missing one a wrong answer.
   const double reach_sq = radius * radius * (1.0 + 1e-6) + 1e-9;
@@ -48,7 +55,8 @@ PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : radius
         }
   }
   if (!planes.empty()) {
-    const Vec3f grow = Vec3f::Constant(static_cast<float>(radius));
+    // Grown a little past the radius: float rounding must never put a point within reach outside.
+    const Vec3f grow = Vec3f::Constant(static_cast<float>(radius * (1.0 + 1e-5) + 1e-5));
     lo_ -= grow;
     hi_ += grow;
   }
@@ -68,7 +76,7 @@ PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : radius
 int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
                         double min_cos) const {
   if (members_.empty()) return -1;  // no planes (or default-constructed)
-  if (max_dist > radius_)
+  if (!(max_dist >= 0 && max_dist <= radius_))
     throw InputError("plane index: a lookup within " + std::to_string(max_dist) + " m of an index built for " +
                      std::to_string(radius_) + " m");
   // Outside the grown bounds (or not a number): no plane is near, and the cell coordinates could overflow.

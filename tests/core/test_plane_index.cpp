@@ -45,7 +45,7 @@ TEST(PlaneIndex, NearestRespectsDistanceAndNormal) {
   std::vector<Plane> planes(3);
   planes[0].centroid = Vec3f(0.2f, 0.2f, 0.2f);
   planes[0].normal = Vec3f(0, 0, 1);
-  planes[1].centroid = Vec3f(0.4f, 0.2f, 0.2f);  // same voxel as plane 0
+  planes[1].centroid = Vec3f(0.4f, 0.2f, 0.2f);  // same cell as plane 0
   planes[1].normal = Vec3f(1, 0, 0);
   planes[2].centroid = Vec3f(3.0f, 0.0f, 0.0f);
   planes[2].normal = Vec3f(0, 0, -1);
@@ -98,8 +98,31 @@ TEST(PlaneIndex, RejectsBadRadiiAndPoints) {
   EXPECT_EQ(index.nearest(planes, Vec3f(nan, 0, 0), Vec3f::UnitZ(), 1.0, 0.0), -1);
   EXPECT_EQ(index.nearest(planes, Vec3f(inf, 0, 0), Vec3f::UnitZ(), 1.0, 0.0), -1);
   EXPECT_EQ(index.nearest(planes, Vec3f(3e9f, -3e9f, 0), Vec3f::UnitZ(), 1.0, 0.0), -1);
+  EXPECT_THROW(index.nearest(planes, planes[0].centroid, planes[0].normal, -0.5, 0.0), InputError);
+  // Centroids the cells cannot hold: refused when the index is built, not missed later.
+  auto far = planes;
+  far[1].centroid.x() = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(PlaneIndex(far, 1.0), InputError);
+  far = planes;
+  far[1].centroid.x() = 300.0f;
+  EXPECT_THROW(PlaneIndex(far, 1e-7), InputError);
+  EXPECT_NO_THROW(PlaneIndex(far, 1e-3));
   const PlaneIndex empty({}, 1.0);
   EXPECT_EQ(empty.nearest({}, Vec3f::Zero(), Vec3f::UnitZ(), 1.0, 0.0), -1);
+}
+
+// A radius float cannot hold: a point just within reach of a plane at the bounds' edge is still found.
+TEST(PlaneIndex, FindsPlanesAtTheEdgeOfItsBounds) {
+  std::vector<Plane> planes(1);
+  planes[0].centroid = Vec3f(-2.05f, 0, 0);
+  planes[0].normal = Vec3f::UnitX();
+  const PlaneIndex index(planes, 1.05);
+  for (float x = -1.0f - 4e-7f; x < -0.999f; x = std::nextafter(x, 0.0f)) {
+    const Vec3f p(x, 0, 0);
+    EXPECT_EQ(index.nearest(planes, p, Vec3f::UnitX(), 1.05, 0.0), bruteNearest(planes, p, Vec3f::UnitX(), 1.05, 0.0))
+        << x;
+    if (x > -0.99999f) break;
+  }
 }
 
 TEST(PlaneIndex, KeptWithTheFingerprintPerRadius) {

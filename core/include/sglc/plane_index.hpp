@@ -17,12 +17,12 @@ namespace sglc {
 class PlaneIndex {
  public:
   PlaneIndex() = default;
-  // Throws InputError unless radius is positive and finite.
+  // Throws InputError unless radius is positive and finite and every centroid finite and within 2^30 cells.
   PlaneIndex(const std::vector<Plane>& planes, double radius);
 
   // Nearest plane centroid to p closer than max_dist whose normal agrees with n (|cos| >= min_cos), the lowest
   // index among equally near ones; -1 if none. `planes` must be the vector the index was built from, and
-  // max_dist at most radius() (InputError otherwise).
+  // max_dist within [0, radius()] (InputError otherwise).
   int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist, double min_cos) const;
 
   double radius() const { return radius_; }
