@@ -185,6 +185,8 @@ std::vector<FoundLoop> LoopFinder::verify(const Fingerprint& query, const std::v
   // background alone cost more to find: only the first candidates of the search may give one; more of a narrow
   // view's, which its view context ranks and whose search is narrower.
   const auto background = pipeline_.backgroundCandidates(query);
+  // The query's plane lookup, built here once rather than by every worker that first misses it at once.
+  if (pipeline_.config().refine.enabled && !hits.empty()) planeIndexOf(query, pipeline_.config().refine.max_corr_m);
   std::vector<std::optional<Verified>> verified(hits.size());
   std::vector<const char*> outcome(hits.size(), nullptr);  // "" verified, else the reason; null: not checked
   exec.forEach(hits.size(), [&](std::size_t i) {
