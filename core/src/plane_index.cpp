@@ -18,7 +18,7 @@ double gapSquared(double x, double a, double b) {
 
 }  // namespace
 
-PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : radius_(radius) {
+PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : plane_count_(planes.size()), radius_(radius) {
   if (!(radius > 0) || !std::isfinite(radius))
     throw InputError("plane index: the radius must be positive and finite, not " + std::to_string(radius));
   // Cells of the radius' size: a plane lies within the radius of at most the 3 x 3 x 3 cells around its own.
@@ -75,6 +75,9 @@ PlaneIndex::PlaneIndex(const std::vector<Plane>& planes, double radius) : radius
 
 int PlaneIndex::nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist,
                         double min_cos) const {
+  if (planes.size() != plane_count_)
+    throw InputError("plane index: built for " + std::to_string(plane_count_) + " planes, asked about a set of " +
+                     std::to_string(planes.size()));
   if (members_.empty()) return -1;  // no planes (or default-constructed)
   if (!(max_dist >= 0 && max_dist <= radius_))
     throw InputError("plane index: a lookup within " + std::to_string(max_dist) + " m of an index built for " +

@@ -109,6 +109,11 @@ TEST(PlaneIndex, RejectsBadRadiiAndPoints) {
   EXPECT_NO_THROW(PlaneIndex(far, 1e-3));
   const PlaneIndex empty({}, 1.0);
   EXPECT_EQ(empty.nearest({}, Vec3f::Zero(), Vec3f::UnitZ(), 1.0, 0.0), -1);
+  // Planes other than those it was built from (here one fewer) would be read out of bounds: refused.
+  auto fewer = planes;
+  fewer.pop_back();
+  EXPECT_THROW(index.nearest(fewer, planes[0].centroid, planes[0].normal, 1.0, 0.0), InputError);
+  EXPECT_THROW(empty.nearest(planes, planes[0].centroid, planes[0].normal, 1.0, 0.0), InputError);
 }
 
 // A radius float cannot hold: a point just within reach of a plane at the bounds' edge is still found.
@@ -135,6 +140,13 @@ TEST(PlaneIndex, KeptWithTheFingerprintPerRadius) {
   EXPECT_DOUBLE_EQ(planeIndexOf(fp, 1.0)->radius(), 1.0);
   const Fingerprint copy = fp;  // a copy may have its planes changed: it builds its own
   EXPECT_NE(planeIndexOf(copy, 1.0), planeIndexOf(fp, 1.0));
+  // A moved-from fingerprint keeps its lookup but not its planes: asking it is refused, not read past the end.
+  Fingerprint moved = fp;
+  ASSERT_TRUE(planeIndexOf(moved, 1.0));
+  const Fingerprint taken = std::move(moved);
+  EXPECT_EQ(taken.planes.size(), fp.planes.size());
+  EXPECT_THROW(planeIndexOf(moved, 1.0)->nearest(moved.planes, Vec3f::Zero(), Vec3f::UnitZ(), 1.0, 0.0),  // NOLINT
+               InputError);
 }
 
 }  // namespace

@@ -21,8 +21,8 @@ class PlaneIndex {
   PlaneIndex(const std::vector<Plane>& planes, double radius);
 
   // Nearest plane centroid to p closer than max_dist whose normal agrees with n (|cos| >= min_cos), the lowest
-  // index among equally near ones; -1 if none. `planes` must be the vector the index was built from, and
-  // max_dist within [0, radius()] (InputError otherwise).
+  // index among equally near ones; -1 if none. `planes` must be the vector the index was built from (one of
+  // another length, a moved-from one say, is refused), and max_dist within [0, radius()] (InputError otherwise).
   int nearest(const std::vector<Plane>& planes, const Vec3f& p, const Vec3f& n, double max_dist, double min_cos) const;
 
   double radius() const { return radius_; }
@@ -34,6 +34,7 @@ class PlaneIndex {
   std::vector<std::uint32_t> starts_;               // row r lists members_[starts_[r] .. starts_[r + 1])
   std::vector<std::int32_t> members_;               // ascending plane index within a row
   Vec3f lo_ = Vec3f::Zero(), hi_ = -Vec3f::Ones();  // planes' bounds grown by the radius (empty: lo > hi)
+  std::size_t plane_count_ = 0;                     // planes.size() at build: the vector lookups must be given
   double radius_ = 0.0;
   double inv_cell_ = 1.0;
 };
