@@ -87,6 +87,9 @@ std::pair<std::shared_ptr<const Fingerprint>, QueryOrigin> LoopFinder::storedQue
     throw StorageError(StorageError::Code::kNotFound, "map '" + map + "' has no scan " + std::to_string(scan_id));
   auto fp = store_.fingerprint(scan_id);
   if (!fp) throw StorageError(StorageError::Code::kNotFound, "scan " + std::to_string(scan_id) + " was deleted");
+  // A copy for the query: what a query derives and keeps with its fingerprint (the plane lookup) then dies with
+  // the query instead of growing the cached one past what the cache counted when it took it.
+  fp = std::make_shared<const Fingerprint>(*fp);
   return {std::move(fp), QueryOrigin{map, info->robot, info->session, info->seq, info->stamp, scan_id}};
 }
 

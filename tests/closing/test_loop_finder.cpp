@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numbers>
 #include <stdexcept>
@@ -245,6 +246,15 @@ TEST_F(LoopFinderTest, AStoredScanQueriesAsItsOwnOrigin) {
   const auto found = finder.find(*fp, who, all, {}, &t);
   ASSERT_EQ(found.size(), 3u);  // every other stored scan, not itself
   for (const auto& f : found) EXPECT_NE(f.scan_id, same_place_id);
+  // The query built its plane lookup on its own copy: the cached fingerprint, whose bytes the cache counted
+  // when it took it, has not grown one.
+  const auto cached = store->fingerprint(same_place_id);
+  ASSERT_NE(cached, fp);
+  std::uint64_t key = 0;
+  const double radius = pipeline.config().refine.max_corr_m;
+  std::memcpy(&key, &radius, sizeof key);
+  EXPECT_TRUE(fp->plane_memo.find(key));
+  EXPECT_FALSE(cached->plane_memo.find(key));
   try {
     finder.storedQuery("other", same_place_id);
     FAIL() << "a scan of another map was found";

@@ -31,7 +31,8 @@ class LoopFinder {
   LoopFinder(const Pipeline& pipeline, const storage::MapStore& store) : pipeline_(pipeline), store_(store) {}
 
   // A stored scan as the query: its fingerprint and its origin (so it excludes itself and its recent
-  // neighbours). StorageError kNotFound when `map` has no such scan.
+  // neighbours). The fingerprint is the query's own copy, not the store's cached one. StorageError kNotFound
+  // when `map` has no such scan.
   std::pair<std::shared_ptr<const Fingerprint>, QueryOrigin> storedQuery(const std::string& map,
                                                                          std::int64_t scan_id) const;
 
