@@ -57,19 +57,20 @@ CpuMs procCpuMs(pid_t pid) {
   std::string line;
   if (!std::getline(in, line)) return {};
   // Fields after the command name (which may hold spaces, so read from its closing parenthesis): state is
-  // field 3, utime and stime are fields 14 and 15, in clock ticks.
+  // field 3, minflt is field 10, utime and stime are fields 14 and 15, in clock ticks.
   const auto close = line.rfind(')');
   if (close == std::string::npos) return {};
   std::istringstream rest(line.substr(close + 1));
   std::string field;
-  double utime = -1, stime = -1;
+  double minflt = -1, utime = -1, stime = -1;
   for (int k = 3; k <= 15 && rest >> field; ++k) {
+    if (k == 10) minflt = std::stod(field);
     if (k == 14) utime = std::stod(field);
     if (k == 15) stime = std::stod(field);
   }
-  if (utime < 0 || stime < 0) return {};
+  if (minflt < 0 || utime < 0 || stime < 0) return {};
   const double tick_ms = 1000.0 / static_cast<double>(::sysconf(_SC_CLK_TCK));
-  return {utime * tick_ms, stime * tick_ms};
+  return {utime * tick_ms, stime * tick_ms, minflt};
 }
 
 long procStatusKb(pid_t pid, const std::string& field) {

@@ -27,9 +27,11 @@ class ServerProcess {
   pid_t pid_ = -1;
 };
 
-// CPU time a process has used so far, ms (user and system, /proc/<pid>/stat); both -1 when it cannot be read.
+// CPU time a process has used so far, ms (user and system, /proc/<pid>/stat), and its minor page faults (pages
+// first touched, or reclaimed and touched again); all -1 when they cannot be read.
 struct CpuMs {
   double user = -1, system = -1;
+  double minor_faults = -1;
   double total() const { return user + system; }
 };
 CpuMs procCpuMs(pid_t pid);

@@ -153,7 +153,8 @@ bool waitUntilServing(const client::Client& cl, const Server& server) {
 }
 
 // The server's CPU time per keyframe over a stretch of work (process user + system time, so other work on the
-// machine does not count): added to `out` when sglc-bench started the server, left out otherwise.
+// machine does not count), and its minor page faults per keyframe (memory touched afresh): added to `out` when
+// sglc-bench started the server, left out otherwise.
 class ServerCpu {
  public:
   explicit ServerCpu(pid_t pid) : pid_(pid), start_(pid > 0 ? bench::procCpuMs(pid) : bench::CpuMs{}) {}
@@ -165,6 +166,7 @@ class ServerCpu {
     out["server_cpu_ms_per_keyframe"] = per(now.total(), start_.total());
     out["server_user_ms_per_keyframe"] = per(now.user, start_.user);
     out["server_sys_ms_per_keyframe"] = per(now.system, start_.system);
+    out["server_minor_faults_per_keyframe"] = per(now.minor_faults, start_.minor_faults);
   }
 
  private:
