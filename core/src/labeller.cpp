@@ -34,12 +34,10 @@ class Ground {
       if (!p.allFinite() || p.x() * p.x() + p.y() * p.y() > r2) continue;
       const int k = index(p);
       column_[i] = k;
-      if (p.z() < low1[k]) {
-        low2[k] = low1[k];
-        low1[k] = p.z();
-      } else if (p.z() < low2[k]) {
-        low2[k] = p.z();
-      }
+      // The two lowest, without a branch (heights come in no order a branch predictor could learn).
+      const float l1 = low1[k];
+      low1[k] = std::min(p.z(), l1);
+      low2[k] = std::min(low2[k], std::max(p.z(), l1));
     }
     std::vector<float> own(n_cells, kInf), near(n_cells, kInf);
     for (std::size_t k = 0; k < n_cells; ++k) own[k] = std::isfinite(low2[k]) ? low2[k] : low1[k];
