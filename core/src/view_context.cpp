@@ -16,6 +16,7 @@ namespace {
 using Row = ViewContext::Row;
 constexpr int kSectors = ViewContext::kSectors;
 constexpr double kMinRangeM = 2.0;  // nearer cells have too coarse a bearing
+constexpr int kMaxRings = 64;       // a sector's rings are the bits of one word when views are compared
 
 void setBit(Row& r, int s) { (s < 64 ? r.lo : r.hi) |= std::uint64_t{1} << (s & 63); }
 int count(const Row& r) { return std::popcount(r.lo) + std::popcount(r.hi); }
@@ -50,8 +51,8 @@ std::shared_ptr<const ViewContext> viewContextOf(const Fingerprint& fp, const Vi
 }
 
 ViewContext viewContext(const std::vector<BevCell>& cells, double cell, const ViewSearchConfig& config, bool merged) {
-  if (config.rings < 1 || !(config.max_range_m > kMinRangeM) || !(cell > 0))
-    throw InputError("view context: rings must be >= 1, max_range_m above 2 m and the cell size positive");
+  if (config.rings < 1 || config.rings > kMaxRings || !(config.max_range_m > kMinRangeM) || !(cell > 0))
+    throw InputError("view context: rings must be in [1, 64], max_range_m above 2 m and the cell size positive");
   ViewContext v;
   v.merged = merged;
   const int rings = config.rings;
@@ -100,26 +101,39 @@ bool isNarrowView(const Fingerprint& fp, double min_view_deg) {
   return viewSpanDeg(fp.background, fp.background_cell) < min_view_deg;
 }
 
+namespace {
+
+// The rings of each sector as the bits of one word (ring i is bit i): a row per ring turned into a word per sector.
+void sectorWords(const std::vector<Row>& rows, std::uint64_t* out) {
+  std::fill(out, out + kSectors, std::uint64_t{0});
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const std::uint64_t ring = std::uint64_t{1} << i;
+    for (std::uint64_t w = rows[i].lo; w != 0; w &= w - 1) out[std::countr_zero(w)] |= ring;
+    for (std::uint64_t w = rows[i].hi; w != 0; w &= w - 1) out[64 + std::countr_zero(w)] |= ring;
+  }
+}
+
+}  // namespace
+
 ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), merged_(narrow.merged) {
-  const auto rings = static_cast<std::size_t>(rings_);
-  building_.resize(kSectors * rings);
-  vegetation_.resize(kSectors * rings);
-  seen_.resize(kSectors);
-  for (int shift = 0; shift < kSectors; ++shift) {
-    const Row seen = rotated(narrow.seen, shift);
-    seen_[static_cast<std::size_t>(shift)] = seen;
-    for (std::size_t i = 0; i < rings; ++i) {
-      building_[shift * rings + i] = rotated(narrow.building[i], shift) & seen;
-      vegetation_[shift * rings + i] = rotated(narrow.vegetation[i], shift) & seen;
-    }
+  if (rings_ < 1 || rings_ > kMaxRings)
+    throw InputError("view context with " + std::to_string(rings_) + " rings: a view is compared with 1 to 64");
+  std::uint64_t building[kSectors], vegetation[kSectors];
+  sectorWords(narrow.building, building);
+  sectorWords(narrow.vegetation, vegetation);
+  for (int s = 0; s < kSectors; ++s) {
+    if ((((s < 64 ? narrow.seen.lo : narrow.seen.hi) >> (s & 63)) & 1U) == 0) continue;
+    seen_.push_back(s);
+    building_.push_back(building[s]);
+    vegetation_.push_back(vegetation[s]);
   }
 }
 
 // Most of a comparison is population counts: where the CPU has the instruction (x86-64 from 2008 on; Debian's
 // baseline does not assume it), a second copy of this function uses it, chosen once at load time (GCC's
-// function multi-versioning, an ifunc of glibc). 13 us instead of 55 us per comparison (BM_ViewMatch). The copies
-// neither throw nor allocate: GCC 12 gives callers of such a function no cleanup for an exception from it (a
-// sanitizer build found a temporary's vectors leaked when match() threw from inside it).
+// function multi-versioning, an ifunc of glibc). The copies neither throw nor allocate: GCC 12 gives callers of
+// such a function no cleanup for an exception from it (a sanitizer build found a temporary's vectors leaked when
+// match() threw from inside it).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define SGLC_POPCNT_CLONES __attribute__((target_clones("popcnt", "default")))
 #else
@@ -128,24 +142,24 @@ ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), me
 
 namespace {
 
-// The narrow view's rows turned by each shift ([shift * rings + ring], seen [shift]) against the other's rows
-// and structure (building | vegetation): the best shift and its similarity.
-SGLC_POPCNT_CLONES std::pair<int, double> bestShift(const Row* building, const Row* vegetation, const Row* seen,
-                                                    const Row* other_building, const Row* other_vegetation,
-                                                    const Row* other_structure, std::size_t rings,
-                                                    bool merged) noexcept {
+// The narrow view turned by each shift against the other's sector words (building, vegetation, and both): the
+// best shift and its similarity. Only the sectors the narrow view saw count, so a comparison visits those:
+// the narrow view's sector u lies on the other's sector (u + shift) % 128, and both hold a word of rings there.
+SGLC_POPCNT_CLONES std::pair<int, double> bestShift(const int* seen, const std::uint64_t* building,
+                                                    const std::uint64_t* vegetation, std::size_t n_seen,
+                                                    const std::uint64_t* other_building,
+                                                    const std::uint64_t* other_vegetation,
+                                                    const std::uint64_t* other_structure, bool merged) noexcept {
   int best_shift = 0;
   double best = 0.0;
   for (int shift = 0; shift < kSectors; ++shift) {
-    // The narrow view turned by `shift` sectors, compared where it saw.
-    const Row* b = building + shift * rings;
-    const Row* v = vegetation + shift * rings;
     int same = 0, judged = 0;
-    for (std::size_t i = 0; i < rings; ++i) {
-      const Row mine = b[i] | v[i];
-      same +=
-          merged ? count(mine & other_structure[i]) : count((b[i] & other_building[i]) | (v[i] & other_vegetation[i]));
-      judged += count(mine | (other_structure[i] & seen[shift]));
+    for (std::size_t k = 0; k < n_seen; ++k) {
+      const auto t = static_cast<std::size_t>((seen[k] + shift) & (kSectors - 1));
+      const std::uint64_t mine = building[k] | vegetation[k];
+      same += std::popcount(merged ? mine & other_structure[t]
+                                   : (building[k] & other_building[t]) | (vegetation[k] & other_vegetation[t]));
+      judged += std::popcount(mine | other_structure[t]);
     }
     const double similarity = judged ? static_cast<double>(same) / static_cast<double>(judged) : 0.0;
     if (similarity > best) {
@@ -162,12 +176,12 @@ ViewMatch ViewMatcher::match(const ViewContext& other) const {
   if (other.rings() != rings_)
     throw InputError("view contexts with " + std::to_string(rings_) + " and " + std::to_string(other.rings()) +
                      " rings cannot be compared");
-  const auto rings = static_cast<std::size_t>(rings_);
-  std::vector<Row> structure(rings);
-  for (std::size_t i = 0; i < rings; ++i) structure[i] = other.building[i] | other.vegetation[i];
-  const auto [best_shift, similarity] =
-      bestShift(building_.data(), vegetation_.data(), seen_.data(), other.building.data(), other.vegetation.data(),
-                structure.data(), rings, merged_ || other.merged);
+  std::uint64_t building[kSectors], vegetation[kSectors], structure[kSectors];
+  sectorWords(other.building, building);
+  sectorWords(other.vegetation, vegetation);
+  for (int s = 0; s < kSectors; ++s) structure[s] = building[s] | vegetation[s];
+  const auto [best_shift, similarity] = bestShift(seen_.data(), building_.data(), vegetation_.data(), seen_.size(),
+                                                  building, vegetation, structure, merged_ || other.merged);
   ViewMatch best;
   best.similarity = similarity;
   // Narrow's sector s lies at other's s + shift: other's frame turns by -shift sectors into narrow's.

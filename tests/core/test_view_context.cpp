@@ -182,6 +182,12 @@ TEST(ViewContext, EmptyAndMismatchedContexts) {
   // Settings no configuration file can give (validateConfig refuses them) are refused here too.
   cfg.rings = 0;
   EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
+  cfg.rings = 65;  // a sector's rings must fit one word
+  EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
+  ViewContext wide;
+  wide.building.resize(65);
+  wide.vegetation.resize(65);
+  EXPECT_THROW(ViewMatcher{wide}, InputError);
   cfg.rings = 30;
   EXPECT_THROW(viewContext({}, std::numeric_limits<double>::quiet_NaN(), cfg), InputError);
   cfg.max_range_m = 1.0;
@@ -190,6 +196,66 @@ TEST(ViewContext, EmptyAndMismatchedContexts) {
 
 // Equal similarities at several shifts give the first of them: a structure pattern repeated every 90 deg
 // matches itself at four headings, and the answer is always the unturned one.
+// The similarity and heading from the definition, bit by bit: at each shift, over every ring and every sector
+// the narrow view saw, cells where both hold structure of one class group over cells where either holds any.
+ViewMatch bruteMatch(const ViewContext& narrow, const ViewContext& other) {
+  const auto bit = [](const ViewContext::Row& r, int s) { return ((s < 64 ? r.lo : r.hi) >> (s & 63) & 1U) != 0; };
+  const bool merged = narrow.merged || other.merged;
+  ViewMatch best;
+  int best_shift = 0;
+  for (int shift = 0; shift < ViewContext::kSectors; ++shift) {
+    int same = 0, judged = 0;
+    for (int i = 0; i < narrow.rings(); ++i)
+      for (int u = 0; u < ViewContext::kSectors; ++u) {
+        if (!bit(narrow.seen, u)) continue;
+        const int t = (u + shift) % ViewContext::kSectors;
+        const bool nb = bit(narrow.building[i], u), nv = bit(narrow.vegetation[i], u);
+        const bool ob = bit(other.building[i], t), ov = bit(other.vegetation[i], t);
+        same += merged ? ((nb || nv) && (ob || ov)) : ((nb && ob) || (nv && ov));
+        judged += nb || nv || ob || ov;
+      }
+    const double similarity = judged ? static_cast<double>(same) / judged : 0.0;
+    if (similarity > best.similarity) {
+      best.similarity = similarity;
+      best_shift = shift;
+    }
+  }
+  best.heading =
+      (ViewContext::kSectors - best_shift) % ViewContext::kSectors * 2.0 * std::numbers::pi / ViewContext::kSectors;
+  return best;
+}
+
+// Random contexts of every kind (rings 1 to 64, views of any width, merged or not): the matcher agrees with the
+// definition exactly.
+TEST(ViewContext, MatchAgreesWithTheDefinition) {
+  std::mt19937_64 rng(5);
+  const auto randomRow = [&](double density) {
+    ViewContext::Row r;
+    for (int s = 0; s < ViewContext::kSectors; ++s)
+      if (std::uniform_real_distribution<double>(0, 1)(rng) < density)
+        (s < 64 ? r.lo : r.hi) |= std::uint64_t{1} << (s & 63);
+    return r;
+  };
+  for (int trial = 0; trial < 300; ++trial) {
+    const int rings = 1 + static_cast<int>(rng() % 64);
+    const auto make = [&](double view, double density) {
+      ViewContext v;
+      v.merged = rng() % 4 == 0;
+      v.seen = randomRow(view);
+      for (int i = 0; i < rings; ++i) {
+        v.building.push_back(randomRow(density));
+        v.vegetation.push_back(randomRow(density));
+      }
+      return v;
+    };
+    const double view = trial % 3 == 0 ? 1.0 : 0.05 + 0.5 * (trial % 7) / 7.0;
+    const auto narrow = make(view, 0.3), other = make(1.0, 0.1 + 0.1 * (trial % 5));
+    const auto got = matchViews(narrow, other), want = bruteMatch(narrow, other);
+    ASSERT_EQ(got.similarity, want.similarity) << trial;
+    ASSERT_EQ(got.heading, want.heading) << trial;
+  }
+}
+
 TEST(ViewContext, TiesGoToTheFirstShift) {
   const ViewSearchConfig cfg;
   std::vector<BevCell> cross;

@@ -69,9 +69,9 @@ class ViewMatcher {
  private:
   int rings_ = 0;
   bool merged_ = false;
-  // [shift * rings + ring]: the narrow view's rows turned by `shift` sectors, within the sectors it saw.
-  std::vector<ViewContext::Row> building_, vegetation_;
-  std::vector<ViewContext::Row> seen_;  // [shift]
+  // The sectors the narrow view saw, and in each the rings holding building / vegetation (ring i is bit i).
+  std::vector<int> seen_;
+  std::vector<std::uint64_t> building_, vegetation_;
 };
 
 // ViewMatcher(narrow).match(other).
