@@ -137,11 +137,14 @@ std::vector<storage::SearchHit> LoopFinder::viewRanked(const ViewRanking& rankin
   req.k = std::max(req.k, pipeline_.config().view_search.max_scans);
   auto hits = store_.search(req);
   std::vector<double> similarity(hits.size(), -1.0);  // -1: deleted meanwhile
+  // Each stored scan's context from the store's own cache of them: a map larger than the fingerprint cache
+  // is not read back scan by scan on every narrow query.
+  const ViewMatcher& matcher = *ranking.queryView().matcher;
   exec.forEach(hits.size(), [&](std::size_t i) {
     if (i % 64 == 0) exec.checkAlive();
-    const auto fp = store_.fingerprint(hits[i].scan_id);
-    if (!fp) return;
-    similarity[i] = ranking.similarity(*fp);
+    const auto context = store_.viewContext(hits[i].scan_id, pipeline_.config().view_search);
+    if (!context) return;
+    similarity[i] = matcher.match(*context).similarity;
   });
   std::vector<std::size_t> order(hits.size());
   std::iota(order.begin(), order.end(), std::size_t{0});

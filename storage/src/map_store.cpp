@@ -73,6 +73,9 @@ class SqliteMapStore final : public MapStore {
   std::shared_ptr<const Fingerprint> fingerprint(std::int64_t scan_id) const override {
     return scan_table::fingerprint(core_, scan_id);
   }
+  std::shared_ptr<const ViewContext> viewContext(std::int64_t scan_id, const ViewSearchConfig& config) const override {
+    return core_.cache.views.get(scan_id, config, [&] { return fingerprint(scan_id); });
+  }
   std::optional<LabelledScan> rawScan(std::int64_t scan_id) const override { return scan_table::raw(core_, scan_id); }
   std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot, const std::string& session,
                                        std::int64_t seq) const override {

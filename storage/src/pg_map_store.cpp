@@ -58,6 +58,9 @@ class PgMapStore final : public MapStore {
   std::shared_ptr<const Fingerprint> fingerprint(std::int64_t id) const override {
     return scans::fingerprint(core_, id);
   }
+  std::shared_ptr<const ViewContext> viewContext(std::int64_t id, const ViewSearchConfig& config) const override {
+    return core_.cache.views.get(id, config, [&] { return fingerprint(id); });
+  }
   std::optional<LabelledScan> rawScan(std::int64_t id) const override { return scans::raw(core_, id); }
   std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot, const std::string& session,
                                        std::int64_t seq) const override {

@@ -15,7 +15,8 @@ Table<StoreOptions> makeTable() {
       "SQLite synchronous mode: full survives power loss, normal only process crashes"));
   t.add(field<StoreOptions>(
       "cache_mb", [](auto& o) -> auto& { return o.cache_mb; }, closed(0, 1e9),
-      "decoded fingerprints kept in memory (MB, least recently used evicted)"));
+      "decoded fingerprints kept in memory (MB, least recently used evicted); stored scans' view contexts get an "
+      "eighth of it more (at least 4 MB, none at 0)"));
   t.add(field<StoreOptions>(
       "busy_timeout_ms", [](auto& o) -> auto& { return o.busy_timeout_ms; }, atLeast(0),
       "wait this long for a lock another connection holds (ms)"));

@@ -492,6 +492,40 @@ TEST_P(OnBothBackends, CacheServesRepeatsAndStaysWithinItsBudget) {
   EXPECT_GT(store->stats().cache_mb, 0.0);
 }
 
+// Stored scans' view contexts are kept apart from their fingerprints: with a cache of a handful of fingerprints,
+// asking every scan's context again reads no fingerprint back; other settings get their own context; a deleted
+// scan's context is forgotten.
+TEST_P(OnBothBackends, ViewContextsOutliveTheirFingerprintsInTheCache) {
+  auto opts = db().options();
+  opts.cache_mb = 0.05;  // room for a handful of fingerprints, and their contexts in an eighth of it more
+  auto store = MapStore::open(opts);
+  const auto all = fill(*store, 1, 2, 15);
+  const ViewSearchConfig cfg;
+  std::vector<std::shared_ptr<const ViewContext>> first;
+  for (const auto& s : all) {
+    first.push_back(store->viewContext(s.id, cfg));
+    ASSERT_NE(first.back(), nullptr);
+    const auto want = viewContextOf(s.fp, cfg);
+    ASSERT_EQ(first.back()->rings(), want->rings());
+    for (int i = 0; i < want->rings(); ++i) {
+      EXPECT_EQ(first.back()->building[i].lo, want->building[i].lo);
+      EXPECT_EQ(first.back()->vegetation[i].hi, want->vegetation[i].hi);
+    }
+  }
+  const auto misses = store->stats().cache_misses;
+  EXPECT_GE(misses, 30);  // each fingerprint read once, most evicted since
+  for (std::size_t k = 0; k < all.size(); ++k) EXPECT_EQ(store->viewContext(all[k].id, cfg), first[k]);
+  EXPECT_EQ(store->stats().cache_misses, misses);
+  ViewSearchConfig other = cfg;
+  other.rings = 20;
+  EXPECT_EQ(store->viewContext(all[0].id, other)->rings(), 20);
+  EXPECT_EQ(store->viewContext(all[0].id, cfg), first[0]);
+  ASSERT_EQ(store->deleteSession("m", all[0].robot, all[0].session), 15);
+  EXPECT_EQ(store->viewContext(all[0].id, cfg), nullptr);
+  EXPECT_EQ(store->viewContext(all[0].id, other), nullptr);
+  EXPECT_EQ(store->viewContext(all.back().id, cfg), first.back());
+}
+
 TEST_P(OnBothBackends, ApproximateIndexAgreesWithExactSearch) {
   auto opts = db().options();
   std::vector<Stored> all;

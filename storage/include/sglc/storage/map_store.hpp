@@ -18,6 +18,7 @@
 #include "sglc/fingerprint.hpp"
 #include "sglc/fingerprint_settings.hpp"
 #include "sglc/types.hpp"
+#include "sglc/view_context.hpp"
 
 namespace sglc::storage {
 
@@ -70,7 +71,9 @@ struct StoreOptions {
   // frozen process finds its transaction gone when it resumes (kUnavailable) and reconnects. Its pose-graph
   // locks (claimGraph) go the same way after this long. 0: never.
   int stall_timeout_ms = 5000;
-  double cache_mb = 256;       // fingerprints kept in memory (least recently used evicted)
+  // Fingerprints kept in memory (least recently used evicted); stored scans' view contexts get an eighth of it
+  // more (at least 4 MB; none when 0).
+  double cache_mb = 256;
   bool snapshot_index = true;  // save the FAISS indexes beside the database on close, load them on open
   double max_db_mb = 0;        // quota: writes beyond it fail with kFull (0: unlimited)
   IndexOptions index;
@@ -235,6 +238,10 @@ class MapStore {
   virtual std::optional<ScanInfo> scanInfo(std::int64_t scan_id) const = 0;
   // The fingerprint of a stored scan, from the cache or the database. nullptr if no such scan.
   virtual std::shared_ptr<const Fingerprint> fingerprint(std::int64_t scan_id) const = 0;
+  // The view context of a stored scan for `config` (viewContextOf of its fingerprint), kept apart from the
+  // fingerprint cache (about 1 KB a scan, in an eighth of cache_mb more): ranking a map larger than the cache
+  // by view reads no fingerprint twice. nullptr if no such scan.
+  virtual std::shared_ptr<const ViewContext> viewContext(std::int64_t scan_id, const ViewSearchConfig& config) const = 0;
   virtual std::optional<LabelledScan> rawScan(std::int64_t scan_id) const = 0;
   // The scan of (map, robot, session, seq), if stored.
   virtual std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot,
