@@ -30,6 +30,16 @@ Row rotated(const Row& r, int shift) {
   return {(r.lo << shift) | (r.hi >> (64 - shift)), (r.hi << shift) | (r.lo >> (64 - shift))};
 }
 
+// The rings of each sector as the bits of one word (ring i is bit i): a row per ring turned into a word per sector.
+void sectorWords(const std::vector<Row>& rows, std::uint64_t* out) {
+  std::fill(out, out + kSectors, std::uint64_t{0});
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    const std::uint64_t ring = std::uint64_t{1} << i;
+    for (std::uint64_t w = rows[i].lo; w != 0; w &= w - 1) out[std::countr_zero(w)] |= ring;
+    for (std::uint64_t w = rows[i].hi; w != 0; w &= w - 1) out[64 + std::countr_zero(w)] |= ring;
+  }
+}
+
 }  // namespace
 
 std::shared_ptr<const ViewContext> viewContextOf(const Fingerprint& fp, const ViewSearchConfig& config) {
@@ -101,23 +111,10 @@ bool isNarrowView(const Fingerprint& fp, double min_view_deg) {
   return viewSpanDeg(fp.background, fp.background_cell) < min_view_deg;
 }
 
-namespace {
-
-// The rings of each sector as the bits of one word (ring i is bit i): a row per ring turned into a word per sector.
-void sectorWords(const std::vector<Row>& rows, std::uint64_t* out) {
-  std::fill(out, out + kSectors, std::uint64_t{0});
-  for (std::size_t i = 0; i < rows.size(); ++i) {
-    const std::uint64_t ring = std::uint64_t{1} << i;
-    for (std::uint64_t w = rows[i].lo; w != 0; w &= w - 1) out[std::countr_zero(w)] |= ring;
-    for (std::uint64_t w = rows[i].hi; w != 0; w &= w - 1) out[64 + std::countr_zero(w)] |= ring;
-  }
-}
-
-}  // namespace
-
 ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), merged_(narrow.merged) {
-  if (rings_ < 1 || rings_ > kMaxRings)
-    throw InputError("view context with " + std::to_string(rings_) + " rings: a view is compared with 1 to 64");
+  if (rings_ < 1 || rings_ > kMaxRings || narrow.vegetation.size() != narrow.building.size())
+    throw InputError("view context with " + std::to_string(rings_) + " building and " +
+                     std::to_string(narrow.vegetation.size()) + " vegetation rings: a view is compared with 1 to 64");
   std::uint64_t building[kSectors], vegetation[kSectors];
   sectorWords(narrow.building, building);
   sectorWords(narrow.vegetation, vegetation);
@@ -142,26 +139,32 @@ ViewMatcher::ViewMatcher(const ViewContext& narrow) : rings_(narrow.rings()), me
 
 namespace {
 
-// The narrow view turned by each shift against the other's sector words (building, vegetation, and both): the
-// best shift and its similarity. Only the sectors the narrow view saw count, so a comparison visits those:
-// the narrow view's sector u lies on the other's sector (u + shift) % 128, and both hold a word of rings there.
+// The narrow view turned by each shift against the other's sector words (building, vegetation, and both; each
+// given twice over, 256 words, so that sector u + shift needs no wrap): the best shift and its similarity. Only
+// the sectors the narrow view saw count: its sector u lies on the other's sector u + shift. Counted per seen
+// sector over all shifts at once, so the inner loop runs over consecutive words.
 SGLC_POPCNT_CLONES std::pair<int, double> bestShift(const int* seen, const std::uint64_t* building,
                                                     const std::uint64_t* vegetation, std::size_t n_seen,
                                                     const std::uint64_t* other_building,
                                                     const std::uint64_t* other_vegetation,
                                                     const std::uint64_t* other_structure, bool merged) noexcept {
+  int same[kSectors] = {}, judged[kSectors] = {};
+  for (std::size_t k = 0; k < n_seen; ++k) {
+    const std::uint64_t b = building[k], v = vegetation[k], mine = b | v;
+    const std::uint64_t* ob = other_building + seen[k];
+    const std::uint64_t* ov = other_vegetation + seen[k];
+    const std::uint64_t* os = other_structure + seen[k];
+    if (merged)
+      for (int shift = 0; shift < kSectors; ++shift) same[shift] += std::popcount(mine & os[shift]);
+    else
+      for (int shift = 0; shift < kSectors; ++shift) same[shift] += std::popcount((b & ob[shift]) | (v & ov[shift]));
+    for (int shift = 0; shift < kSectors; ++shift) judged[shift] += std::popcount(mine | os[shift]);
+  }
   int best_shift = 0;
   double best = 0.0;
   for (int shift = 0; shift < kSectors; ++shift) {
-    int same = 0, judged = 0;
-    for (std::size_t k = 0; k < n_seen; ++k) {
-      const auto t = static_cast<std::size_t>((seen[k] + shift) & (kSectors - 1));
-      const std::uint64_t mine = building[k] | vegetation[k];
-      same += std::popcount(merged ? mine & other_structure[t]
-                                   : (building[k] & other_building[t]) | (vegetation[k] & other_vegetation[t]));
-      judged += std::popcount(mine | other_structure[t]);
-    }
-    const double similarity = judged ? static_cast<double>(same) / static_cast<double>(judged) : 0.0;
+    const double similarity =
+        judged[shift] ? static_cast<double>(same[shift]) / static_cast<double>(judged[shift]) : 0.0;
     if (similarity > best) {
       best = similarity;
       best_shift = shift;
@@ -173,13 +176,17 @@ SGLC_POPCNT_CLONES std::pair<int, double> bestShift(const int* seen, const std::
 }  // namespace
 
 ViewMatch ViewMatcher::match(const ViewContext& other) const {
-  if (other.rings() != rings_)
+  if (other.rings() != rings_ || other.vegetation.size() != other.building.size())
     throw InputError("view contexts with " + std::to_string(rings_) + " and " + std::to_string(other.rings()) +
-                     " rings cannot be compared");
-  std::uint64_t building[kSectors], vegetation[kSectors], structure[kSectors];
+                     " rings (" + std::to_string(other.vegetation.size()) + " of vegetation) cannot be compared");
+  std::uint64_t building[2 * kSectors], vegetation[2 * kSectors], structure[2 * kSectors];
   sectorWords(other.building, building);
   sectorWords(other.vegetation, vegetation);
-  for (int s = 0; s < kSectors; ++s) structure[s] = building[s] | vegetation[s];
+  for (int s = 0; s < kSectors; ++s) {
+    structure[s] = structure[s + kSectors] = building[s] | vegetation[s];
+    building[s + kSectors] = building[s];
+    vegetation[s + kSectors] = vegetation[s];
+  }
   const auto [best_shift, similarity] = bestShift(seen_.data(), building_.data(), vegetation_.data(), seen_.size(),
                                                   building, vegetation, structure, merged_ || other.merged);
   ViewMatch best;

@@ -72,7 +72,7 @@ class FingerprintCache {
   // Its figures in a store's statistics.
   void report(Stats& s) const {
     std::lock_guard lock(mutex_);
-    s.cache_mb = static_cast<double>(used_) / (1024.0 * 1024.0);
+    s.cache_mb = static_cast<double>(used_ + views.usedBytes()) / (1024.0 * 1024.0);  // view contexts included
     s.cache_hits = hits_;
     s.cache_misses = misses_;
   }

@@ -29,23 +29,29 @@ class ViewContextCache {
   std::shared_ptr<const ViewContext> get(std::int64_t id, const ViewSearchConfig& config,
                                          const std::function<std::shared_ptr<const Fingerprint>()>& load) {
     const Key key{id, settingsKey(config)};
+    std::uint64_t erasures = 0;
     {
       std::lock_guard lock(mutex_);
       if (auto it = map_.find(key); it != map_.end()) {
         lru_.splice(lru_.begin(), lru_, it->second);
         return it->second->value;
       }
+      erasures = erasures_;
     }
     const auto fp = load();
     if (!fp) return nullptr;
-    auto made = viewContextOf(*fp, config);
-    put(key, made);
+    // Computed here rather than through the fingerprint's memo (viewContextOf): a cached fingerprint must not
+    // grow past the bytes its cache counted when it took it.
+    auto made = std::make_shared<const ViewContext>(
+        viewContext(fp->background, fp->background_cell, config, fp->labeller_structure));
+    put(key, made, erasures);
     return made;
   }
 
   // Forgets scan id's contexts (for every setting seen).
   void erase(std::int64_t id) {
     std::lock_guard lock(mutex_);
+    ++erasures_;
     for (const auto settings : settings_seen_) {
       const auto it = map_.find({id, settings});
       if (it == map_.end()) continue;
@@ -89,11 +95,13 @@ class ViewContextCache {
     return key;
   }
 
-  void put(const Key& key, std::shared_ptr<const ViewContext> value) {
-    const std::size_t bytes =
-        sizeof(ViewContext) + sizeof(Item) + 64 + (value->building.size() + value->vegetation.size()) * sizeof(ViewContext::Row);
+  // Keeps value unless a scan was erased since the caller looked (`erasures` then): the scan it was computed
+  // from may be the one deleted, and a deleted scan's context must not come back.
+  void put(const Key& key, std::shared_ptr<const ViewContext> value, std::uint64_t erasures) {
+    const std::size_t bytes = sizeof(ViewContext) + sizeof(Item) + 64 +
+                              (value->building.size() + value->vegetation.size()) * sizeof(ViewContext::Row);
     std::lock_guard lock(mutex_);
-    if (bytes > capacity_ || map_.count(key)) return;
+    if (bytes > capacity_ || map_.count(key) || erasures != erasures_) return;
     if (std::find(settings_seen_.begin(), settings_seen_.end(), key.settings) == settings_seen_.end())
       settings_seen_.push_back(key.settings);
     lru_.push_front({key, std::move(value), bytes});
@@ -109,6 +117,7 @@ class ViewContextCache {
   mutable std::mutex mutex_;
   std::size_t capacity_;
   std::size_t used_ = 0;
+  std::uint64_t erasures_ = 0;  // erase() calls so far
   std::list<Item> lru_;
   std::unordered_map<Key, std::list<Item>::iterator, KeyHash> map_;
   std::vector<std::uint64_t> settings_seen_;  // in practice one: a store's engine has one configuration

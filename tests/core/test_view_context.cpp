@@ -188,14 +188,17 @@ TEST(ViewContext, EmptyAndMismatchedContexts) {
   wide.building.resize(65);
   wide.vegetation.resize(65);
   EXPECT_THROW(ViewMatcher{wide}, InputError);
+  // Building and vegetation rings must pair up.
+  auto uneven = full;
+  uneven.vegetation.push_back({});
+  EXPECT_THROW(ViewMatcher{uneven}, InputError);
+  EXPECT_THROW(matchViews(full, uneven), InputError);
   cfg.rings = 30;
   EXPECT_THROW(viewContext({}, std::numeric_limits<double>::quiet_NaN(), cfg), InputError);
   cfg.max_range_m = 1.0;
   EXPECT_THROW(viewContext({}, kCell, cfg), InputError);
 }
 
-// Equal similarities at several shifts give the first of them: a structure pattern repeated every 90 deg
-// matches itself at four headings, and the answer is always the unturned one.
 // The similarity and heading from the definition, bit by bit: at each shift, over every ring and every sector
 // the narrow view saw, cells where both hold structure of one class group over cells where either holds any.
 ViewMatch bruteMatch(const ViewContext& narrow, const ViewContext& other) {
@@ -256,6 +259,8 @@ TEST(ViewContext, MatchAgreesWithTheDefinition) {
   }
 }
 
+// Equal similarities at several shifts give the first of them: a structure pattern repeated every 90 deg
+// matches itself at four headings, and the answer is always the unturned one.
 TEST(ViewContext, TiesGoToTheFirstShift) {
   const ViewSearchConfig cfg;
   std::vector<BevCell> cross;

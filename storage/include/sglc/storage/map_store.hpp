@@ -241,7 +241,8 @@ class MapStore {
   // The view context of a stored scan for `config` (viewContextOf of its fingerprint), kept apart from the
   // fingerprint cache (about 1 KB a scan, in an eighth of cache_mb more): ranking a map larger than the cache
   // by view reads no fingerprint twice. nullptr if no such scan.
-  virtual std::shared_ptr<const ViewContext> viewContext(std::int64_t scan_id, const ViewSearchConfig& config) const = 0;
+  virtual std::shared_ptr<const ViewContext> viewContext(std::int64_t scan_id,
+                                                         const ViewSearchConfig& config) const = 0;
   virtual std::optional<LabelledScan> rawScan(std::int64_t scan_id) const = 0;
   // The scan of (map, robot, session, seq), if stored.
   virtual std::optional<std::int64_t> findScan(const std::string& map, const std::string& robot,
