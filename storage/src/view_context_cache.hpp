@@ -24,8 +24,8 @@ class ViewContextCache {
  public:
   explicit ViewContextCache(std::size_t capacity_bytes) : capacity_(capacity_bytes) {}
 
-  // The context of scan `id` for `config`: kept, else viewContextOf(*load()) (kept from then on); nullptr when
-  // load finds no such scan. Throws what load or viewContextOf throw.
+  // The context of scan `id` for `config`: kept, else computed from *load() as viewContextOf would (kept from
+  // then on); nullptr when load finds no such scan. Throws what load or viewContext throw.
   std::shared_ptr<const ViewContext> get(std::int64_t id, const ViewSearchConfig& config,
                                          const std::function<std::shared_ptr<const Fingerprint>()>& load) {
     const Key key{id, settingsKey(config)};
@@ -83,7 +83,8 @@ class ViewContextCache {
     std::size_t bytes;
   };
 
-  // The settings that shape a context (a scan's own cell size and label source are fixed with its id).
+  // The settings that shape a context (a scan's own cell size and label source are fixed with its id): the
+  // config fields viewContextOf keys its memo by; a field added there must be added here.
   static std::uint64_t settingsKey(const ViewSearchConfig& config) {
     std::uint64_t key = 1469598103934665603ULL;  // FNV-1a
     const auto mix = [&key](const auto& value) {
