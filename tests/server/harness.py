@@ -34,12 +34,15 @@ def free_port():
 
 class Server:
     def __init__(self, db, extra=()):
-        self.port = free_port()
-        self.addr = f"127.0.0.1:{self.port}"
         self.log_path = db + ".log"
         self.log = open(self.log_path, "ab")
-        self.proc = subprocess.Popen([_binary, "--db", db, "--listen", self.addr, "--sync-normal", *extra],
+        start = self.log.tell()  # the log is appended to across restarts: read this run's lines only
+        # Port 0: the server takes a free port and logs it, so another test's server cannot take it in between.
+        self.proc = subprocess.Popen([_binary, "--db", db, "--listen", "127.0.0.1:0", "--sync-normal", *extra],
                                      stdout=self.log, stderr=subprocess.STDOUT)
+        self._start = start
+        self.port = self._listening_port(start)
+        self.addr = f"127.0.0.1:{self.port}"
         self.channel = grpc.insecure_channel(self.addr)
         grpc.channel_ready_future(self.channel).result(timeout=30)
         self.admin = rpc.MapAdminStub(self.channel)
@@ -55,10 +58,23 @@ class Server:
                     break
                 time.sleep(0.05)
 
+    def _listening_port(self, start):
+        import json
+        for _ in range(600):
+            with open(self.log_path, errors="replace") as f:
+                f.seek(start)
+                for line in f:
+                    if '"event":"listening"' in line:
+                        return json.loads(line)["port"]
+            assert self.proc.poll() is None, f"sglc-server exited {self.proc.returncode} before it listened"
+            time.sleep(0.1)
+        raise AssertionError("sglc-server logged no port in 60 s")
+
     def logged_port(self, event):
         """The port the server logged for `event` (e.g. "viz", "metrics": their addresses may say port 0)."""
         import json
         with open(self.log_path, errors="replace") as f:
+            f.seek(self._start)
             for line in f:
                 if f'"event":"{event}"' in line:
                     return json.loads(line)["port"]

@@ -10,7 +10,6 @@ import json
 import math
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -30,10 +29,24 @@ def run(args, expect=0):
     return p
 
 
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+def logged_port(server, log_path):
+    """The port `server` logged it listens on; fails with the log's tail if it exits first."""
+    for _ in range(600):
+        with open(log_path, errors="replace") as f:
+            for line in f:
+                if '"event":"listening"' in line:
+                    return json.loads(line)["port"]
+        assert server.poll() is None, f"sglc-server exited {server.returncode} before listening:\n{tail(log_path)}"
+        time.sleep(0.1)
+    raise AssertionError(f"sglc-server logged no port in 60 s:\n{tail(log_path)}")
+
+
+def tail(path, lines=30):
+    try:
+        with open(path, errors="replace") as f:
+            return "".join(f.readlines()[-lines:])
+    except OSError as e:
+        return f"(no log: {e})"
 
 
 def have_matplotlib():
@@ -164,10 +177,12 @@ def main():
             print("  figures not checked: /usr/bin/python3 has no matplotlib")
 
         # 2. The same through a real server: identical numbers and files.
-        port = free_port()
-        log = open(os.path.join(tmp, "server.log"), "wb")
-        server = subprocess.Popen([SERVER, "--db", os.path.join(tmp, "s.db"), "--listen", f"127.0.0.1:{port}",
+        # Port 0: the server picks a free port and logs it, so no other test's server can take it in between.
+        server_log = os.path.join(tmp, "server.log")
+        log = open(server_log, "wb")
+        server = subprocess.Popen([SERVER, "--db", os.path.join(tmp, "s.db"), "--listen", "127.0.0.1:0",
                                    "--sync-normal"], stdout=log, stderr=subprocess.STDOUT)
+        port = logged_port(server, server_log)
         remote = os.path.join(tmp, "remote")
         for attempt in range(100):
             p = subprocess.run([EVAL, "--protocol", "sequence", "--sim", "--frames", FRAMES, "--out", remote,
@@ -240,6 +255,11 @@ def main():
             assert not os.path.exists(os.path.join(tmp, "nan")), option
         print("ok")
         return 0
+    except BaseException:
+        if server:  # the server's side of a failure: whether it still runs, and what it logged last
+            print(f"sglc-server: {'running' if server.poll() is None else f'exited {server.returncode}'}; its log "
+                  f"ends:\n{tail(server_log)}", file=sys.stderr)
+        raise
     finally:
         if server:
             server.terminate()
