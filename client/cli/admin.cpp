@@ -1,4 +1,5 @@
-// The map-administration subcommands of `sglc`: maps, robots, sessions, scan, stats, delete, backup, create-map.
+// The map-administration subcommands of `sglc`: maps, robots, sessions, scan, stats, compact, delete, backup,
+// create-map.
 #include <iomanip>
 #include <iostream>
 #include <memory>
@@ -151,6 +152,10 @@ int runStats(const Common& common, const std::string& map) {
     j["db_bytes"] = s.db_bytes();
     j["fingerprint_bytes"] = s.fingerprint_bytes();
     j["cache_mb"] = s.cache_mb();
+    j["places"] = s.places();
+    j["versions"] = s.versions();
+    j["retired_scans"] = s.retired_scans();
+    j["retired_bytes"] = s.retired_bytes();
     std::cout << j.dump() << std::endl;
     return 0;
   }
@@ -163,6 +168,36 @@ int runStats(const Common& common, const std::string& map) {
             << "  database    " << std::fixed << std::setprecision(1) << s.db_bytes() / 1e6 << " MB\n"
             << "  fingerprints " << s.fingerprint_bytes() / 1e6 << " MB\n"
             << "  cache       " << s.cache_mb() << " MB\n";
+  if (s.places() > 0 || s.retired_scans() > 0)
+    std::cout << "  places      " << s.places() << " (" << s.versions() << " versions kept)\n"
+              << "  retired     " << s.retired_scans() << " scans, " << s.retired_bytes() / 1e6 << " MB saved\n";
+  return 0;
+}
+
+int runCompact(const Common& common, const std::string& map) {
+  const auto r = connectClient(common).compact(map);
+  if (common.json) {
+    json j;
+    j["map"] = map;
+    j["policy_on"] = r.policy_on();
+    j["placed"] = r.placed();
+    j["retired"] = r.retired();
+    j["retired_bytes"] = r.retired_bytes();
+    j["loops_moved"] = r.loops_moved();
+    j["loops_dropped"] = r.loops_dropped();
+    j["open_sessions"] = r.open_sessions();
+    j["places"] = r.places();
+    j["versions"] = r.versions();
+    std::cout << j.dump() << std::endl;
+    return 0;
+  }
+  std::cout << "map " << map << (r.policy_on() ? "" : " (policy off: map.max_versions_per_place is 0)") << ":\n"
+            << "  placed      " << r.placed() << " scans\n"
+            << "  retired     " << r.retired() << " scans, " << std::fixed << std::setprecision(1)
+            << r.retired_bytes() / 1e6 << " MB\n"
+            << "  loops       " << r.loops_moved() << " moved to scans that stay, " << r.loops_dropped() << " dropped\n"
+            << "  sessions    " << r.open_sessions() << " still within their retention, left whole\n"
+            << "  places      " << r.places() << " (" << r.versions() << " versions kept)\n";
   return 0;
 }
 
@@ -303,6 +338,14 @@ void addAdmin(CLI::App& app, Common& common, Commands& out) {
   addCommon(c, common);
   c->add_option("--map", *stats_map, "Only this map");
   out.push_back({c, [&common, stats_map] { return runStats(common, *stats_map); }});
+
+  auto compact_map = std::make_shared<std::string>();
+  c = app.add_subcommand("compact",
+                         "Apply the map's lifelong policy now: places, then retire what ended sessions "
+                         "added beyond each place's versions (docs/LIFELONG.md)");
+  addCommon(c, common);
+  c->add_option("--map", *compact_map, "Map name")->required();
+  out.push_back({c, [&common, compact_map] { return runCompact(common, *compact_map); }});
   addMapEdits(app, common, out);
 }
 

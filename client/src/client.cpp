@@ -382,6 +382,12 @@ v1::BackupResponse Client::backup(const std::string& path, const CallOptions& ca
   return core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::Backup, "MapAdmin.Backup", request, call);
 }
 
+v1::CompactResponse Client::compact(const std::string& map, const CallOptions& call) const {
+  v1::CompactRequest request;
+  request.set_map(map);
+  return core_->unary(core_->admin.get(), &v1::MapAdmin::Stub::Compact, "MapAdmin.Compact", request, call);
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // IngestSession
 

@@ -81,7 +81,29 @@ Ingested Ingestor::commit(PendingScan p, const LabelledScan& scan) const {
   }
   out.timing.store_ms = msSince(t0);
   if (loops_recorded_) recordLoops(out, in);
+  if (lifelong_.enabled() && !out.already_stored) recordPlace(out, in);
   return std::move(out);
+}
+
+// The scan joins the place of its surest verified loop's candidate, or founds one. The scan is stored: a failure
+// here must not fail the call (the next compaction places it).
+void Ingestor::recordPlace(Ingested& out, const IngestInput& in) const {
+  std::vector<PlaceTie> ties;
+  for (const auto& loop : out.loops) {
+    if (!loop.result.is_loop) continue;
+    const auto& res = loop.result;
+    ties.push_back({loop.scan_id, res.probability > 0.0 ? std::optional(res.probability) : std::nullopt,
+                    res.T.block<3, 1>(0, 3).norm()});
+  }
+  const PlaceLookup lookup{[&](std::int64_t id) { return store_.placeOf(id); },
+                           [&](std::int64_t place) { return store_.placeVersions(in.key.map, place); }};
+  try {
+    const auto records = placeScan(out.scan_id, ties, lifelong_, lookup);
+    store_.setPlaces(in.key.map, records);
+    out.place = records.back();
+  } catch (const StorageError& e) {
+    out.report.warnings.push_back(std::string("place not recorded (the next compaction places it): ") + e.what());
+  }
 }
 
 // Verified loops join the map's pose graph. The scan is stored: a failure here must not fail the call. A loop

@@ -117,7 +117,7 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   auto* graph = state.graph();
   closing::Ingestor::LoopsRecorded recorded;
   if (graph) recorded = [graph](const std::string& map) { graph->loopsAdded(map); };
-  const closing::Ingestor ingestor(state.pipeline(), store, std::move(recorded));
+  const closing::Ingestor ingestor(state.pipeline(), store, std::move(recorded), state.limits().lifelong);
   // Engine work holds a compute slot; the database write does not.
   auto slot = state.compute().acquire(ctx);
   auto pending = ingestor.compute(scan, std::move(input), executionOf(state, ctx), [&](const ScanReport& report) {
@@ -137,6 +137,14 @@ void ingestScan(const ServiceState& state, const grpc::ServerContextBase* ctx, c
   timing->set_store_ms(done.timing.store_ms);
   resp->set_scan_id(done.scan_id);
   resp->set_already_stored(done.already_stored);
+  if (done.place) {
+    resp->set_place_id(done.place->place_id);
+    resp->set_kept(done.place->kept);
+  } else if (state.limits().lifelong.enabled() && !done.already_stored) {
+    spdlog::warn("{}", logging::logLine({{"event", "place_not_recorded"},
+                                         {"scan", done.scan_id},
+                                         {"error", done.report.warnings.empty() ? "" : done.report.warnings.back()}}));
+  }
   for (const auto& error : done.unrecorded_loops)
     spdlog::warn("{}", logging::logLine({{"event", "loop_not_recorded"}, {"scan", done.scan_id}, {"error", error}}));
   resp->set_seq(key.seq());
@@ -356,11 +364,47 @@ grpc::Status MapAdminService::GetStats(grpc::ServerContext* ctx, const v1::GetSt
     resp->set_db_bytes(s.db_bytes);
     resp->set_fingerprint_bytes(s.fingerprint_bytes);
     resp->set_cache_mb(s.cache_mb);
+    resp->set_places(s.places);
+    resp->set_versions(s.versions);
+    resp->set_retired_scans(s.retired_scans);
+    resp->set_retired_bytes(s.retired_bytes);
     if (auto* graph = state_.graph(); graph && !req->map().empty())
       if (const auto event = graph->latest(req->map()); event && event->failed) {
         resp->set_pose_graph_failed(true);
         resp->set_pose_graph_error(event->error);
       }
+  });
+}
+
+grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::CompactRequest* req,
+                                      v1::CompactResponse* resp) {
+  return run(ctx, {"Compact", req->map(), ""}, [&](CallLog&) {
+    TokenTable::require(state_.tokens().authenticate(*ctx), req->map());
+    requireMap(state_, ctx, req->map());
+    const auto& policy = state_.limits().lifelong;
+    const auto r =
+        closing::compact(state_.store(), req->map(), policy, state_.limits().odometry,
+                         std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count());
+    // The pose graph drops the retired scans and solves again with their loops moved.
+    if (auto* graph = state_.graph(); graph && r.retired > 0) graph->scansRemoved(req->map());
+    resp->set_placed(r.placed);
+    resp->set_retired(r.retired);
+    resp->set_retired_bytes(r.retired_bytes);
+    resp->set_loops_moved(r.loops_moved);
+    resp->set_loops_dropped(r.loops_dropped);
+    resp->set_open_sessions(r.open_sessions);
+    resp->set_places(r.places);
+    resp->set_versions(r.versions);
+    resp->set_policy_on(policy.enabled());
+    spdlog::info("{}", logging::logLine({{"event", "compacted"},
+                                         {"map", req->map()},
+                                         {"placed", r.placed},
+                                         {"retired", r.retired},
+                                         {"bytes", r.retired_bytes},
+                                         {"loops_moved", r.loops_moved},
+                                         {"loops_dropped", r.loops_dropped},
+                                         {"places", r.places},
+                                         {"versions", r.versions}}));
   });
 }
 

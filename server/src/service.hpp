@@ -12,6 +12,7 @@
 #include "map_settings_guard.hpp"
 #include "memory_budget.hpp"
 #include "server_metrics.hpp"
+#include "sglc/closing/compaction.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
@@ -32,6 +33,8 @@ struct ServiceLimits {
   std::size_t max_inflight_bytes = std::size_t{1} << 30;  // scan memory in flight (MemoryBudget)
   std::int64_t max_message_bytes = 64 << 20;
   StreamLimits streams;
+  closing::LifelongOptions lifelong;  // the map section: places and versions (docs/LIFELONG.md)
+  closing::OdometryNoise odometry;    // the pose graph's, for loops moved off retired scans
 };
 
 // State shared by both services. The store is attached once it is loaded; until then calls get UNAVAILABLE.
@@ -130,6 +133,7 @@ class MapAdminService final : public v1::MapAdmin::Service {
   grpc::Status GetServerInfo(grpc::ServerContext* ctx, const v1::GetServerInfoRequest* req,
                              v1::GetServerInfoResponse* resp) override;
   grpc::Status Backup(grpc::ServerContext* ctx, const v1::BackupRequest* req, v1::BackupResponse* resp) override;
+  grpc::Status Compact(grpc::ServerContext* ctx, const v1::CompactRequest* req, v1::CompactResponse* resp) override;
 
  private:
   ServiceState& state_;

@@ -75,6 +75,8 @@ Table<Settings> makeTable() {
       t, "storage", [](auto& s) -> auto& { return s.store; });
   posegraph::graphParams().nestInto(
       t, "pose_graph", [](auto& s) -> auto& { return s.graph; });
+  closing::lifelongParams().nestInto(
+      t, "map", [](auto& s) -> auto& { return s.lifelong; });
   engineParams().nestInto(
       t, "engine", [](auto& s) -> auto& { return s.engine; });
   return t;
@@ -125,7 +127,10 @@ ServiceLimits limitsOf(const Settings& s) {
           s.threads,
           static_cast<std::size_t>(s.max_inflight_mb * 1024 * 1024),
           static_cast<std::int64_t>(s.max_message_mb * 1024 * 1024),
-          s.streams};
+          s.streams,
+          s.lifelong,
+          {s.graph.odometry_sigma_m, s.graph.odometry_sigma_per_m, s.graph.odometry_sigma_deg,
+           s.graph.odometry_sigma_deg_per_m}};
 }
 
 std::string configReference() {

@@ -37,6 +37,7 @@ struct Settings {
   Config engine;
   storage::StoreOptions store;
   GraphOptimiserOptions graph;
+  closing::LifelongOptions lifelong;  // map.*
 };
 
 const params::Table<Settings>& settingsTable();

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "places_table.hpp"
 #include "validate.hpp"
 
 namespace sglc::storage::admin {
@@ -51,6 +52,7 @@ Stats stats(const StoreCore& core, const std::string& map) {
     s.scans = st.i64(0);
     s.fingerprint_bytes = st.i64(1);
   }
+  places_table::count(*reader, map_id, s);
   std::error_code ec;
   for (const char* suffix : {"", "-wal"}) {
     const auto size = fs::file_size(core.options.path + suffix, ec);

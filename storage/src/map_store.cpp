@@ -11,6 +11,7 @@
 #include "map_index.hpp"
 #include "map_settings.hpp"
 #include "pg_store.hpp"
+#include "places_table.hpp"
 #include "pose_graph_tables.hpp"
 #include "postgres.hpp"
 #include "scan_table.hpp"
@@ -131,6 +132,20 @@ class SqliteMapStore final : public MapStore {
   }
   std::int64_t optimisedThroughLoop(const std::string& map) const override {
     return pose_graph_tables::optimisedThroughLoop(core_, map);
+  }
+
+  // ---- Places (lifelong maps)
+  void setPlaces(const std::string& map, const std::vector<PlaceRecord>& records) override {
+    places_table::set(core_, map, records);
+  }
+  std::vector<PlaceRecord> places(const std::string& map) const override { return places_table::all(core_, map); }
+  std::optional<PlaceRecord> placeOf(std::int64_t scan_id) const override { return places_table::of(core_, scan_id); }
+  std::int64_t placeVersions(const std::string& map, std::int64_t place_id) const override {
+    return places_table::versions(core_, map, place_id);
+  }
+  Retired retireScans(const std::string& map, const std::vector<std::int64_t>& scans,
+                      const std::vector<LoopRecord>& new_loops) override {
+    return places_table::retire(core_, map, scans, new_loops);
   }
 
  private:

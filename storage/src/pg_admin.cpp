@@ -142,6 +142,7 @@ Stats stats(const Core& core, const std::string& map) {
   s.scans = r.i64(0, 0);
   s.fingerprint_bytes = r.i64(0, 1);
   s.db_bytes = databaseBytes(*db);
+  places::count(*db, map_id, s);
   core.cache.report(s);
   return s;
 }

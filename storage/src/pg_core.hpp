@@ -41,7 +41,8 @@ enum class Change : std::int16_t {
   kMapDeleted = 2,
   kScanAdded = 3,
   kSessionDeleted = 4,
-  kRobotDeleted = 5
+  kRobotDeleted = 5,
+  kScanRetired = 6  // ref: the scan (lifelong maps)
 };
 
 struct Core {

@@ -108,6 +108,10 @@ void apply(Core& core, const Result& r, int i) {
       std::erase_if(m->sessions, [&](const auto& s) { return s.first.first == ref; });
       std::erase_if(m->robots, [&](const auto& r) { return r.second == ref; });
       break;
+    case Change::kScanRetired:
+      m->deletions += 1;
+      if (m->index->remove({ref}) > 0) core.cache.erase(ref);
+      break;
     default:
       break;
   }

@@ -120,6 +120,20 @@ class PgMapStore final : public MapStore {
   }
 
   // ---- Replicas
+  // ---- Places (lifelong maps)
+  void setPlaces(const std::string& map, const std::vector<PlaceRecord>& records) override {
+    places::set(core_, map, records);
+  }
+  std::vector<PlaceRecord> places(const std::string& map) const override { return places::all(core_, map); }
+  std::optional<PlaceRecord> placeOf(std::int64_t scan_id) const override { return places::of(core_, scan_id); }
+  std::int64_t placeVersions(const std::string& map, std::int64_t place_id) const override {
+    return places::versions(core_, map, place_id);
+  }
+  Retired retireScans(const std::string& map, const std::vector<std::int64_t>& scans,
+                      const std::vector<LoopRecord>& new_loops) override {
+    return places::retire(core_, map, scans, new_loops);
+  }
+
   bool shared() const override { return true; }
   GraphClaim claimGraph(std::int64_t map_id) override { return owner_.claim(map_id); }
 

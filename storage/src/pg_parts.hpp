@@ -36,6 +36,17 @@ std::vector<SessionFrame> sessionFrames(const Core& core, const std::string& map
 std::int64_t mapValue(const Core& core, const std::string& map, const char* column_query);
 }  // namespace graph
 
+namespace places {
+void set(Core& core, const std::string& map, const std::vector<PlaceRecord>& records);
+std::vector<PlaceRecord> all(const Core& core, const std::string& map);
+std::optional<PlaceRecord> of(const Core& core, std::int64_t scan_id);
+std::int64_t versions(const Core& core, const std::string& map, std::int64_t place_id);
+Retired retire(Core& core, const std::string& map, const std::vector<std::int64_t>& scans,
+               const std::vector<LoopRecord>& new_loops);
+// The places, kept versions and retired totals of one map (map_id) or all (map_id < 0), into `s`.
+void count(const Conn& db, std::int64_t map_id, Stats& s);
+}  // namespace places
+
 namespace admin {
 // pg_dump (custom format) of the database into `dest`, which must not exist.
 void backup(const Core& core, const std::string& dest);

@@ -106,6 +106,17 @@ const Migration kMigrations[] = {
     ALTER TABLE loops ADD COLUMN probability double precision;
     )sql",
      nullptr},
+    // 4 -> 5: places of lifelong maps (gone with their scans), and each map's retired totals.
+    {R"sql(
+    CREATE TABLE places(
+      scan_id bigint PRIMARY KEY REFERENCES scans(id) ON DELETE CASCADE,
+      map_id bigint NOT NULL REFERENCES maps(id) ON DELETE CASCADE, place_id bigint NOT NULL,
+      kept boolean NOT NULL);
+    CREATE INDEX places_by_place ON places(map_id, place_id);
+    ALTER TABLE maps ADD COLUMN retired_scans bigint NOT NULL DEFAULT 0;
+    ALTER TABLE maps ADD COLUMN retired_bytes bigint NOT NULL DEFAULT 0;
+    )sql",
+     nullptr},
 };
 
 // The schema version of the database, 0 for one without our tables; kCorrupt for a database that holds

@@ -8,7 +8,7 @@
 namespace sglc::storage::pg {
 
 // Schema version this build writes in PostgreSQL (numbered apart from the SQLite file's).
-inline constexpr int kSchemaVersion = 4;
+inline constexpr int kSchemaVersion = 5;
 
 // Creates or migrates our tables in the connection's current schema, one transaction per step, under an
 // advisory lock so that replicas opening together migrate once. Throws kCorrupt for a database that holds

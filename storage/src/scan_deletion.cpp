@@ -17,7 +17,7 @@ using Code = StorageError::Code;
 // first the ids of the scans removed, then the rows in dependency order.
 struct Deletion {
   const char* scan_ids;
-  std::array<const char*, 7> rows;
+  std::array<const char*, 8> rows;
 };
 
 constexpr Deletion kSession = {
@@ -28,6 +28,7 @@ constexpr Deletion kSession = {
      "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
      "DELETE FROM session_frames WHERE session_id IN"
      " (SELECT session_id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
+     "DELETE FROM places WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND session_id = ?2)",
      "DELETE FROM scans WHERE map_id = ?1 AND session_id = ?2", "DELETE FROM sessions WHERE id = ?2", nullptr}};
 
 constexpr Deletion kRobot = {
@@ -38,6 +39,7 @@ constexpr Deletion kRobot = {
      "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
      "DELETE FROM session_frames WHERE session_id IN"
      " (SELECT session_id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
+     "DELETE FROM places WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1 AND robot_id = ?2)",
      "DELETE FROM scans WHERE map_id = ?1 AND robot_id = ?2", "DELETE FROM sessions WHERE robot_id = ?2",
      "DELETE FROM robots WHERE id = ?2"}};
 
@@ -116,12 +118,13 @@ std::int64_t deleteMap(StoreCore& core, const std::string& map) {
     st.bind(1, m->id);
     while (st.step()) ids.push_back(st.i64(0));
   }
-  static constexpr std::array<const char*, 8> kRows = {
+  static constexpr std::array<const char*, 9> kRows = {
       "DELETE FROM scan_blobs WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1)",
       "DELETE FROM loops WHERE map_id = ?1",
       "DELETE FROM optimised_poses WHERE scan_id IN (SELECT id FROM scans WHERE map_id = ?1)",
       "DELETE FROM session_frames WHERE session_id IN"
       " (SELECT x.id FROM sessions x JOIN robots r ON r.id = x.robot_id WHERE r.map_id = ?1)",
+      "DELETE FROM places WHERE map_id = ?1",
       "DELETE FROM scans WHERE map_id = ?1",
       "DELETE FROM sessions WHERE robot_id IN (SELECT id FROM robots WHERE map_id = ?1)",
       "DELETE FROM robots WHERE map_id = ?1",

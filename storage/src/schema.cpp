@@ -135,6 +135,16 @@ const Migration kMigrations[] = {
     ALTER TABLE loops ADD COLUMN probability REAL;
     )sql",
      nullptr},
+    // 8 -> 9: places of lifelong maps, and each map's retired totals.
+    {R"sql(
+    CREATE TABLE places(
+      scan_id INTEGER PRIMARY KEY REFERENCES scans(id), map_id INTEGER NOT NULL REFERENCES maps(id),
+      place_id INTEGER NOT NULL, kept INTEGER NOT NULL);
+    CREATE INDEX places_by_place ON places(map_id, place_id);
+    ALTER TABLE maps ADD COLUMN retired_scans INTEGER NOT NULL DEFAULT 0;
+    ALTER TABLE maps ADD COLUMN retired_bytes INTEGER NOT NULL DEFAULT 0;
+    )sql",
+     nullptr},
 };
 static_assert(std::size(kMigrations) == kSchemaVersion, "one migration per schema version");
 

@@ -202,6 +202,8 @@ class Client {
   v1::GetStatsResponse getStats(const std::string& map = "", const CallOptions& call = {}) const;
   // `path` is on the server's filesystem and must not exist yet.
   v1::BackupResponse backup(const std::string& path, const CallOptions& call = {}) const;
+  // Applies the map's lifelong policy now (docs/LIFELONG.md).
+  v1::CompactResponse compact(const std::string& map, const CallOptions& call = {}) const;
 
   // ---- PoseGraph
   // Every optimised (or odometry-chained) scan pose of a robot / session / the whole map (empty names), all

@@ -12,6 +12,7 @@
 
 #include "sglc/closing/loop_finder.hpp"
 #include "sglc/closing/loop_query.hpp"
+#include "sglc/closing/places.hpp"
 #include "sglc/pipeline.hpp"
 #include "sglc/storage/map_store.hpp"
 
@@ -44,6 +45,9 @@ struct Ingested {
   std::vector<FoundLoop> loops;
   // Verified loops that could not be recorded for the pose graph, and why (the scan is stored regardless).
   std::vector<std::string> unrecorded_loops;
+  // Lifelong maps: the scan's place, and whether the map keeps it as one of the place's versions (else it retires
+  // with its session). Absent with the policy off, for a scan stored before, or when recording failed.
+  std::optional<storage::PlaceRecord> place;
   IngestTiming timing;
 };
 
@@ -63,8 +67,14 @@ class Ingestor {
   // Both must outlive the ingestor. Verified loops are recorded (MapStore::addLoop) only when `loops_recorded`
   // is given (a server with a pose graph): every one, also of scans without an odometry pose, which the pose
   // graph leaves out but listings and exports show.
-  Ingestor(const Pipeline& pipeline, storage::MapStore& store, LoopsRecorded loops_recorded = {})
-      : pipeline_(pipeline), store_(store), finder_(pipeline, store), loops_recorded_(std::move(loops_recorded)) {}
+  // With `lifelong` enabled, each stored scan gets a place (places.hpp) from its verified loops.
+  Ingestor(const Pipeline& pipeline, storage::MapStore& store, LoopsRecorded loops_recorded = {},
+           LifelongOptions lifelong = {})
+      : pipeline_(pipeline),
+        store_(store),
+        finder_(pipeline, store),
+        loops_recorded_(std::move(loops_recorded)),
+        lifelong_(lifelong) {}
 
   // Told where the scan's labels came from and what may keep it from closing loops, as soon as it is
   // fingerprinted (before the checks that may still fail the call).
@@ -77,17 +87,19 @@ class Ingestor {
                       const ReportListener& on_report = {}) const;
 
   // Database work: stores the scan (unless it was stored already, or another call stored the identical scan
-  // meanwhile: then its own copy leaves the loops) and records its verified loops.
+  // meanwhile: then its own copy leaves the loops), records its verified loops and, for a lifelong map, its place.
   Ingested commit(PendingScan pending, const LabelledScan& scan) const;
 
  private:
   void requireSameScan(std::int64_t id, const Fingerprint& fp, const IngestInput& input) const;
   void recordLoops(Ingested& out, const IngestInput& input) const;
+  void recordPlace(Ingested& out, const IngestInput& input) const;
 
   const Pipeline& pipeline_;
   storage::MapStore& store_;
   const LoopFinder finder_;  // over the same engine and map
   LoopsRecorded loops_recorded_;
+  LifelongOptions lifelong_;
 };
 
 }  // namespace sglc::closing

@@ -196,8 +196,31 @@ struct OptimisedPose {
   Mat4d pose = Mat4d::Identity();  // scan (LiDAR) -> map frame
 };
 
+// A scan's place in a lifelong map (docs/LIFELONG.md): the keyframes that verified loops tie together within
+// map.place_radius_m share a place, named by the id of the scan that founded it. A kept scan is one of the
+// place's long-term versions; the others stay with their session until it ends and is retired.
+struct PlaceRecord {
+  std::int64_t scan_id = 0;
+  std::int64_t place_id = 0;
+  bool kept = true;
+  // Read back only (places()): the scan's session and seq, and when it was stored (server clock, seconds).
+  std::int64_t session_id = 0;
+  std::int64_t seq = 0;
+  double added_at = 0;
+};
+
+// What retireScans did.
+struct Retired {
+  std::int64_t scans = 0;       // removed from the index and the database
+  std::int64_t bytes = 0;       // their fingerprint bytes
+  std::int64_t loops_kept = 0;  // loops added in place of loops that touched them
+};
+
 struct Stats {
   std::int64_t maps = 0, robots = 0, sessions = 0, scans = 0;
+  // Lifelong maps: places, their long-term versions (kept scans), scans retired so far and their fingerprint
+  // bytes (the bytes saved), counted since the map's creation.
+  std::int64_t places = 0, versions = 0, retired_scans = 0, retired_bytes = 0;
   std::int64_t index_entries = 0;
   std::int64_t db_bytes = 0;
   std::int64_t fingerprint_bytes = 0;
@@ -295,6 +318,23 @@ class MapStore {
   // larger ids are not yet reflected in the stored poses.
   virtual std::int64_t optimisedThroughLoop(const std::string& map) const = 0;
 
+  // ---- Lifelong maps: places and retirement (docs/LIFELONG.md).
+  // Records (or replaces) the places of scans of `map`, in one transaction. kNotFound for a scan not in the map.
+  virtual void setPlaces(const std::string& map, const std::vector<PlaceRecord>& records) = 0;
+  // Every placed scan of `map`, in scan-id order, with its session, seq and time of storage.
+  virtual std::vector<PlaceRecord> places(const std::string& map) const = 0;
+  // The place of one scan, if it has one.
+  virtual std::optional<PlaceRecord> placeOf(std::int64_t scan_id) const = 0;
+  // The number of kept versions of place `place_id` of `map`.
+  virtual std::int64_t placeVersions(const std::string& map, std::int64_t place_id) const = 0;
+  // Retires scans of `map` in one transaction: they leave the index and the database with everything that hangs
+  // on them (as deletions do: loops, optimised poses, places), and `new_loops` (between scans that stay: the
+  // retired scans' loops moved to them) are added unless a loop of the same pair exists. Counts into the map's
+  // retired totals; bumps MapInfo::deletions (pose graphs rebuild). Scans already gone are skipped. Serialised
+  // with other retirements of the map across processes (PostgreSQL: an advisory lock per map).
+  virtual Retired retireScans(const std::string& map, const std::vector<std::int64_t>& scans,
+                              const std::vector<LoopRecord>& new_loops) = 0;
+
   // ---- Several processes on one database (PostgreSQL): who solves a map's pose graph.
   // True when other processes may write this database too (their scans and loops appear without a call here).
   virtual bool shared() const { return false; }
@@ -313,6 +353,6 @@ bool isPostgresUrl(const std::string& path);
 std::string printableLocation(const std::string& path);
 
 // Schema version this build writes; older files are migrated forward on open.
-inline constexpr int kSchemaVersion = 8;
+inline constexpr int kSchemaVersion = 9;
 
 }  // namespace sglc::storage

@@ -1,0 +1,172 @@
+#include "sglc/closing/compaction.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <unordered_map>
+#include <unordered_set>
+
+namespace sglc::closing {
+namespace {
+
+using storage::LoopRecord;
+using storage::PlaceRecord;
+
+PlaceTie tieOf(const LoopRecord& l) { return {l.candidate_scan, l.probability, l.T.block<3, 1>(0, 3).norm()}; }
+
+// Places for the map's scans that have none, in scan-id order, from their recorded loops to earlier scans.
+std::int64_t placeUnplaced(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
+                           const std::vector<storage::GraphNodeRecord>& nodes, const std::vector<LoopRecord>& loops) {
+  std::unordered_map<std::int64_t, PlaceRecord> placed;
+  std::unordered_map<std::int64_t, std::int64_t> versions;
+  for (const auto& p : store.places(map)) {
+    placed[p.scan_id] = p;
+    if (p.kept) ++versions[p.place_id];
+  }
+  std::unordered_map<std::int64_t, std::vector<PlaceTie>> ties;
+  for (const auto& l : loops)
+    if (l.candidate_scan < l.query_scan) ties[l.query_scan].push_back(tieOf(l));
+  const PlaceLookup lookup{[&](std::int64_t id) -> std::optional<PlaceRecord> {
+                             const auto it = placed.find(id);
+                             return it == placed.end() ? std::nullopt : std::optional(it->second);
+                           },
+                           [&](std::int64_t place) { return versions[place]; }};
+  std::vector<PlaceRecord> records;
+  for (const auto& n : nodes) {
+    if (placed.count(n.scan_id)) continue;
+    const auto it = ties.find(n.scan_id);
+    for (const auto& r :
+         placeScan(n.scan_id, it == ties.end() ? std::vector<PlaceTie>{} : it->second, options, lookup)) {
+      placed[r.scan_id] = r;
+      if (r.kept) ++versions[r.place_id];
+      records.push_back(r);
+    }
+  }
+  if (!records.empty()) store.setPlaces(map, records);
+  return static_cast<std::int64_t>(records.size());
+}
+
+// The covariance a loop moved over `d` metres of odometry gains (translation then rotation, m and rad).
+Mat6d odometryCovariance(const OdometryNoise& n, double d) {
+  const double st = n.sigma_m + n.sigma_per_m * d, sr = (n.sigma_deg + n.sigma_deg_per_m * d) * M_PI / 180.0;
+  Mat6d c = Mat6d::Zero();
+  c.diagonal() << st * st, st * st, st * st, sr * sr, sr * sr, sr * sr;
+  return c;
+}
+
+// A loop's end moved from scan `from` to scan `to` of the same session: T gains the odometry between them.
+struct Anchor {
+  std::int64_t scan = 0;
+  Mat4d to_from = Mat4d::Identity();  // points of `from` into the frame of `to`
+};
+
+class LoopMover {
+ public:
+  LoopMover(const std::vector<storage::GraphNodeRecord>& nodes, const std::unordered_set<std::int64_t>& retired,
+            const OdometryNoise& noise)
+      : retired_(retired), noise_(noise) {
+    for (const auto& n : nodes) {
+      by_id_[n.scan_id] = &n;
+      if (!retired.count(n.scan_id) && n.odometry_pose) sessions_[n.session_id].emplace(n.seq, &n);
+    }
+  }
+
+  // The loop with its retired ends moved to their sessions' nearest scans that stay; nullopt when an end has
+  // none (no odometry, or its session keeps nothing) or both ends become one scan.
+  std::optional<LoopRecord> move(const LoopRecord& l) const {
+    const auto q = anchor(l.query_scan), c = anchor(l.candidate_scan);
+    if (!q || !c || q->scan == c->scan) return std::nullopt;
+    LoopRecord out = l;
+    out.id = 0;
+    out.query_scan = q->scan;
+    out.candidate_scan = c->scan;
+    // T maps candidate points into the query's frame: p_q' = to_from(q) T inverse(to_from(c)) p_c'.
+    out.T = q->to_from * l.T * c->to_from.inverse();
+    const double d = q->to_from.block<3, 1>(0, 3).norm() + c->to_from.block<3, 1>(0, 3).norm();
+    if (l.information) {
+      // (I^-1 + C)^-1 = I (1 + C I)^-1: no inverse of I, which may be singular in degenerate directions.
+      const Mat6d& info = *l.information;
+      const Mat6d moved = info * (Mat6d::Identity() + odometryCovariance(noise_, d) * info).inverse();
+      out.information = (0.5 * (moved + moved.transpose())).eval();
+    }
+    return out;
+  }
+
+ private:
+  std::optional<Anchor> anchor(std::int64_t scan) const {
+    if (!retired_.count(scan)) return Anchor{scan};
+    const auto n = by_id_.find(scan);
+    if (n == by_id_.end() || !n->second->odometry_pose) return std::nullopt;
+    const auto s = sessions_.find(n->second->session_id);
+    if (s == sessions_.end() || s->second.empty()) return std::nullopt;
+    // The nearest seq that stays; the earlier one on a tie.
+    const auto& kept = s->second;
+    const auto seq = n->second->seq;
+    auto after = kept.lower_bound(seq);
+    auto pick = after;
+    if (after == kept.end() || (after != kept.begin() && seq - std::prev(after)->first <= after->first - seq))
+      pick = std::prev(after);
+    const auto* to = pick->second;
+    return Anchor{to->scan_id, to->odometry_pose->inverse() * *n->second->odometry_pose};
+  }
+
+  const std::unordered_set<std::int64_t>& retired_;
+  const OdometryNoise noise_;
+  std::unordered_map<std::int64_t, const storage::GraphNodeRecord*> by_id_;
+  std::unordered_map<std::int64_t, std::map<std::int64_t, const storage::GraphNodeRecord*>> sessions_;
+};
+
+}  // namespace
+
+CompactionReport compact(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
+                         const OdometryNoise& noise, double now_s) {
+  CompactionReport report;
+  const auto nodes = store.graphNodes(map);
+  const auto loops = store.loops(map);
+  report.placed = placeUnplaced(store, map, options, nodes, loops);
+  const auto places = store.places(map);
+  std::unordered_set<std::int64_t> places_seen;
+  std::unordered_map<std::int64_t, double> session_last;
+  for (const auto& p : places) {
+    places_seen.insert(p.place_id);
+    report.versions += p.kept ? 1 : 0;
+    auto& last = session_last[p.session_id];
+    last = std::max(last, p.added_at);
+  }
+  report.places = static_cast<std::int64_t>(places_seen.size());
+  if (!options.enabled()) return report;
+  const double retention_s = options.session_retention_h * 3600.0;
+  std::unordered_set<std::int64_t> open;
+  for (const auto& [session, last] : session_last)
+    if (now_s - last < retention_s) open.insert(session);
+  report.open_sessions = static_cast<std::int64_t>(open.size());
+  std::unordered_set<std::int64_t> retired;
+  std::vector<std::int64_t> ids;
+  for (const auto& p : places)
+    if (!p.kept && !open.count(p.session_id)) {
+      retired.insert(p.scan_id);
+      ids.push_back(p.scan_id);
+    }
+  if (ids.empty()) return report;
+  const LoopMover mover(nodes, retired, noise);
+  std::vector<LoopRecord> moved;
+  for (const auto& l : loops) {
+    if (!retired.count(l.query_scan) && !retired.count(l.candidate_scan)) continue;
+    if (auto m = mover.move(l))
+      moved.push_back(std::move(*m));
+    else
+      ++report.loops_dropped;
+  }
+  // The surest first: of two loops moved onto one pair, the store keeps the first.
+  std::stable_sort(moved.begin(), moved.end(), [](const LoopRecord& a, const LoopRecord& b) {
+    return a.probability.value_or(0) > b.probability.value_or(0);
+  });
+  const auto done = store.retireScans(map, ids, moved);
+  report.retired = done.scans;
+  report.retired_bytes = done.bytes;
+  report.loops_moved = done.loops_kept;
+  report.loops_dropped += static_cast<std::int64_t>(moved.size()) - done.loops_kept;
+  return report;
+}
+
+}  // namespace sglc::closing

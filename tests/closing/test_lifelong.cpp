@@ -1,0 +1,213 @@
+// Lifelong maps (docs/LIFELONG.md): the place rule, and compaction on both back-ends: places for a map built
+// before the policy, retirement of an ended session's surplus scans with their loops moved onto the scans of
+// the session that stay (checked against the true relative poses), sessions within their retention left whole,
+// and nothing retired with the policy off.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <map>
+#include <set>
+
+#include "backend.hpp"
+#include "sglc/closing/compaction.hpp"
+#include "sglc/closing/places.hpp"
+
+namespace sglc::closing {
+namespace {
+
+using storage::LoopRecord;
+using storage::MapStore;
+using storage::PlaceRecord;
+using storage::testing::randomFingerprint;
+
+// ---- The place rule, on its own.
+
+struct FakeMap {
+  std::map<std::int64_t, PlaceRecord> places;
+  PlaceLookup lookup() {
+    return {[this](std::int64_t id) -> std::optional<PlaceRecord> {
+              const auto it = places.find(id);
+              return it == places.end() ? std::nullopt : std::optional(it->second);
+            },
+            [this](std::int64_t place) {
+              std::int64_t n = 0;
+              for (const auto& [id, p] : places) n += p.place_id == place && p.kept;
+              return n;
+            }};
+  }
+  void add(const std::vector<PlaceRecord>& records) {
+    for (const auto& r : records) places[r.scan_id] = r;
+  }
+};
+
+LifelongOptions policy(int versions) {
+  LifelongOptions o;
+  o.max_versions_per_place = versions;
+  o.place_radius_m = 3.0;
+  o.min_probability = 0.9;
+  o.session_retention_h = 0;
+  return o;
+}
+
+TEST(PlaceRule, SurestCloseLoopJoinsAPlaceUntilItHoldsItsVersions) {
+  FakeMap m;
+  m.add(placeScan(1, {}, policy(2), m.lookup()));
+  EXPECT_EQ(m.places[1].place_id, 1);  // no loop: founds its own place
+  EXPECT_TRUE(m.places[1].kept);
+  // Too unsure, too far, or of unknown probability: no tie.
+  const auto alone = placeScan(2, {{1, 0.89, 0.5}, {1, 0.99, 3.5}, {1, std::nullopt, 0.1}}, policy(2), m.lookup());
+  ASSERT_EQ(alone.size(), 1u);
+  EXPECT_EQ(alone[0].place_id, 2);
+  m.add(placeScan(3, {{1, 0.95, 1.0}}, policy(2), m.lookup()));
+  EXPECT_EQ(m.places[3].place_id, 1);
+  EXPECT_TRUE(m.places[3].kept);  // the place's second version
+  m.add(placeScan(4, {{3, 0.97, 2.0}, {1, 0.95, 0.1}}, policy(2), m.lookup()));
+  EXPECT_EQ(m.places[4].place_id, 1);  // through scan 3, the surer loop
+  EXPECT_FALSE(m.places[4].kept);      // the place holds its 2 versions
+  // The policy off: every scan is kept.
+  EXPECT_TRUE(placeScan(5, {{1, 0.95, 1.0}}, policy(0), m.lookup()).back().kept);
+}
+
+TEST(PlaceRule, ACandidateWithoutAPlaceFoundsItAndTiesBreakByDistanceThenId) {
+  FakeMap m;
+  const auto r = placeScan(9, {{7, 0.95, 1.0}, {5, 0.95, 1.0}, {6, 0.95, 2.0}}, policy(1), m.lookup());
+  ASSERT_EQ(r.size(), 2u);
+  EXPECT_EQ(r[0].scan_id, 5);  // equal probability and distance: the lower id
+  EXPECT_EQ(r[0].place_id, 5);
+  EXPECT_TRUE(r[0].kept);
+  EXPECT_EQ(r[1].place_id, 5);
+  EXPECT_FALSE(r[1].kept);  // the founder is the place's one version
+}
+
+// ---- Compaction on a store.
+
+Mat4d at(double x, double y) {
+  Mat4d T = Mat4d::Identity();
+  T(0, 3) = x;
+  T(1, 3) = y;
+  return T;
+}
+
+// Robot "a" drives x = 0..9 m; robot "b" drives the same street 0.2 m to the side, with its odometry in a frame
+// of its own (offset 100 m). b's scans 2..7 have verified loops to a's scans at the same x; b_0, b_1, b_8, b_9 none.
+struct Street {
+  std::vector<std::int64_t> a, b;
+  static Mat4d truthA(int k) { return at(k, 0); }
+  static Mat4d truthB(int k) { return at(k, 0.2); }
+};
+
+Street build(MapStore& store) {
+  store.createMap("m", DescriptorLayout{}.scanDim());
+  Street s;
+  for (const char* robot : {"a", "b"})
+    for (int k = 0; k < 10; ++k) {
+      const auto fp = randomFingerprint(static_cast<std::uint64_t>(k + (robot[0] == 'b' ? 50 : 0)));
+      const Mat4d odom = robot[0] == 'a' ? at(k, 0) : at(100 + k, 0);
+      const auto id = store.addScan(
+          {.map = "m", .robot = robot, .session = "day", .seq = k, .odometry_pose = odom, .fingerprint = &fp});
+      (robot[0] == 'a' ? s.a : s.b).push_back(id);
+    }
+  for (int k = 2; k < 8; ++k) {
+    LoopRecord l{0, s.b[k], s.a[k], Street::truthB(k).inverse() * Street::truthA(k), 0.8, 0.9, 0.05, 40};
+    l.probability = 0.95;
+    l.information = Mat6d::Identity() * 1e4;
+    store.addLoop("m", l);
+  }
+  return s;
+}
+
+constexpr double kFuture = 4e9;  // seconds: long after every scan was stored
+
+class Compaction : public storage::testing::OnBothBackends {};
+
+TEST_P(Compaction, RetiresAnEndedSessionsSurplusAndMovesItsLoopsOntoScansThatStay) {
+  auto store = db().open();
+  const auto s = build(*store);
+  const auto before = store->stats("m");
+  const auto r = compact(*store, "m", policy(1), OdometryNoise{}, kFuture);
+  EXPECT_EQ(r.placed, 20);  // a map built before the policy: every scan placed from its loops
+  EXPECT_EQ(r.retired, 6);  // b_2..b_7 relocalized into places that hold their one version
+  EXPECT_EQ(r.retired_bytes, before.fingerprint_bytes * 6 / 20);
+  EXPECT_EQ(r.loops_moved, 6);
+  EXPECT_EQ(r.loops_dropped, 0);
+  EXPECT_EQ(r.places, 14);
+  EXPECT_EQ(r.versions, 14);
+  for (int k = 2; k < 8; ++k) EXPECT_FALSE(store->scanInfo(s.b[k])) << k;
+  const auto st = store->stats("m");
+  EXPECT_EQ(st.scans, 14);
+  EXPECT_EQ(st.index_entries, 14);
+  EXPECT_EQ(st.places, 14);
+  EXPECT_EQ(st.versions, 14);
+  EXPECT_EQ(st.retired_scans, 6);
+  EXPECT_EQ(st.retired_bytes, r.retired_bytes);
+  // Each loop now ties the nearest kept scan of b (b_1 or b_8) to a_k, with the true relative pose, and less
+  // information than the loop it replaces (the odometry between them added).
+  const auto loops = store->loops("m");
+  ASSERT_EQ(loops.size(), 6u);
+  std::set<std::int64_t> stays(s.a.begin(), s.a.end());
+  stays.insert({s.b[0], s.b[1], s.b[8], s.b[9]});
+  for (const auto& l : loops) {
+    ASSERT_TRUE(stays.count(l.query_scan) && stays.count(l.candidate_scan));
+    const int k = static_cast<int>(std::find(s.a.begin(), s.a.end(), l.candidate_scan) - s.a.begin());
+    ASSERT_LT(k, 10);
+    const int anchor = k <= 4 ? 1 : 8;
+    EXPECT_EQ(l.query_scan, s.b[anchor]) << k;
+    const Mat4d truth = Street::truthB(anchor).inverse() * Street::truthA(k);
+    EXPECT_LT((l.T - truth).norm(), 1e-9) << k;
+    ASSERT_TRUE(l.information && l.probability);
+    EXPECT_LT((*l.information)(0, 0), 1e4);
+    EXPECT_GT((*l.information)(0, 0), 0);
+    EXPECT_EQ(*l.probability, 0.95);
+  }
+  // A second compaction finds nothing more to do.
+  const auto again = compact(*store, "m", policy(1), OdometryNoise{}, kFuture);
+  EXPECT_EQ(again.placed + again.retired + again.loops_moved, 0);
+  // The map reopens as it was left (indexes rebuilt or loaded).
+  store.reset();
+  store = db().open();
+  EXPECT_EQ(store->stats("m").index_entries, 14);
+  EXPECT_EQ(store->places("m").size(), 14u);
+}
+
+TEST_P(Compaction, SessionsWithinTheirRetentionAndMapsWithThePolicyOffKeepEverything) {
+  auto store = db().open();
+  build(*store);
+  auto keep = policy(1);
+  keep.session_retention_h = 1;  // both sessions' last scans were stored a moment ago, within the hour
+  const auto now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto open = compact(*store, "m", keep, OdometryNoise{}, now + 60);
+  EXPECT_EQ(open.retired, 0);
+  EXPECT_EQ(open.open_sessions, 2);
+  EXPECT_EQ(open.places, 14);
+  EXPECT_EQ(open.versions, 14);  // b_2..b_7 are surplus, waiting for their session to end
+  const auto off = compact(*store, "m", policy(0), OdometryNoise{}, kFuture);
+  EXPECT_EQ(off.retired, 0);
+  EXPECT_EQ(store->stats("m").scans, 20);
+  EXPECT_EQ(store->loops("m").size(), 6u);
+  // Deleting a session takes its places with it.
+  store->deleteSession("m", "b", "day");
+  EXPECT_EQ(store->places("m").size(), 10u);
+  EXPECT_EQ(store->stats("m").places, 10);
+}
+
+TEST_P(Compaction, SetPlacesRefusesAScanOfAnotherMapAndRecordsNothing) {
+  auto store = db().open();
+  const auto s = build(*store);
+  store->createMap("other", DescriptorLayout{}.scanDim());
+  EXPECT_EQ(storage::testing::errorCode([&] {
+              store->setPlaces("other", {{s.a[0], s.a[0], true}});
+            }),
+            storage::StorageError::Code::kNotFound);
+  EXPECT_EQ(storage::testing::errorCode([&] {
+              store->setPlaces("m", {{s.a[0], s.a[0], true}, {999999, 999999, true}});
+            }),
+            storage::StorageError::Code::kNotFound);
+  EXPECT_TRUE(store->places("m").empty());
+  EXPECT_FALSE(store->placeOf(s.a[0]));
+}
+
+INSTANTIATE_TEST_SUITE_P(MapStore, Compaction, ::testing::Values("sqlite", "postgresql"),
+                         [](const auto& info) { return info.param; });
+
+}  // namespace
+}  // namespace sglc::closing
