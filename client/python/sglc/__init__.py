@@ -22,7 +22,7 @@ from .packing import pack_scan, read_kitti_scan, unpack_labels, unpack_points
 from .pose_graph import MapWatch
 from .readers import Bag, BagScan, read_bag, read_scan
 from .results import (Backup, Evidence, GraphNode, IngestResult, Loop, LoopEdge, LoopEnd, MapEvent, MapInfo,
-                      MatchResult, QueryResult, RobotInfo, ScanInfo, ScanPose, ServerInfo, SessionFrame, SessionInfo, Stats,
+                      MatchResult, QueryResult, RobotInfo, ScanInfo, ScanPose, ServerInfo, SessionFrame, SessionInfo, Stats, Compaction,
                       Timing, information, matrix)
 from .stream import IngestSession, ScanInput
 from .version import __version__
@@ -34,7 +34,7 @@ __all__ = [
     "FailedPreconditionError", "AbortedError", "OutOfRangeError", "UnimplementedError", "InternalError",
     "UnavailableError", "DataLossError", "UnauthenticatedError",
     "Backup", "Evidence", "GraphNode", "IngestResult", "Loop", "LoopEdge", "LoopEnd", "MapEvent", "MapInfo",
-    "MatchResult", "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats",
+    "MatchResult", "QueryResult", "RobotInfo", "ScanInfo", "ScanPose", "ServerInfo", "SessionFrame", "SessionInfo", "Stats", "Compaction",
     "Timing", "information", "matrix", "pack_scan", "read_kitti_scan", "unpack_points", "unpack_labels",
     "Bag", "BagScan", "read_bag", "read_scan", "deskew", "twist_between",
     "__version__",

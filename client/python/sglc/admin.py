@@ -5,7 +5,7 @@ from typing import List, Optional
 
 from ._args import integer
 from ._stubs import pb2
-from .results import Backup, MapInfo, RobotInfo, ScanInfo, ServerInfo, SessionInfo, Stats
+from .results import Backup, Compaction, MapInfo, RobotInfo, ScanInfo, ServerInfo, SessionInfo, Stats
 
 
 class AdminCalls:
@@ -64,3 +64,8 @@ class AdminCalls:
         """Online backup into a new file `name` (a plain file name) in the server's backup directory."""
         r = self._admin_call("Backup", pb2.BackupRequest(path=name), timeout)
         return Backup(r.path, r.bytes)
+
+    def compact(self, map: str, timeout: Optional[float] = None) -> Compaction:
+        """Applies the map's lifelong policy now (docs/LIFELONG.md): places for scans that have none, then the
+        retirement of ended sessions' scans that are not versions of their places (none with the policy off)."""
+        return Compaction.from_proto(self._admin_call("Compact", pb2.CompactRequest(map=map), timeout))

@@ -125,11 +125,14 @@ class IngestResult:
     warnings: List[str]
     timing: Timing
     deskewed: bool = False  # the scan's points were moved by their point_times
+    place_id: int = 0       # lifelong maps: the scan's place (0 with the policy off)
+    kept: bool = False      # ... and whether the map keeps it as a version (else it retires with its session)
 
     @classmethod
     def from_proto(cls, m) -> "IngestResult":
         return cls(m.scan_id, m.seq, m.already_stored, LABEL_SOURCES.get(m.label_source, "unspecified"),
-                   [Loop.from_proto(c) for c in m.loops], list(m.warnings), Timing.from_proto(m.timing), m.deskewed)
+                   [Loop.from_proto(c) for c in m.loops], list(m.warnings), Timing.from_proto(m.timing), m.deskewed,
+                   m.place_id, m.kept)
 
 
 @dataclass
@@ -213,6 +216,25 @@ class ScanInfo:
 
 
 @dataclass
+class Compaction:
+    """What MapAdmin.Compact did (docs/LIFELONG.md)."""
+    policy_on: bool
+    placed: int
+    retired: int
+    retired_bytes: int
+    loops_moved: int
+    loops_dropped: int
+    open_sessions: int
+    places: int
+    versions: int
+
+    @classmethod
+    def from_proto(cls, m) -> "Compaction":
+        return cls(m.policy_on, m.placed, m.retired, m.retired_bytes, m.loops_moved, m.loops_dropped,
+                   m.open_sessions, m.places, m.versions)
+
+
+@dataclass
 class Stats:
     maps: int
     robots: int
@@ -224,11 +246,17 @@ class Stats:
     cache_mb: float
     pose_graph_failed: bool
     pose_graph_error: str
+    # Lifelong maps (docs/LIFELONG.md): places, their kept versions, scans retired so far and their bytes.
+    places: int = 0
+    versions: int = 0
+    retired_scans: int = 0
+    retired_bytes: int = 0
 
     @classmethod
     def from_proto(cls, m) -> "Stats":
         return cls(m.maps, m.robots, m.sessions, m.scans, m.index_entries, m.db_bytes, m.fingerprint_bytes,
-                   m.cache_mb, m.pose_graph_failed, m.pose_graph_error)
+                   m.cache_mb, m.pose_graph_failed, m.pose_graph_error, m.places, m.versions, m.retired_scans,
+                   m.retired_bytes)
 
 
 @dataclass
