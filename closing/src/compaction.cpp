@@ -116,6 +116,23 @@ class LoopMover {
   std::unordered_map<std::int64_t, std::map<std::int64_t, const storage::GraphNodeRecord*>> sessions_;
 };
 
+// Places that hold fewer versions than the policy allows (a kept version's session or robot was deleted, or the
+// setting was raised) take their newest surplus scans as versions, so that no place is left to retire entirely.
+std::int64_t promoteSurplus(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
+                            std::vector<PlaceRecord>& places) {
+  std::unordered_map<std::int64_t, std::int64_t> versions;
+  for (const auto& p : places) versions[p.place_id] += p.kept ? 1 : 0;
+  std::vector<PlaceRecord> promoted;
+  for (auto it = places.rbegin(); it != places.rend(); ++it)  // newest first (places() is in scan-id order)
+    if (!it->kept && versions[it->place_id] < options.max_versions_per_place) {
+      ++versions[it->place_id];
+      it->kept = true;
+      promoted.push_back(*it);
+    }
+  if (!promoted.empty()) store.setPlaces(map, promoted);
+  return static_cast<std::int64_t>(promoted.size());
+}
+
 }  // namespace
 
 CompactionReport compact(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
@@ -124,7 +141,8 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   const auto nodes = store.graphNodes(map);
   const auto loops = store.loops(map);
   report.placed = placeUnplaced(store, map, options, nodes, loops);
-  const auto places = store.places(map);
+  auto places = store.places(map);
+  if (options.enabled()) report.promoted = promoteSurplus(store, map, options, places);
   std::unordered_set<std::int64_t> places_seen;
   std::unordered_map<std::int64_t, double> session_last;
   for (const auto& p : places) {

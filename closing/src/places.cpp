@@ -23,7 +23,10 @@ Table<LifelongOptions> makeTable() {
                                "lifelong maps: the loop model's probability such a loop needs"));
   t.add(field<LifelongOptions>(SGLC_KEY(session_retention_h), closed(0, 87600),
                                "lifelong maps: a session's scans that are not versions of their places are retired "
-                               "this long after its last scan (h; applied by sglc compact)"));
+                               "this long after its last scan (h; it must exceed the longest pause within a drive)"));
+  t.add(field<LifelongOptions>(SGLC_KEY(compact_interval_s), closed(0, 604800),
+                               "lifelong maps: the server compacts every map this often (s; 0: only sglc compact "
+                               "does; nothing runs with the policy off)"));
   return t;
 }
 

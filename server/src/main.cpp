@@ -14,6 +14,7 @@
 #include <map>
 
 #include "call.hpp"
+#include "compaction_timer.hpp"
 #include "gauge_refresher.hpp"
 #include "io_poller.hpp"
 #include "metrics_http.hpp"
@@ -214,13 +215,33 @@ int serve(const Settings& s, sigset_t& signals) {
     state->attachViz(hub.get());
   }
   state->attach(store.get(), graph.get());
+  // Lifelong maps: retire what ended sessions added beyond their places' versions (docs/LIFELONG.md).
+  auto compactor = std::make_unique<sglc::server::CompactionTimer>(
+      *store, s.lifelong, state->limits().odometry,
+      [g = graph.get()](const std::string& map, const sglc::closing::CompactionReport& r, const std::string& error) {
+        if (!error.empty()) {
+          spdlog::warn("{}", sglc::logging::logLine({{"event", "compaction_failed"}, {"map", map}, {"error", error}}));
+          return;
+        }
+        if (r.retired > 0) g->scansRemoved(map);
+        spdlog::info("{}", sglc::logging::logLine({{"event", "compacted"},
+                                                   {"map", map},
+                                                   {"placed", r.placed},
+                                                   {"retired", r.retired},
+                                                   {"bytes", r.retired_bytes},
+                                                   {"loops_moved", r.loops_moved},
+                                                   {"loops_dropped", r.loops_dropped},
+                                                   {"places", r.places},
+                                                   {"versions", r.versions}}));
+      });
   health->SetServingStatus(true);
 
   int sig = 0;
   sigwait(&signals, &sig);
   spdlog::info("{}", sglc::logging::logLine({{"event", "shutdown"}, {"signal", sig}}));
   health->SetServingStatus(false);
-  graph->stop();  // loops recorded from now on are optimised after the next start
+  compactor.reset();  // a compaction in progress finishes first
+  graph->stop();      // loops recorded from now on are optimised after the next start
   graph->unsubscribe(solves);
   // Watchers end; ingest streams end after the request they are working on; new streams are refused.
   state->streams().closeAll(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));

@@ -155,6 +155,15 @@ void declareStoreGauges(Metrics& m, const ServiceState& state) {
           one([](const StoreSnapshot& s) { return double(s.stats.db_bytes); }));
   m.gauge("sglc_fingerprint_cache_bytes", "Fingerprints held in the memory cache (bytes)",
           one([](const StoreSnapshot& s) { return s.stats.cache_mb * 1024.0 * 1024.0; }));
+  // Lifelong maps (docs/LIFELONG.md).
+  m.gauge("sglc_places", "Places of lifelong maps (all maps)",
+          one([](const StoreSnapshot& s) { return double(s.stats.places); }));
+  m.gauge("sglc_place_versions", "Scans kept as versions of their places (all maps)",
+          one([](const StoreSnapshot& s) { return double(s.stats.versions); }));
+  m.gauge("sglc_retired_scans", "Scans retired by compaction since the maps were created (all maps)",
+          one([](const StoreSnapshot& s) { return double(s.stats.retired_scans); }));
+  m.gauge("sglc_retired_bytes", "Fingerprint bytes of the scans retired since the maps were created (all maps)",
+          one([](const StoreSnapshot& s) { return double(s.stats.retired_bytes); }));
 }
 
 // A closed set of label values for the engine's refusal reasons (core/src/verification.cpp, landmarks).

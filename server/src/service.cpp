@@ -388,6 +388,7 @@ grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::Compac
     // The pose graph drops the retired scans and solves again with their loops moved.
     if (auto* graph = state_.graph(); graph && r.retired > 0) graph->scansRemoved(req->map());
     resp->set_placed(r.placed);
+    resp->set_promoted(r.promoted);
     resp->set_retired(r.retired);
     resp->set_retired_bytes(r.retired_bytes);
     resp->set_loops_moved(r.loops_moved);
@@ -399,6 +400,7 @@ grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::Compac
     spdlog::info("{}", logging::logLine({{"event", "compacted"},
                                          {"map", req->map()},
                                          {"placed", r.placed},
+                                         {"promoted", r.promoted},
                                          {"retired", r.retired},
                                          {"bytes", r.retired_bytes},
                                          {"loops_moved", r.loops_moved},

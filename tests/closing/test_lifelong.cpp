@@ -1,7 +1,7 @@
 // Lifelong maps (docs/LIFELONG.md): the place rule, and compaction on both back-ends: places for a map built
 // before the policy, retirement of an ended session's surplus scans with their loops moved onto the scans of
 // the session that stay (checked against the true relative poses), sessions within their retention left whole,
-// and nothing retired with the policy off.
+// surplus promoted where a place lost its versions, and nothing retired with the policy off.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -188,6 +188,27 @@ TEST_P(Compaction, SessionsWithinTheirRetentionAndMapsWithThePolicyOffKeepEveryt
   store->deleteSession("m", "b", "day");
   EXPECT_EQ(store->places("m").size(), 10u);
   EXPECT_EQ(store->stats("m").places, 10);
+}
+
+TEST_P(Compaction, PlacesLeftWithoutTheirVersionsTakeSurplusScansInstead) {
+  auto store = db().open();
+  const auto s = build(*store);
+  auto keep = policy(1);
+  keep.session_retention_h = 1;  // first only places: both sessions are within their retention
+  const auto now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  EXPECT_EQ(compact(*store, "m", keep, OdometryNoise{}, now + 60).versions, 14);
+  // Robot a's run is deleted: its places would lose the street if b's surplus retired.
+  store->deleteSession("m", "a", "day");
+  const auto r = compact(*store, "m", policy(1), OdometryNoise{}, kFuture);
+  EXPECT_EQ(r.promoted, 6);
+  EXPECT_EQ(r.retired, 0);
+  EXPECT_EQ(r.versions, 10);
+  for (int k = 2; k < 8; ++k) {
+    const auto p = store->placeOf(s.b[k]);
+    ASSERT_TRUE(p);
+    EXPECT_TRUE(p->kept);
+  }
+  EXPECT_EQ(store->stats("m").scans, 10);
 }
 
 TEST_P(Compaction, SetPlacesRefusesAScanOfAnotherMapAndRecordsNothing) {

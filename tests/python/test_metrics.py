@@ -111,6 +111,9 @@ def test_scrape_counts_calls_stages_and_sizes(metrics_server, kitti):
     # Sizes and queues, read at the scrape.
     assert value(samples, "sglc_map_scans", map="m") == 2 and value(samples, "sglc_maps") == 1
     assert value(samples, "sglc_index_entries") == 2 and value(samples, "sglc_db_bytes") > 0
+    # The policy of lifelong maps is off by default: no places, nothing retired.
+    assert value(samples, "sglc_places") == 0 and value(samples, "sglc_retired_scans") == 0
+    assert value(samples, "sglc_place_versions") == 0 and value(samples, "sglc_retired_bytes") == 0
     assert value(samples, "sglc_compute_queue_depth") == 0 and value(samples, "sglc_inflight_bytes") == 0
     assert value(samples, "sglc_inflight_bytes_limit") > 0 and value(samples, "process_resident_memory_bytes") > 0
     assert value(samples, "sglc_build_info", version=sglc.__version__) == 1

@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 try:
     import grpc
@@ -148,6 +149,26 @@ def test_lifelong(tmp):
         assert st.retired_scans == surplus and st.scans == total - surplus, st
         off = s.admin.Compact(pb.CompactRequest(map="m"))
         assert not off.policy_on and off.retired == 0 and off.versions == total - surplus, off
+    finally:
+        assert s.stop() == 0
+    # The server compacts on its own (every second here): a third day's surplus retires without sglc compact.
+    with open(cfg, "w") as f:
+        f.write("map:\n  max_versions_per_place: 1\n  session_retention_h: 0\n  compact_interval_s: 1\n")
+    s = Server(db, ["--config", cfg])
+    try:
+        q_dir, q_frames, _, q_odom = queries
+        reqs = [pb.IngestRequest(key=pb.ScanKey(map="m", robot="c", session="day", seq=f), scan=scan(q_dir, f),
+                                 odometry_pose=tf(q_odom[i]), query=True) for i, f in enumerate(q_frames)]
+        c_surplus = sum(not r.kept for r in s.loop.IngestStream(iter(reqs), timeout=900))
+        assert c_surplus > len(q_frames) // 2, (c_surplus, len(q_frames))
+        deadline = time.monotonic() + 300  # a bound for a stuck timer, not a speed test
+        while time.monotonic() < deadline:
+            st = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+            if st.retired_scans == surplus + c_surplus:
+                break
+            time.sleep(0.2)
+        assert st.retired_scans == surplus + c_surplus and st.scans == st.versions, st
+        print(f"  the server's own compaction retired day 3's {c_surplus} surplus scans")
     finally:
         assert s.stop() == 0
 

@@ -1,8 +1,10 @@
 // What only the PostgreSQL map store has: a server to reach, other applications' databases to refuse, and other
 // processes (replicas) writing the same map. The behaviour both back-ends share is tested on both in
 // test_map_store.cpp.
+#include <atomic>
 #include <chrono>
 #include <future>
+#include <set>
 #include <thread>
 
 #include "backend.hpp"
@@ -202,6 +204,59 @@ TEST_F(PostgresStore, ReplicasSeeEachOthersWrites) {
     return m && m->id == again.id;
   }));
   EXPECT_EQ(a->stats("m").index_entries, 0);
+  EXPECT_EQ(a->integrityCheck(), "ok");
+}
+
+// Lifelong maps: one replica retires a place's surplus scans while another ingests into the same place (new scans
+// with loops to the scans being retired). The write lock orders the two; neither leaves a dangling loop or place,
+// and both replicas' indexes lose the retired scans.
+TEST_F(PostgresStore, ARetirementAndAnIngestIntoItsPlacesOnTwoReplicasStayConsistent) {
+  auto a = backend_.open();
+  auto b = backend_.open();
+  const auto dim = static_cast<int>(randomFingerprint(1).descriptor.size());
+  a->createMap("m", dim);
+  b->createMap("m", dim);
+  constexpr int kN = 40;
+  std::vector<Fingerprint> fps;
+  for (int i = 0; i < 3 * kN; ++i) fps.push_back(randomFingerprint(500 + static_cast<std::uint64_t>(i), 6));
+  std::vector<std::int64_t> kept, surplus;
+  std::vector<PlaceRecord> places;
+  for (int i = 0; i < kN; ++i) {
+    kept.push_back(a->addScan({.map = "m", .robot = "a", .session = "s", .seq = i, .fingerprint = &fps[i]}));
+    surplus.push_back(a->addScan({.map = "m", .robot = "b", .session = "s", .seq = i, .fingerprint = &fps[kN + i]}));
+    places.push_back({kept.back(), kept.back(), true});
+    places.push_back({surplus.back(), kept.back(), false});
+  }
+  a->setPlaces("m", places);
+  std::atomic<int> refused{0};
+  auto ingest = std::async(std::launch::async, [&] {
+    for (int i = 0; i < kN; ++i) {
+      const auto id = b->addScan({.map = "m", .robot = "c", .session = "s", .seq = i, .fingerprint = &fps[2 * kN + i]});
+      try {  // a loop to a scan retired meanwhile is refused (kNotFound), as the ingest path records it
+        b->addLoop("m", {0, id, surplus[i], Mat4d::Identity(), 0.5, 0.6, 0.1, 9});
+      } catch (const StorageError& e) {
+        EXPECT_EQ(e.code(), StorageError::Code::kNotFound) << e.what();
+        ++refused;
+      }
+      b->setPlaces("m", {{id, kept[i], false}});
+    }
+  });
+  const auto retired = a->retireScans("m", surplus, {});
+  ingest.get();
+  EXPECT_EQ(retired.scans, kN);
+  for (auto* store : {a.get(), b.get()}) {
+    ASSERT_TRUE(eventually([&] { return store->stats("m").index_entries == 2 * kN; }));
+    const auto st = store->stats("m");
+    EXPECT_EQ(st.scans, 2 * kN);
+    EXPECT_EQ(st.retired_scans, kN);
+    EXPECT_EQ(st.places, kN);
+    EXPECT_EQ(store->places("m").size(), static_cast<std::size_t>(2 * kN));
+    for (const auto id : surplus) EXPECT_EQ(store->fingerprint(id), nullptr);
+    std::set<std::int64_t> ids;
+    for (const auto& n : store->graphNodes("m")) ids.insert(n.scan_id);
+    for (const auto& l : store->loops("m")) EXPECT_TRUE(ids.count(l.query_scan) && ids.count(l.candidate_scan));
+  }
+  RecordProperty("loops_refused", refused.load());
   EXPECT_EQ(a->integrityCheck(), "ok");
 }
 

@@ -227,11 +227,12 @@ class Compaction:
     open_sessions: int
     places: int
     versions: int
+    promoted: int = 0  # surplus scans made versions of places left with too few
 
     @classmethod
     def from_proto(cls, m) -> "Compaction":
         return cls(m.policy_on, m.placed, m.retired, m.retired_bytes, m.loops_moved, m.loops_dropped,
-                   m.open_sessions, m.places, m.versions)
+                   m.open_sessions, m.places, m.versions, m.promoted)
 
 
 @dataclass

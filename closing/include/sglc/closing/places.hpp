@@ -21,6 +21,8 @@ struct LifelongOptions {
   double min_probability = 0.9;
   // A session's scans that are not versions of their places are retired this long after its last scan (h).
   double session_retention_h = 24.0;
+  // The server compacts every map this often (s; 0: only `sglc compact` does).
+  double compact_interval_s = 600.0;
 
   bool enabled() const { return max_versions_per_place > 0; }
 };

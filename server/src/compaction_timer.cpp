@@ -1,0 +1,57 @@
+#include "compaction_timer.hpp"
+
+#include <chrono>
+
+namespace sglc::server {
+
+CompactionTimer::CompactionTimer(storage::MapStore& store, closing::LifelongOptions policy,
+                                 closing::OdometryNoise noise, Done done)
+    : store_(store), policy_(policy), noise_(noise), done_(std::move(done)) {
+  if (policy_.enabled() && policy_.compact_interval_s > 0) thread_ = std::thread([this] { run(); });
+}
+
+CompactionTimer::~CompactionTimer() {
+  {
+    const std::lock_guard lock(mutex_);
+    stop_ = true;
+  }
+  wake_.notify_all();
+  if (thread_.joinable()) thread_.join();
+}
+
+void CompactionTimer::run() {
+  const auto interval = std::chrono::duration<double>(policy_.compact_interval_s);
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    if (wake_.wait_for(lock, interval, [this] { return stop_; })) return;
+    lock.unlock();
+    compactAll();
+    lock.lock();
+  }
+}
+
+void CompactionTimer::compactAll() {
+  std::vector<storage::MapInfo> maps;
+  try {
+    maps = store_.listMaps();
+  } catch (const std::exception& e) {
+    done_("", {}, e.what());
+    return;
+  }
+  for (const auto& map : maps) {
+    {
+      const std::lock_guard lock(mutex_);
+      if (stop_) return;
+    }
+    try {
+      const double now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+      const auto r = closing::compact(store_, map.name, policy_, noise_, now);
+      if (r.placed > 0 || r.retired > 0) done_(map.name, r, "");
+    } catch (const storage::StorageError& e) {
+      // A map deleted meanwhile is no failure; anything else is reported and tried again next time.
+      if (e.code() != storage::StorageError::Code::kNotFound) done_(map.name, {}, e.what());
+    }
+  }
+}
+
+}  // namespace sglc::server
