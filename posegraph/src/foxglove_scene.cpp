@@ -54,6 +54,9 @@ std::map<std::string, std::string> schemas() {
                        R"("nodes":{"type":"integer"},"loops":{"type":"integer"},"rejected_loops":{"type":"integer"},)"
                        R"("optimise_ms":{"type":"number"},"converged":{"type":"boolean"},"global":{"type":"boolean"},)"
                        R"("failed":{"type":"boolean"},"error":{"type":"string"}}})";
+  s["sglc.MapStats"] = R"({"title":"sglc.MapStats","type":"object","properties":{"scans":{"type":"integer"},)"
+                       R"("places":{"type":"integer"},"versions":{"type":"integer"},)"
+                       R"("retired_scans":{"type":"integer"},"retired_bytes":{"type":"integer"}}})";
   return s;
 }
 
@@ -254,6 +257,15 @@ std::string foxgloveMapEvent(const GraphEvent& event) {
                {"global", event.global},
                {"failed", event.failed},
                {"error", event.error}})
+      .dump();
+}
+
+std::string foxgloveMapStats(const storage::Stats& stats) {
+  return Json({{"scans", stats.scans},
+               {"places", stats.places},
+               {"versions", stats.versions},
+               {"retired_scans", stats.retired_scans},
+               {"retired_bytes", stats.retired_bytes}})
       .dump();
 }
 

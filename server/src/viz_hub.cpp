@@ -170,6 +170,8 @@ VizUpdate VizHub::rebuild(const std::string& map, const std::optional<Keyframe>&
   update.complete = true;
   for (auto& t : posegraph::foxgloveScene(graph, stamp_ns))
     update.messages.push_back(message(std::move(t.topic), std::move(t.schema_name), std::move(t.message), stamp_ns));
+  update.messages.push_back(
+      message("map_stats", "sglc.MapStats", posegraph::foxgloveMapStats(store_.stats(map)), stamp_ns));
   if (keyframe)
     for (const auto& n : graph.nodes)
       if (n.scan_id == keyframe->scan_id) {

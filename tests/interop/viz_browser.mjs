@@ -64,7 +64,7 @@ try {
     }
     const v = window.sglcView;
     return { connected: v.connected, map: v.map, maps: v.maps, drawn: v.drawn, counts: v.counts,
-             graphVersion: v.graphVersion, statuses: v.statuses,
+             graphVersion: v.graphVersion, statuses: v.statuses, mapStats: v.mapStats,
              stats: document.getElementById("stats").innerText,
              pixels: { trajectory, intra, inter } };
   });

@@ -66,8 +66,10 @@ def test_live_view(tmp):
     # Two robots drive the loop route (a frames 0-129, b 110-238): the page, open before they start, draws the
     # map as it grows (with the newest keyframe); then Foxglove's client and the page agree with the server.
     seq = simulate(tmp)
+    # With the lifelong policy on (two versions per place; nothing retires within the test), so that the page and
+    # the client show places.
     s = Server(os.path.join(tmp, "viz.db"), extra=["--viz-listen", "127.0.0.1:0", "--metrics-listen", "127.0.0.1:0",
-                                                   "--viz-interval-s", "0.2"])
+                                                   "--viz-interval-s", "0.2", "--set", "map.max_versions_per_place=2"])
     try:
         port = s.logged_port("viz")
         url = f"http://127.0.0.1:{port}/"
@@ -93,6 +95,13 @@ def test_live_view(tmp):
         assert browser.returncode == 0, (drawn, err[-2000:])
         assert drawn["errors"] == [], drawn["errors"]
         assert drawn["maps"] == ["m"] and drawn["counts"]["inter"] > 0 and drawn["counts"]["intra"] > 0, drawn
+        # The map's statistics, as GetStats gives them: places and their versions (robot b's second pass over a's
+        # frames 110-129 and the route's own revisits put scans in places that hold their versions).
+        stats = s.admin.GetStats(pb.GetStatsRequest(map="m"))
+        assert 0 < stats.places and stats.versions < stats.scans == 259, stats
+        assert drawn["mapStats"] == {"scans": 259, "places": stats.places, "versions": stats.versions,
+                                     "retired_scans": 0, "retired_bytes": 0}, drawn["mapStats"]
+        assert f"places {stats.places} ({stats.versions} versions)" in drawn["stats"], drawn["stats"]
         # It is on the canvas: pixels in the first robot's colour and in both loop colours (loops are drawn over
         # the trajectories, and the solve's timing moves them a little: bounds well below the ~900-7000 seen).
         px = drawn["pixels"]
@@ -105,7 +114,8 @@ def test_live_view(tmp):
         assert schemas == {"/sglc/m/trajectory/a": "foxglove.PosesInFrame", "/sglc/m/trajectory/b": "foxglove.PosesInFrame",
                            "/sglc/m/odometry/a": "foxglove.PosesInFrame", "/sglc/m/odometry/b": "foxglove.PosesInFrame",
                            "/sglc/m/loops": "foxglove.SceneUpdate", "/sglc/m/loop_list": "sglc.LoopList",
-                           "/sglc/m/keyframe": "foxglove.PointCloud", "/sglc/m/events": "sglc.MapEvent"}, schemas
+                           "/sglc/m/keyframe": "foxglove.PointCloud", "/sglc/m/events": "sglc.MapEvent",
+                           "/sglc/m/map_stats": "sglc.MapStats"}, schemas
         assert all(c["encoding"] == "json" and c["schemaEncoding"] == "jsonschema" for c in got["channels"])
         t = got["topics"]
         assert t["/sglc/m/trajectory/a"]["last"]["poses"] == 130 and t["/sglc/m/trajectory/b"]["last"]["poses"] == 129
@@ -113,6 +123,7 @@ def test_live_view(tmp):
         assert sum(e["points"] for e in scene) == 2 * loops
         assert t["/sglc/m/loop_list"]["last"]["loops"] == loops
         assert t["/sglc/m/events"]["last"]["graph_version"] >= 1
+        assert t["/sglc/m/map_stats"]["last"]["places"] == stats.places, t["/sglc/m/map_stats"]
         # The server's optimised pose of b's last scan is the trajectory's last pose.
         last_b = [p for p in s.graph.GetPoses(pb.GetPosesRequest(map="m", page_size=10000)).poses if p.robot == "b"][-1]
         T = last_b.t_map_scan.m
@@ -189,7 +200,7 @@ def test_tokens_and_hostile_viewers(tmp):
 
         # A viewer that stops reading never holds up ingest: the drive is stored, and a new viewer sees it all.
         stalled, subscribed = stalled_viewer(s.logged_port("viz"), "/sglc/m/", token="admin-token-123")
-        assert len(subscribed) == 6, subscribed
+        assert len(subscribed) == 7, subscribed  # keyframe, events, trajectory, odometry, loops, loop_list, map_stats
         ingest(s, seq, "r2", "0:239", m="m", token="admin-token-123")
         _, got = node("viz_client.mjs", ws + "?token=admin-token-123", "--prefix", "/sglc/m/", "--poses", 244)
         assert got["topics"]["/sglc/m/trajectory/r2"]["last"]["poses"] == 239

@@ -50,4 +50,7 @@ std::string foxglovePointCloud(const Points& points, const Mat4d& pose, std::uin
 // sglc.MapEvent of a graph event.
 std::string foxgloveMapEvent(const GraphEvent& event);
 
+// sglc.MapStats of a map's statistics: scans, and for lifelong maps places, versions and what was retired.
+std::string foxgloveMapStats(const storage::Stats& stats);
+
 }  // namespace sglc::posegraph
