@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -58,6 +59,14 @@ Mat6d odometryCovariance(const OdometryNoise& n, double d) {
 struct Anchor {
   std::int64_t scan = 0;
   Mat4d to_from = Mat4d::Identity();  // points of `from` into the frame of `to`
+  bool moved = false;
+};
+
+// A loop moved onto scans that stay, how far (m, both ends' moves together), and the scans it was moved onto.
+struct MovedLoop {
+  LoopRecord loop;
+  double moved_m = 0;
+  std::vector<std::int64_t> anchors;
 };
 
 class LoopMover {
@@ -73,23 +82,27 @@ class LoopMover {
 
   // The loop with its retired ends moved to their sessions' nearest scans that stay; nullopt when an end has
   // none (no odometry, or its session keeps nothing) or both ends become one scan.
-  std::optional<LoopRecord> move(const LoopRecord& l) const {
+  std::optional<MovedLoop> move(const LoopRecord& l) const {
     const auto q = anchor(l.query_scan), c = anchor(l.candidate_scan);
     if (!q || !c || q->scan == c->scan) return std::nullopt;
-    LoopRecord out = l;
+    MovedLoop m;
+    LoopRecord& out = m.loop;
+    out = l;
     out.id = 0;
     out.query_scan = q->scan;
     out.candidate_scan = c->scan;
     // T maps candidate points into the query's frame: p_q' = to_from(q) T inverse(to_from(c)) p_c'.
     out.T = q->to_from * l.T * c->to_from.inverse();
-    const double d = q->to_from.block<3, 1>(0, 3).norm() + c->to_from.block<3, 1>(0, 3).norm();
+    m.moved_m = q->to_from.block<3, 1>(0, 3).norm() + c->to_from.block<3, 1>(0, 3).norm();
     if (l.information) {
       // (I^-1 + C)^-1 = I (1 + C I)^-1: no inverse of I, which may be singular in degenerate directions.
       const Mat6d& info = *l.information;
-      const Mat6d moved = info * (Mat6d::Identity() + odometryCovariance(noise_, d) * info).inverse();
+      const Mat6d moved = info * (Mat6d::Identity() + odometryCovariance(noise_, m.moved_m) * info).inverse();
       out.information = (0.5 * (moved + moved.transpose())).eval();
     }
-    return out;
+    for (const auto& a : {*q, *c})
+      if (a.moved) m.anchors.push_back(a.scan);
+    return m;
   }
 
  private:
@@ -107,7 +120,7 @@ class LoopMover {
     if (after == kept.end() || (after != kept.begin() && seq - std::prev(after)->first <= after->first - seq))
       pick = std::prev(after);
     const auto* to = pick->second;
-    return Anchor{to->scan_id, to->odometry_pose->inverse() * *n->second->odometry_pose};
+    return Anchor{to->scan_id, to->odometry_pose->inverse() * *n->second->odometry_pose, true};
   }
 
   const std::unordered_set<std::int64_t>& retired_;
@@ -115,6 +128,28 @@ class LoopMover {
   std::unordered_map<std::int64_t, const storage::GraphNodeRecord*> by_id_;
   std::unordered_map<std::int64_t, std::map<std::int64_t, const storage::GraphNodeRecord*>> sessions_;
 };
+
+// The loops to keep of those moved: at most `per_anchor` onto each scan that stays, those moved the least (their
+// poses carry the least odometry; ties: the surer, then the lower ids). Without a bound, every ended session
+// whose few kept scans (new places) took all its retired scans' loops would add dozens of long, weak loops to
+// the graph, which would grow with the days driven, not with the map. In the order the store should keep them:
+// of two loops moved onto one pair, it keeps the first.
+std::vector<LoopRecord> fewestPerAnchor(std::vector<MovedLoop> moved, int per_anchor) {
+  std::sort(moved.begin(), moved.end(), [](const MovedLoop& a, const MovedLoop& b) {
+    return std::make_tuple(a.moved_m, -a.loop.probability.value_or(0), a.loop.query_scan, a.loop.candidate_scan) <
+           std::make_tuple(b.moved_m, -b.loop.probability.value_or(0), b.loop.query_scan, b.loop.candidate_scan);
+  });
+  std::unordered_map<std::int64_t, int> taken;
+  std::vector<LoopRecord> out;
+  for (auto& m : moved) {
+    bool room = true;
+    for (const auto a : m.anchors) room = room && taken[a] < per_anchor;
+    if (!room) continue;
+    for (const auto a : m.anchors) ++taken[a];
+    out.push_back(std::move(m.loop));
+  }
+  return out;
+}
 
 // Places that hold fewer versions than the policy allows (a kept version's session or robot was deleted, or the
 // setting was raised) take their newest surplus scans as versions, so that no place is left to retire entirely.
@@ -167,18 +202,17 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
     }
   if (ids.empty()) return report;
   const LoopMover mover(nodes, retired, noise);
-  std::vector<LoopRecord> moved;
+  std::vector<MovedLoop> candidates;
   for (const auto& l : loops) {
     if (!retired.count(l.query_scan) && !retired.count(l.candidate_scan)) continue;
     if (auto m = mover.move(l))
-      moved.push_back(std::move(*m));
+      candidates.push_back(std::move(*m));
     else
       ++report.loops_dropped;
   }
-  // The surest first: of two loops moved onto one pair, the store keeps the first.
-  std::stable_sort(moved.begin(), moved.end(), [](const LoopRecord& a, const LoopRecord& b) {
-    return a.probability.value_or(0) > b.probability.value_or(0);
-  });
+  const auto movable = static_cast<std::int64_t>(candidates.size());
+  const auto moved = fewestPerAnchor(std::move(candidates), options.max_moved_loops_per_scan);
+  report.loops_dropped += movable - static_cast<std::int64_t>(moved.size());
   const auto done = store.retireScans(map, ids, moved);
   report.retired = done.scans;
   report.retired_bytes = done.bytes;

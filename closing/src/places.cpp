@@ -24,6 +24,9 @@ Table<LifelongOptions> makeTable() {
   t.add(field<LifelongOptions>(SGLC_KEY(session_retention_h), closed(0, 87600),
                                "lifelong maps: a session's scans that are not versions of their places are retired "
                                "this long after its last scan (h; it must exceed the longest pause within a drive)"));
+  t.add(field<LifelongOptions>(SGLC_KEY(max_moved_loops_per_scan), closed(0, 1000),
+                               "lifelong maps: a retired scan's loops move to the nearest scans of its session that "
+                               "stay; each of those takes at most this many, the ones moved the least"));
   t.add(field<LifelongOptions>(SGLC_KEY(compact_interval_s), closed(0, 604800),
                                "lifelong maps: the server compacts every map this often (s; 0: only sglc compact "
                                "does; nothing runs with the policy off)"));

@@ -169,6 +169,23 @@ TEST_P(Compaction, RetiresAnEndedSessionsSurplusAndMovesItsLoopsOntoScansThatSta
   EXPECT_EQ(store->places("m").size(), 14u);
 }
 
+TEST_P(Compaction, EachScanThatStaysTakesAtMostItsShareOfMovedLoopsTheNearestFirst) {
+  auto store = db().open();
+  const auto s = build(*store);
+  auto two = policy(1);
+  two.max_moved_loops_per_scan = 2;
+  const auto r = compact(*store, "m", two, OdometryNoise{}, kFuture);
+  EXPECT_EQ(r.retired, 6);
+  EXPECT_EQ(r.loops_moved, 4);
+  EXPECT_EQ(r.loops_dropped, 2);
+  // b_1 keeps the loops of b_2 and b_3 (moved 1 and 2 m), not b_4's (3 m); b_8 those of b_7 and b_6.
+  std::set<std::pair<std::int64_t, std::int64_t>> pairs;
+  for (const auto& l : store->loops("m")) pairs.insert({l.query_scan, l.candidate_scan});
+  const std::set<std::pair<std::int64_t, std::int64_t>> expected = {
+      {s.b[1], s.a[2]}, {s.b[1], s.a[3]}, {s.b[8], s.a[6]}, {s.b[8], s.a[7]}};
+  EXPECT_EQ(pairs, expected);
+}
+
 TEST_P(Compaction, SessionsWithinTheirRetentionAndMapsWithThePolicyOffKeepEverything) {
   auto store = db().open();
   build(*store);
