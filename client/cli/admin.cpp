@@ -182,6 +182,7 @@ int runCompact(const Common& common, const std::string& map) {
     j["policy_on"] = r.policy_on();
     j["placed"] = r.placed();
     j["promoted"] = r.promoted();
+    j["demoted"] = r.demoted();
     j["retired"] = r.retired();
     j["retired_bytes"] = r.retired_bytes();
     j["loops_moved"] = r.loops_moved();
@@ -193,7 +194,8 @@ int runCompact(const Common& common, const std::string& map) {
     return 0;
   }
   std::cout << "map " << map << (r.policy_on() ? "" : " (policy off: map.max_versions_per_place is 0)") << ":\n"
-            << "  placed      " << r.placed() << " scans (" << r.promoted() << " surplus made versions)\n"
+            << "  placed      " << r.placed() << " scans; " << r.promoted() << " surplus made versions, " << r.demoted()
+            << " versions made surplus\n"
             << "  retired     " << r.retired() << " scans, " << std::fixed << std::setprecision(1)
             << r.retired_bytes() / 1e6 << " MB\n"
             << "  loops       " << r.loops_moved() << " moved to scans that stay, " << r.loops_dropped() << " dropped\n"

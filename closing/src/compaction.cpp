@@ -55,6 +55,19 @@ Mat6d odometryCovariance(const OdometryNoise& n, double d) {
   return c;
 }
 
+// The adjoint of T on a (translation, rotation) perturbation: T Exp(xi) T^-1 = Exp(Ad(T) xi).
+Mat6d adjoint(const Mat4d& T) {
+  const Eigen::Matrix3d R = T.block<3, 3>(0, 0);
+  const Eigen::Vector3d t = T.block<3, 1>(0, 3);
+  Eigen::Matrix3d tx;
+  tx << 0, -t.z(), t.y(), t.z(), 0, -t.x(), -t.y(), t.x(), 0;
+  Mat6d ad = Mat6d::Zero();
+  ad.block<3, 3>(0, 0) = R;
+  ad.block<3, 3>(0, 3) = tx * R;
+  ad.block<3, 3>(3, 3) = R;
+  return ad;
+}
+
 // A loop's end moved from scan `from` to scan `to` of the same session: T gains the odometry between them.
 struct Anchor {
   std::int64_t scan = 0;
@@ -84,7 +97,9 @@ class LoopMover {
   // none (no odometry, or its session keeps nothing) or both ends become one scan.
   std::optional<MovedLoop> move(const LoopRecord& l) const {
     const auto q = anchor(l.query_scan), c = anchor(l.candidate_scan);
-    if (!q || !c || q->scan == c->scan) return std::nullopt;
+    // Without an information matrix (refinement off, or recorded before schema 3) the pose graph weighs a loop by
+    // its residual alone, which says nothing of the odometry it would be moved over: such loops are not moved.
+    if (!q || !c || q->scan == c->scan || !l.information) return std::nullopt;
     MovedLoop m;
     LoopRecord& out = m.loop;
     out = l;
@@ -94,12 +109,7 @@ class LoopMover {
     // T maps candidate points into the query's frame: p_q' = to_from(q) T inverse(to_from(c)) p_c'.
     out.T = q->to_from * l.T * c->to_from.inverse();
     m.moved_m = q->to_from.block<3, 1>(0, 3).norm() + c->to_from.block<3, 1>(0, 3).norm();
-    if (l.information) {
-      // (I^-1 + C)^-1 = I (1 + C I)^-1: no inverse of I, which may be singular in degenerate directions.
-      const Mat6d& info = *l.information;
-      const Mat6d moved = info * (Mat6d::Identity() + odometryCovariance(noise_, m.moved_m) * info).inverse();
-      out.information = (0.5 * (moved + moved.transpose())).eval();
-    }
+    out.information = movedInformation(*l.information, out.T, q->to_from, c->to_from);
     for (const auto& a : {*q, *c})
       if (a.moved) m.anchors.push_back(a.scan);
     return m;
@@ -121,6 +131,21 @@ class LoopMover {
       pick = std::prev(after);
     const auto* to = pick->second;
     return Anchor{to->scan_id, to->odometry_pose->inverse() * *n->second->odometry_pose, true};
+  }
+
+  // The information of the moved loop T' = Q T C^-1. The pose graph's error of a loop is a right perturbation of T
+  // (in the candidate's frame, translation first), so moving the candidate end by C turns an error xi into
+  // Ad(C) xi: the information becomes Ad(C)^-T I Ad(C)^-1. The odometry over each end's move adds its covariance:
+  // the candidate end's in the new candidate frame, the query end's (a left perturbation) through Ad(T'^-1).
+  // (I^-1 + S)^-1 is computed as I (1 + S I)^-1: no inverse of I, which may be singular in degenerate directions.
+  Mat6d movedInformation(const Mat6d& info, const Mat4d& moved_T, const Mat4d& Q, const Mat4d& C) const {
+    const Mat6d ad_c_inv = adjoint(C.inverse());
+    const Mat6d info_c = ad_c_inv.transpose() * info * ad_c_inv;
+    const Mat6d ad_t_inv = adjoint(moved_T.inverse());
+    const Mat6d added = ad_t_inv * odometryCovariance(noise_, Q.block<3, 1>(0, 3).norm()) * ad_t_inv.transpose() +
+                        odometryCovariance(noise_, C.block<3, 1>(0, 3).norm());
+    const Mat6d moved = info_c * (Mat6d::Identity() + added * info_c).inverse();
+    return 0.5 * (moved + moved.transpose());
   }
 
   const std::unordered_set<std::int64_t>& retired_;
@@ -151,21 +176,33 @@ std::vector<LoopRecord> fewestPerAnchor(std::vector<MovedLoop> moved, int per_an
   return out;
 }
 
-// Places that hold fewer versions than the policy allows (a kept version's session or robot was deleted, or the
-// setting was raised) take their newest surplus scans as versions, so that no place is left to retire entirely.
-std::int64_t promoteSurplus(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
-                            std::vector<PlaceRecord>& places) {
-  std::unordered_map<std::int64_t, std::int64_t> versions;
+// Every place to the policy's number of versions. One that holds fewer (a kept version's session or robot was
+// deleted, or the setting was raised) takes its newest surplus scans as versions, so that no place is left to
+// retire entirely; one that holds more (places assigned with the policy off, or the setting lowered) keeps its
+// oldest versions and the newer ones become surplus. Returns (promoted, demoted).
+std::pair<std::int64_t, std::int64_t> rebalance(storage::MapStore& store, const std::string& map,
+                                                const LifelongOptions& options, std::vector<PlaceRecord>& places) {
+  const auto max = static_cast<std::int64_t>(options.max_versions_per_place);
+  std::unordered_map<std::int64_t, std::int64_t> versions, seen;
   for (const auto& p : places) versions[p.place_id] += p.kept ? 1 : 0;
-  std::vector<PlaceRecord> promoted;
-  for (auto it = places.rbegin(); it != places.rend(); ++it)  // newest first (places() is in scan-id order)
-    if (!it->kept && versions[it->place_id] < options.max_versions_per_place) {
+  std::vector<PlaceRecord> changed;
+  std::int64_t promoted = 0, demoted = 0;
+  for (auto& p : places)  // oldest first (places() is in scan-id order): the first `max` versions stay
+    if (p.kept && ++seen[p.place_id] > max) {
+      p.kept = false;
+      --versions[p.place_id];
+      changed.push_back(p);
+      ++demoted;
+    }
+  for (auto it = places.rbegin(); it != places.rend(); ++it)  // newest first
+    if (!it->kept && versions[it->place_id] < max) {
       ++versions[it->place_id];
       it->kept = true;
-      promoted.push_back(*it);
+      changed.push_back(*it);
+      ++promoted;
     }
-  if (!promoted.empty()) store.setPlaces(map, promoted);
-  return static_cast<std::int64_t>(promoted.size());
+  if (!changed.empty()) store.setPlaces(map, changed);
+  return {promoted, demoted};
 }
 
 }  // namespace
@@ -177,7 +214,7 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   const auto loops = store.loops(map);
   report.placed = placeUnplaced(store, map, options, nodes, loops);
   auto places = store.places(map);
-  if (options.enabled()) report.promoted = promoteSurplus(store, map, options, places);
+  if (options.enabled()) std::tie(report.promoted, report.demoted) = rebalance(store, map, options, places);
   std::unordered_set<std::int64_t> places_seen;
   std::unordered_map<std::int64_t, double> session_last;
   for (const auto& p : places) {

@@ -389,6 +389,7 @@ grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::Compac
     if (auto* graph = state_.graph(); graph && r.retired > 0) graph->scansRemoved(req->map());
     resp->set_placed(r.placed);
     resp->set_promoted(r.promoted);
+    resp->set_demoted(r.demoted);
     resp->set_retired(r.retired);
     resp->set_retired_bytes(r.retired_bytes);
     resp->set_loops_moved(r.loops_moved);
@@ -401,6 +402,7 @@ grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::Compac
                                          {"map", req->map()},
                                          {"placed", r.placed},
                                          {"promoted", r.promoted},
+                                         {"demoted", r.demoted},
                                          {"retired", r.retired},
                                          {"bytes", r.retired_bytes},
                                          {"loops_moved", r.loops_moved},

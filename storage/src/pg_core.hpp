@@ -71,6 +71,9 @@ class WriteTx {
   explicit WriteTx(Core& core);
   // Appends a journal entry and a notification to this transaction; returns the entry's id.
   std::int64_t journal(Change kind, std::int64_t map_id, std::int64_t ref);
+  // One entry per ref of `refs` (a PostgreSQL bigint[] literal, "{1,2}") in one statement, and one notification;
+  // returns the last entry's id.
+  std::int64_t journalEach(Change kind, std::int64_t map_id, const std::string& refs);
   // Commits, then runs `apply` (the change to the catalogue and indexes) under the exclusive state lock, so no
   // reader sees the one without the other, and records `entry` (0: none) as applied.
   template <typename Apply>

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <map>
+#include <unordered_set>
 
 #include "map_index.hpp"
 #include "pg_core.hpp"
@@ -108,9 +110,7 @@ void apply(Core& core, const Result& r, int i) {
       std::erase_if(m->sessions, [&](const auto& s) { return s.first.first == ref; });
       std::erase_if(m->robots, [&](const auto& r) { return r.second == ref; });
       break;
-    case Change::kScanRetired:
-      m->deletions += 1;
-      if (m->index->remove({ref}) > 0) core.cache.erase(ref);
+    case Change::kScanRetired:  // gathered by catchUp and applied a map at a time
       break;
     default:
       break;
@@ -161,10 +161,28 @@ void catchUp(Core& core) {
         {core.applied, kBatch});
     if (r.rows() == 0) return;
     std::unique_lock lock(core.state_mutex);
+    // Retired scans leave each index in one pass (a pass per scan would cost retired x index entries under the
+    // exclusive lock), before any other kind of entry that follows them is applied.
+    std::map<std::int64_t, std::unordered_set<std::int64_t>> retired;
+    const auto flush = [&] {
+      for (auto& [map_id, ids] : retired)
+        if (MapState* m = mapById(core, map_id)) {
+          m->index->remove(ids);
+          m->deletions += 1;
+          for (const auto id : ids) core.cache.erase(id);
+        }
+      retired.clear();
+    };
     for (int i = 0; i < r.rows(); ++i) {
-      apply(core, r, i);
+      if (static_cast<Change>(r.i64(i, 1)) == Change::kScanRetired) {
+        retired[r.i64(i, 2)].insert(r.i64(i, 3));
+      } else {
+        flush();
+        apply(core, r, i);
+      }
       core.applied = r.i64(i, 0);
     }
+    flush();
     if (r.rows() < kBatch) return;
   }
 }
@@ -192,6 +210,16 @@ std::int64_t WriteTx::journal(Change kind, std::int64_t map_id, std::int64_t ref
                                     {map_id, static_cast<int>(kind), ref});
   const auto id = r.i64(0, 0);
   core_.writer.query("SELECT pg_notify($1, $2)", {kChannel, std::to_string(id)});  // the entry, for followers
+  return id;
+}
+
+std::int64_t WriteTx::journalEach(Change kind, std::int64_t map_id, const std::string& refs) {
+  const auto r = core_.writer.query(
+      "WITH e AS (INSERT INTO sglc_changes(map_id, kind, ref) SELECT $1, $2, unnest($3::bigint[]) RETURNING id)"
+      " SELECT coalesce(max(id), 0) FROM e",
+      {map_id, static_cast<int>(kind), refs});
+  const auto id = r.i64(0, 0);
+  core_.writer.query("SELECT pg_notify($1, $2)", {kChannel, std::to_string(id)});
   return id;
 }
 

@@ -28,7 +28,8 @@ bool insertLoop(const Conn& db, std::int64_t map_id, const LoopRecord& loop) {
                "INSERT INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse, created_at,"
                " information, probability) SELECT $1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11"
                " WHERE (SELECT count(*) FROM scans WHERE map_id = $1 AND id IN ($2, $3)) = 2"
-               " AND NOT EXISTS(SELECT 1 FROM loops WHERE query_scan = $2 AND candidate_scan = $3) RETURNING id",
+               " AND NOT EXISTS(SELECT 1 FROM loops WHERE (query_scan = $2 AND candidate_scan = $3) OR"
+               " (query_scan = $3 AND candidate_scan = $2)) RETURNING id",
                {map_id, loop.query_scan, loop.candidate_scan, Bytes(t), loop.score, loop.inliers, loop.fitness,
                 loop.rmse, nowSeconds(), loop.information ? Param(Bytes(info)) : Param(),
                 loop.probability ? Param(*loop.probability) : Param()})
@@ -92,23 +93,34 @@ Retired retire(Core& core, const std::string& map, const std::vector<std::int64_
   }
   const auto& db = tx.conn();
   Retired out;
+  // Set-based, as deletions are: a few statements whatever the number of scans, so the write lock that every
+  // replica waits on is held for a few round trips.
+  std::string list = "{";
+  for (std::size_t i = 0; i < scans.size(); ++i) list += (i ? "," : "") + std::to_string(scans[i]);
+  list += "}";
+  const auto found = db.query(
+      "SELECT s.id, s.fingerprint_bytes, s.fingerprint_bytes + octet_length(s.descriptor) +"
+      " coalesce(octet_length(b.raw), 0) FROM scans s JOIN scan_blobs b ON b.scan_id = s.id"
+      " WHERE s.id = ANY($1::bigint[]) AND s.map_id = $2 ORDER BY s.id",
+      {list, m->id});
   std::unordered_set<std::int64_t> ids;
-  std::int64_t entry = 0;
-  for (const auto id : scans) {
-    const auto r = db.query(
-        "SELECT s.fingerprint_bytes, s.fingerprint_bytes + octet_length(s.descriptor) + coalesce(octet_length(b.raw), "
-        "0)"
-        " FROM scans s JOIN scan_blobs b ON b.scan_id = s.id WHERE s.id = $1 AND s.map_id = $2",
-        {id, m->id});
-    if (r.rows() == 0 || !ids.insert(id).second) continue;
-    out.bytes += r.i64(0, 0);
-    db.query("UPDATE maps SET bytes = greatest(0, bytes - $2) WHERE id = $1", {m->id, r.i64(0, 1)});
-    for (const char* sql :
-         {"DELETE FROM scan_blobs WHERE scan_id = $1", "DELETE FROM loops WHERE query_scan = $1 OR candidate_scan = $1",
-          "DELETE FROM optimised_poses WHERE scan_id = $1", "DELETE FROM scans WHERE id = $1"})
-      db.query(sql, {id});
-    entry = tx.journal(Change::kScanRetired, m->id, id);
+  std::int64_t stored = 0;
+  list = "{";
+  for (int i = 0; i < found.rows(); ++i) {
+    ids.insert(found.i64(i, 0));
+    out.bytes += found.i64(i, 1);
+    stored += found.i64(i, 2);
+    list += (i ? "," : "") + std::to_string(found.i64(i, 0));
   }
+  list += "}";
+  db.query("UPDATE maps SET bytes = greatest(0, bytes - $2) WHERE id = $1", {m->id, stored});
+  for (const char* sql :
+       {"DELETE FROM scan_blobs WHERE scan_id = ANY($1::bigint[])",
+        "DELETE FROM loops WHERE query_scan = ANY($1::bigint[]) OR candidate_scan = ANY($1::bigint[])",
+        "DELETE FROM optimised_poses WHERE scan_id = ANY($1::bigint[])",
+        "DELETE FROM scans WHERE id = ANY($1::bigint[])"})
+    db.query(sql, {list});
+  const std::int64_t entry = ids.empty() ? 0 : tx.journalEach(Change::kScanRetired, m->id, list);
   for (const auto& loop : new_loops)
     if (insertLoop(db, m->id, loop)) ++out.loops_kept;
   out.scans = static_cast<std::int64_t>(ids.size());

@@ -33,7 +33,8 @@ bool insertLoop(const sql::Db& db, std::int64_t map_id, const LoopRecord& loop) 
   sql::Stmt st(db,
                "INSERT OR IGNORE INTO loops(map_id, query_scan, candidate_scan, t, score, inliers, fitness, rmse,"
                " created_at, information, probability) SELECT ?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11"
-               " WHERE (SELECT count(*) FROM scans WHERE map_id = ?1 AND id IN (?2, ?3)) = 2");
+               " WHERE (SELECT count(*) FROM scans WHERE map_id = ?1 AND id IN (?2, ?3)) = 2"
+               " AND NOT EXISTS(SELECT 1 FROM loops WHERE query_scan = ?3 AND candidate_scan = ?2)");
   st.bind(1, map_id).bind(2, loop.query_scan).bind(3, loop.candidate_scan).bindBlob(4, t).bind(5, loop.score);
   st.bind(6, static_cast<std::int64_t>(loop.inliers)).bind(7, loop.fitness).bind(8, loop.rmse).bind(9, nowSeconds());
   if (loop.information)

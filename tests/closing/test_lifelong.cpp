@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <map>
+#include <random>
 #include <set>
 
 #include "backend.hpp"
@@ -169,6 +170,57 @@ TEST_P(Compaction, RetiresAnEndedSessionsSurplusAndMovesItsLoopsOntoScansThatSta
   EXPECT_EQ(store->places("m").size(), 14u);
 }
 
+// A loop whose candidate end moves onto a scan turned 90 degrees and 2 m away: its information turns with it (the
+// registration's weak direction, the candidate's x, becomes the new candidate's y), so that every error costs
+// what it cost before the move (no odometry noise here).
+TEST_P(Compaction, AMovedCandidateEndTurnsTheLoopsInformationWithIt) {
+  auto store = db().open();
+  store->createMap("m", DescriptorLayout{}.scanDim());
+  const auto fp = randomFingerprint(7);
+  Mat4d turned = at(2, 0);
+  turned.block<3, 3>(0, 0) = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const auto a0 = store->addScan(
+      {.map = "m", .robot = "a", .session = "d", .seq = 0, .odometry_pose = at(0, 5), .fingerprint = &fp});
+  const auto b0 = store->addScan(
+      {.map = "m", .robot = "b", .session = "d", .seq = 0, .odometry_pose = at(0, 0), .fingerprint = &fp});
+  const auto b1 =
+      store->addScan({.map = "m", .robot = "b", .session = "d", .seq = 1, .odometry_pose = turned, .fingerprint = &fp});
+  store->setPlaces("m", {{a0, a0, true}, {b0, b0, true}, {b1, a0, false}});
+  Mat6d info = Mat6d::Identity() * 1e4;
+  info(0, 0) = 1.0;  // weak along the candidate's x
+  LoopRecord l{0, a0, b1, at(1, -4), 0.8, 0.9, 0.05, 40};
+  l.probability = 0.95;
+  l.information = info;
+  store->addLoop("m", l);
+  const auto r = compact(*store, "m", policy(1), OdometryNoise{0, 0, 0, 0}, kFuture);
+  ASSERT_EQ(r.retired, 1);
+  ASSERT_EQ(r.loops_moved, 1);
+  const auto moved = store->loops("m").at(0);
+  EXPECT_EQ(moved.query_scan, a0);
+  EXPECT_EQ(moved.candidate_scan, b0);
+  EXPECT_LT((moved.T - l.T * turned.inverse()).norm(), 1e-9);
+  const Mat6d& I2 = *moved.information;
+  EXPECT_NEAR(I2(1, 1), 1.0, 1e-6);  // the weak direction is now along b0's y
+  EXPECT_GT(I2(0, 0), 1e3);
+  // A small error xi of the old loop (in b1's frame) is the error Ad(turned) xi of the moved one: same cost.
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0, 1e-3);
+  for (int k = 0; k < 20; ++k) {
+    Eigen::Matrix<double, 6, 1> xi;
+    for (int i = 0; i < 6; ++i) xi[i] = n(rng);
+    Mat4d d = Mat4d::Identity();  // Exp(xi) to first order
+    d.block<3, 3>(0, 0) = Eigen::AngleAxisd(xi.tail<3>().norm(), xi.tail<3>().normalized()).toRotationMatrix();
+    d.block<3, 1>(0, 3) = xi.head<3>();
+    const Mat4d err = moved.T.inverse() * (l.T * d * turned.inverse());  // the moved loop's error
+    Eigen::Matrix<double, 6, 1> xi2;
+    xi2.head<3>() = err.block<3, 1>(0, 3);
+    const Eigen::AngleAxisd aa(Eigen::Matrix3d(err.block<3, 3>(0, 0)));
+    xi2.tail<3>() = aa.angle() * aa.axis();
+    const double before = xi.dot(info * xi), after = xi2.dot(I2 * xi2);
+    EXPECT_NEAR(after, before, 1e-2 * before) << k;  // equal to first order (xi ~ 1e-3)
+  }
+}
+
 TEST_P(Compaction, EachScanThatStaysTakesAtMostItsShareOfMovedLoopsTheNearestFirst) {
   auto store = db().open();
   const auto s = build(*store);
@@ -226,6 +278,21 @@ TEST_P(Compaction, PlacesLeftWithoutTheirVersionsTakeSurplusScansInstead) {
     EXPECT_TRUE(p->kept);
   }
   EXPECT_EQ(store->stats("m").scans, 10);
+}
+
+TEST_P(Compaction, PlacesOverTheirVersionsKeepTheOldestWhenThePolicyComesOn) {
+  auto store = db().open();
+  const auto s = build(*store);
+  const auto off = compact(*store, "m", policy(0), OdometryNoise{}, kFuture);  // places only, every scan kept
+  EXPECT_EQ(off.placed, 20);
+  EXPECT_EQ(off.versions, 20);
+  EXPECT_EQ(off.retired, 0);
+  const auto on = compact(*store, "m", policy(1), OdometryNoise{}, kFuture);
+  EXPECT_EQ(on.demoted, 6);  // b_2..b_7, newer than a's versions of their places
+  EXPECT_EQ(on.promoted, 0);
+  EXPECT_EQ(on.retired, 6);
+  EXPECT_EQ(on.versions, 14);
+  for (int k = 0; k < 10; ++k) EXPECT_TRUE(store->scanInfo(s.a[k])) << k;
 }
 
 TEST_P(Compaction, SetPlacesRefusesAScanOfAnotherMapAndRecordsNothing) {

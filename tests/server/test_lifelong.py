@@ -78,7 +78,8 @@ def test_lifelong(tmp):
     db = os.path.join(tmp, "life.db")
     cfg = os.path.join(tmp, "life.yaml")
     with open(cfg, "w") as f:
-        f.write("map:\n  max_versions_per_place: 1\n  session_retention_h: 0\n"
+        # The server's own compaction off: this part compacts with sglc compact, however long the drives take.
+        f.write("map:\n  max_versions_per_place: 1\n  session_retention_h: 0\n  compact_interval_s: 0\n"
                 "pose_graph:\n  odometry_sigma_per_m: 0.02\n  odometry_sigma_deg_per_m: 0.01\n")
     s = Server(db, ["--config", cfg])
     try:

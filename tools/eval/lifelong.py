@@ -34,8 +34,10 @@ BIN = os.path.join(REPO, "build", "bin")
 sys.path.insert(0, os.path.join(REPO, "build", "python"))
 import sglc  # noqa: E402
 
-POSES = "/work/shared/data/kitti_odometry_gt_poses/poses/00.txt"
-CALIB = "/work/shared/data/semantickitti_scans/sequences/00/calib.txt"
+# The fitting path (KITTI 00) and its calibration, from the shared data beside the repository.
+DATA = os.environ.get("SGLC_DATA", os.path.join(REPO, "..", "shared", "data"))
+POSES = os.path.join(DATA, "kitti_odometry_gt_poses", "poses", "00.txt")
+CALIB = os.path.join(DATA, "semantickitti_scans", "sequences", "00", "calib.txt")
 SEED = 11
 MAP = "district"
 ROBOTS = (("car", "hdl64"), ("bot", "vlp16"))

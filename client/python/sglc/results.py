@@ -228,11 +228,12 @@ class Compaction:
     places: int
     versions: int
     promoted: int = 0  # surplus scans made versions of places left with too few
+    demoted: int = 0   # versions made surplus in places that held too many
 
     @classmethod
     def from_proto(cls, m) -> "Compaction":
         return cls(m.policy_on, m.placed, m.retired, m.retired_bytes, m.loops_moved, m.loops_dropped,
-                   m.open_sessions, m.places, m.versions, m.promoted)
+                   m.open_sessions, m.places, m.versions, m.promoted, m.demoted)
 
 
 @dataclass

@@ -21,6 +21,7 @@ struct OdometryNoise {
 struct CompactionReport {
   std::int64_t placed = 0;                // scans given a place
   std::int64_t promoted = 0;              // surplus scans made versions of places that held too few
+  std::int64_t demoted = 0;               // versions made surplus in places that held too many
   std::int64_t retired = 0;               // scans retired
   std::int64_t retired_bytes = 0;         // their fingerprint bytes
   std::int64_t loops_moved = 0;           // loops recorded between scans that stay in place of retired scans' loops

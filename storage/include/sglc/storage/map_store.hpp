@@ -331,7 +331,7 @@ class MapStore {
   // on them (as deletions do: loops, optimised poses, places), and `new_loops` (between scans that stay: the
   // retired scans' loops moved to them) are added unless a loop of the same pair exists. Counts into the map's
   // retired totals; bumps MapInfo::deletions (pose graphs rebuild). Scans already gone are skipped. Serialised
-  // with other retirements of the map across processes (PostgreSQL: an advisory lock per map).
+  // with every other write (PostgreSQL: the database-wide write lock, across processes).
   virtual Retired retireScans(const std::string& map, const std::vector<std::int64_t>& scans,
                               const std::vector<LoopRecord>& new_loops) = 0;
 
