@@ -1,8 +1,26 @@
 #include "compaction_timer.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <chrono>
 
+#include "sglc/log/log_line.hpp"
+
 namespace sglc::server {
+
+void logCompaction(const std::string& map, const closing::CompactionReport& r) {
+  spdlog::info("{}", logging::logLine({{"event", "compacted"},
+                                       {"map", map},
+                                       {"placed", r.placed},
+                                       {"promoted", r.promoted},
+                                       {"demoted", r.demoted},
+                                       {"retired", r.retired},
+                                       {"bytes", r.retired_bytes},
+                                       {"loops_moved", r.loops_moved},
+                                       {"loops_dropped", r.loops_dropped},
+                                       {"places", r.places},
+                                       {"versions", r.versions}}));
+}
 
 CompactionTimer::CompactionTimer(storage::MapStore& store, closing::LifelongOptions policy,
                                  closing::OdometryNoise noise, Done done)
@@ -46,7 +64,7 @@ void CompactionTimer::compactAll() {
     try {
       const double now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
       const auto r = closing::compact(store_, map.name, policy_, noise_, now);
-      if (r.placed > 0 || r.retired > 0) done_(map.name, r, "");
+      if (r.placed + r.promoted + r.demoted + r.retired > 0) done_(map.name, r, "");
     } catch (const storage::StorageError& e) {
       // A map deleted meanwhile is no failure; anything else is reported and tried again next time.
       if (e.code() != storage::StorageError::Code::kNotFound) done_(map.name, {}, e.what());

@@ -16,9 +16,13 @@
 
 namespace sglc::server {
 
+// The log line of one compaction: {"event":"compacted", "map", what it placed, promoted, demoted, retired, ...}.
+void logCompaction(const std::string& map, const closing::CompactionReport& r);
+
 class CompactionTimer {
  public:
-  // Told of each compaction that placed or retired anything, or of its failure (error non-empty).
+  // Told of each compaction that changed anything (placed, promoted, demoted, retired), or of its failure (error
+  // non-empty).
   using Done = std::function<void(const std::string& map, const closing::CompactionReport&, const std::string& error)>;
 
   CompactionTimer(storage::MapStore& store, closing::LifelongOptions policy, closing::OdometryNoise noise, Done done);

@@ -224,15 +224,7 @@ int serve(const Settings& s, sigset_t& signals) {
           return;
         }
         if (r.retired > 0) g->scansRemoved(map);
-        spdlog::info("{}", sglc::logging::logLine({{"event", "compacted"},
-                                                   {"map", map},
-                                                   {"placed", r.placed},
-                                                   {"retired", r.retired},
-                                                   {"bytes", r.retired_bytes},
-                                                   {"loops_moved", r.loops_moved},
-                                                   {"loops_dropped", r.loops_dropped},
-                                                   {"places", r.places},
-                                                   {"versions", r.versions}}));
+        sglc::server::logCompaction(map, r);
       });
   health->SetServingStatus(true);
 

@@ -11,6 +11,7 @@
 #include <tuple>
 
 #include "call.hpp"
+#include "compaction_timer.hpp"
 #include "query_codec.hpp"
 #include "rpc_error.hpp"
 #include "server_metrics.hpp"
@@ -398,17 +399,7 @@ grpc::Status MapAdminService::Compact(grpc::ServerContext* ctx, const v1::Compac
     resp->set_places(r.places);
     resp->set_versions(r.versions);
     resp->set_policy_on(policy.enabled());
-    spdlog::info("{}", logging::logLine({{"event", "compacted"},
-                                         {"map", req->map()},
-                                         {"placed", r.placed},
-                                         {"promoted", r.promoted},
-                                         {"demoted", r.demoted},
-                                         {"retired", r.retired},
-                                         {"bytes", r.retired_bytes},
-                                         {"loops_moved", r.loops_moved},
-                                         {"loops_dropped", r.loops_dropped},
-                                         {"places", r.places},
-                                         {"versions", r.versions}}));
+    logCompaction(req->map(), r);
   });
 }
 

@@ -125,7 +125,9 @@ def part_older_map(tmp):
     ingest(s, 0)
     s.stop()
     con = sqlite3.connect(db)
-    con.executescript("DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash; "
+    con.executescript("DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; "
+                      "ALTER TABLE maps DROP COLUMN retired_bytes; "
+                      "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash; "
                       "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=6;")
     con.close()
     s = h.Server(db, CELL)

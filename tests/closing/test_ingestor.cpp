@@ -106,7 +106,10 @@ TEST_F(IngestorTest, AnIdenticalRetryAfterAFormatUpgradeAnswersAsTheFirstCall) {
     sqlite3_finalize(st);
     // A schema-5 file: without the columns later schemas add.
     EXPECT_EQ(
-        sqlite3_exec(db, "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=5", nullptr, nullptr, nullptr),
+        sqlite3_exec(db,
+                     "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN "
+                     "retired_bytes; ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=5",
+                     nullptr, nullptr, nullptr),
         SQLITE_OK);
     sqlite3_close(db);
   }

@@ -21,15 +21,15 @@ std::string errorOf(const std::string& path, const std::vector<std::pair<std::st
   return "(no error)";
 }
 
-TEST(ServerSettings, OneRegistryOverFourSections) {
+TEST(ServerSettings, OneRegistryOverFiveSections) {
   std::set<std::string> sections, keys;
   for (const auto& p : settingsTable().params()) {
     sections.insert(p.info.key.substr(0, p.info.key.find('.')));
     EXPECT_TRUE(keys.insert(p.info.key).second) << p.info.key;
   }
-  EXPECT_EQ(sections, (std::set<std::string>{"engine", "pose_graph", "server", "storage"}));
+  EXPECT_EQ(sections, (std::set<std::string>{"engine", "map", "pose_graph", "server", "storage"}));
   for (const auto* key : {"server.max_calls", "storage.sync", "pose_graph.debounce_ms", "engine.verify.min_probability",
-                          "engine.refine.max_shift_m", "engine.labels.preset"})
+                          "engine.refine.max_shift_m", "engine.labels.preset", "map.max_versions_per_place"})
     EXPECT_TRUE(keys.count(key)) << key;
   EXPECT_NO_THROW(settingsTable().validate(Settings{}));
 }

@@ -84,7 +84,9 @@ TEST(LoopProbability, SqliteMigratesFromVersion7WithOldLoopsUnknown) {
     ids = scans(*store, 3);
     store->addLoop("m", loop(ids[2], ids[0], std::nullopt));
   }
-  execSql(backend.options().path, "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=7;");
+  execSql(backend.options().path,
+          "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN retired_bytes; "
+          "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=7;");
   auto store = backend.open();
   store->addLoop("m", loop(ids[2], ids[1], 0.75));
   const auto loops = store->loops("m");
@@ -106,12 +108,14 @@ TEST(LoopProbability, PostgresMigratesFromSchema3WithOldLoopsUnknown) {
   }
   {
     pg::Conn conn(backend.options().path);
-    conn.exec("ALTER TABLE loops DROP COLUMN probability");
+    conn.exec(
+        "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN retired_bytes; "
+        "ALTER TABLE loops DROP COLUMN probability");
     conn.exec("UPDATE sglc_meta SET value = '3' WHERE key = 'schema_version'");
   }
   auto store = backend.open();
   pg::Conn conn(backend.options().path);
-  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "4");
+  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "5");
   store->addLoop("m", loop(ids[2], ids[1], 0.75));
   const auto loops = store->loops("m");
   ASSERT_EQ(loops.size(), 2u);

@@ -122,10 +122,12 @@ TEST_P(MapSettingsStore, MigrationLeavesOlderMapsForTheFirstRecorder) {
     store->addScan({.map = "old", .robot = "r", .session = "s", .seq = 0, .fingerprint = &fp});
   }
   // Schema 6 (PostgreSQL 2) had neither the settings nor the loops' probability (schema 8 / 4).
-  exec(db().postgres() ? "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
+  exec(db().postgres() ? "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN "
+                         "retired_bytes; DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
                          " ALTER TABLE loops DROP COLUMN probability;"
                          " UPDATE sglc_meta SET value = '2' WHERE key = 'schema_version'"
-                       : "DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
+                       : "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN "
+                         "retired_bytes; DROP TABLE map_settings; ALTER TABLE maps DROP COLUMN settings_hash;"
                          " ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=6;");
   auto store = open(kNuscenes);
   EXPECT_EQ(store->mapSettings("old"), std::nullopt);

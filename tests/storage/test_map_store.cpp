@@ -746,7 +746,8 @@ TEST(MapStore, MigratesAVersion1FileForward) {
   // Turn it back into a version-1 file: no pose-graph tables, no graph_version or graph_loop column.
   execSql(
       path,
-      "DROP TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
+      "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN retired_bytes; DROP "
+      "TABLE loops; DROP TABLE optimised_poses; DROP TABLE session_frames;"
       " ALTER TABLE maps DROP COLUMN graph_version; ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=1;");
   auto store = MapStore::open(options(path));
   EXPECT_EQ(store->stats("m").scans, 4);
@@ -816,8 +817,11 @@ TEST(MapStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
       setDescriptor(path, all[k].id, old);
     }
     setBlob(path, all.back().id, {1, 2, 3});
-    execSql(path, format == 1 ? "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=4;"
-                              : "ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=5;");
+    execSql(path, format == 1
+                      ? "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN "
+                        "retired_bytes; ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=4;"
+                      : "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN "
+                        "retired_bytes; ALTER TABLE loops DROP COLUMN probability; PRAGMA user_version=5;");
     auto store = MapStore::open(options(path));
     for (std::size_t k = 0; k + 1 < all.size(); ++k) {
       // Recomputed from the stored nodes and background view, with the spectrum's default settings.
@@ -862,6 +866,7 @@ TEST(MapStore, LoopInformationRoundTripsAndMigratesFromVersion2) {
   }
   // Back to a version-2 file: no information column, no graph_loop.
   execSql(path,
+          "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN retired_bytes; "
           "ALTER TABLE loops DROP COLUMN information; ALTER TABLE loops DROP COLUMN probability;"
           " ALTER TABLE maps DROP COLUMN graph_loop; PRAGMA user_version=2;");
   const Mat6d info = someInformation();

@@ -115,11 +115,13 @@ TEST_F(PostgresStore, MigratesOlderFingerprintsToTheCurrentDescriptor) {
   const std::vector<std::uint8_t> junk{1, 2, 3};
   conn.query("UPDATE scan_blobs SET fingerprint = $1 WHERE scan_id = $2",
              {std::span<const std::uint8_t>(junk), ids.back()});
-  exec("ALTER TABLE loops DROP COLUMN probability");
+  exec(
+      "DROP TABLE places; ALTER TABLE maps DROP COLUMN retired_scans; ALTER TABLE maps DROP COLUMN retired_bytes; "
+      "ALTER TABLE loops DROP COLUMN probability");
   exec("UPDATE sglc_meta SET value = '1' WHERE key = 'schema_version'");
 
   auto store = backend_.open();
-  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "4");
+  EXPECT_EQ(conn.query("SELECT value FROM sglc_meta WHERE key = 'schema_version'").text(0, 0), "5");
   const DescriptorConfig defaults;
   for (std::size_t k = 0; k + 1 < ids.size(); k += 37) {
     SCOPED_TRACE("scan " + std::to_string(k));
