@@ -72,4 +72,18 @@ void CompactionTimer::compactAll() {
   }
 }
 
+std::unique_ptr<CompactionTimer> startCompactionTimer(storage::MapStore& store, closing::LifelongOptions policy,
+                                                      closing::OdometryNoise noise, posegraph::GraphOptimiser& graph) {
+  return std::make_unique<CompactionTimer>(
+      store, policy, noise,
+      [&graph](const std::string& map, const closing::CompactionReport& r, const std::string& error) {
+        if (!error.empty()) {
+          spdlog::warn("{}", logging::logLine({{"event", "compaction_failed"}, {"map", map}, {"error", error}}));
+          return;
+        }
+        if (r.retired > 0) graph.scansRemoved(map);
+        logCompaction(map, r);
+      });
+}
+
 }  // namespace sglc::server

@@ -7,11 +7,13 @@
 
 #include <condition_variable>
 #include <functional>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <thread>
 
 #include "sglc/closing/compaction.hpp"
+#include "sglc/posegraph/graph_optimiser.hpp"
 #include "sglc/storage/map_store.hpp"
 
 namespace sglc::server {
@@ -43,5 +45,10 @@ class CompactionTimer {
   bool stop_ = false;
   std::thread thread_;
 };
+
+// The server's timer: retired scans leave `graph` at once; each compaction that changed anything, or failed, is
+// logged.
+std::unique_ptr<CompactionTimer> startCompactionTimer(storage::MapStore& store, closing::LifelongOptions policy,
+                                                      closing::OdometryNoise noise, posegraph::GraphOptimiser& graph);
 
 }  // namespace sglc::server

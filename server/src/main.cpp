@@ -162,6 +162,20 @@ MetricsEndpoint serveMetrics(const Settings& s, sglc::server::ServiceState& stat
 }
 
 // Serves until SIGTERM or SIGINT, then shuts down in order.
+// The live view's hub over the map (none without --viz-listen), attached to the service.
+std::unique_ptr<sglc::server::VizHub> startVizHub(const Settings& s, sglc::server::VizServer* viz,
+                                                  sglc::storage::MapStore& store, sglc::server::GraphOptimiser& graph,
+                                                  sglc::server::ServiceState& state) {
+  if (!viz) return nullptr;
+  sglc::server::VizHubOptions options;
+  options.min_interval = std::chrono::milliseconds(static_cast<long>(s.viz_interval_s * 1000));
+  auto hub = std::make_unique<sglc::server::VizHub>(store, graph, options,
+                                                    [viz](sglc::server::VizUpdate u) { viz->publish(std::move(u)); });
+  viz->onDemand([h = hub.get()](const sglc::server::VizDemand& d) { h->setDemand(d); });
+  state.attachViz(hub.get());
+  return hub;
+}
+
 int serve(const Settings& s, sigset_t& signals) {
   const auto state = std::make_unique<sglc::server::ServiceState>(
       sglc::Pipeline(s.engine), sglc::server::TokenTable::load(s.tokens), sglc::server::limitsOf(s));
@@ -205,27 +219,10 @@ int serve(const Settings& s, sigset_t& signals) {
   const auto solves = graph->subscribe([&metrics = state->metrics()](const std::string&, const auto& event) {
     sglc::server::observeSolve(metrics, event);
   });
-  std::unique_ptr<sglc::server::VizHub> hub;
-  if (viz) {
-    sglc::server::VizHubOptions options;
-    options.min_interval = std::chrono::milliseconds(static_cast<long>(s.viz_interval_s * 1000));
-    hub = std::make_unique<sglc::server::VizHub>(
-        *store, *graph, options, [v = viz.get()](sglc::server::VizUpdate u) { v->publish(std::move(u)); });
-    viz->onDemand([h = hub.get()](const sglc::server::VizDemand& d) { h->setDemand(d); });
-    state->attachViz(hub.get());
-  }
+  auto hub = startVizHub(s, viz.get(), *store, *graph, *state);
   state->attach(store.get(), graph.get());
   // Lifelong maps: retire what ended sessions added beyond their places' versions (docs/LIFELONG.md).
-  auto compactor = std::make_unique<sglc::server::CompactionTimer>(
-      *store, s.lifelong, state->limits().odometry,
-      [g = graph.get()](const std::string& map, const sglc::closing::CompactionReport& r, const std::string& error) {
-        if (!error.empty()) {
-          spdlog::warn("{}", sglc::logging::logLine({{"event", "compaction_failed"}, {"map", map}, {"error", error}}));
-          return;
-        }
-        if (r.retired > 0) g->scansRemoved(map);
-        sglc::server::logCompaction(map, r);
-      });
+  auto compactor = sglc::server::startCompactionTimer(*store, s.lifelong, state->limits().odometry, *graph);
   health->SetServingStatus(true);
 
   int sig = 0;
