@@ -15,12 +15,27 @@ using storage::PlaceRecord;
 
 PlaceTie tieOf(const LoopRecord& l) { return {l.candidate_scan, l.probability, l.T.block<3, 1>(0, 3).norm()}; }
 
-// Places for the map's scans that have none, in scan-id order, from their recorded loops to earlier scans.
+// The sessions whose newest placed scan was stored less than the retention ago (none with the policy off).
+std::unordered_set<std::int64_t> openSessions(const std::vector<PlaceRecord>& places, const LifelongOptions& options,
+                                              double now_s) {
+  std::unordered_map<std::int64_t, double> last;
+  for (const auto& p : places) last[p.session_id] = std::max(last[p.session_id], p.added_at);
+  std::unordered_set<std::int64_t> open;
+  if (options.enabled())
+    for (const auto& [session, at] : last)
+      if (now_s - at < options.session_retention_h * 3600.0) open.insert(session);
+  return open;
+}
+
+// Places for the map's scans that have none, in scan-id order, from their recorded loops to earlier scans. Scans
+// of open sessions are left to their ingest: one being stored now gets its place from its own loops, which a
+// compaction that read the map a moment before would not see (and would overwrite the ingest's place with).
 std::int64_t placeUnplaced(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
-                           const std::vector<storage::GraphNodeRecord>& nodes, const std::vector<LoopRecord>& loops) {
+                           const std::vector<storage::GraphNodeRecord>& nodes, const std::vector<LoopRecord>& loops,
+                           const std::vector<PlaceRecord>& before, const std::unordered_set<std::int64_t>& open) {
   std::unordered_map<std::int64_t, PlaceRecord> placed;
   std::unordered_map<std::int64_t, std::int64_t> versions;
-  for (const auto& p : store.places(map)) {
+  for (const auto& p : before) {
     placed[p.scan_id] = p;
     if (p.kept) ++versions[p.place_id];
   }
@@ -34,7 +49,7 @@ std::int64_t placeUnplaced(storage::MapStore& store, const std::string& map, con
                            [&](std::int64_t place) { return versions[place]; }};
   std::vector<PlaceRecord> records;
   for (const auto& n : nodes) {
-    if (placed.count(n.scan_id)) continue;
+    if (placed.count(n.scan_id) || open.count(n.session_id)) continue;
     const auto it = ties.find(n.scan_id);
     for (const auto& r :
          placeScan(n.scan_id, it == ties.end() ? std::vector<PlaceTie>{} : it->second, options, lookup)) {
@@ -212,23 +227,18 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   CompactionReport report;
   const auto nodes = store.graphNodes(map);
   const auto loops = store.loops(map);
-  report.placed = placeUnplaced(store, map, options, nodes, loops);
   auto places = store.places(map);
+  report.placed = placeUnplaced(store, map, options, nodes, loops, places, openSessions(places, options, now_s));
+  if (report.placed > 0) places = store.places(map);
   if (options.enabled()) std::tie(report.promoted, report.demoted) = rebalance(store, map, options, places);
   std::unordered_set<std::int64_t> places_seen;
-  std::unordered_map<std::int64_t, double> session_last;
   for (const auto& p : places) {
     places_seen.insert(p.place_id);
     report.versions += p.kept ? 1 : 0;
-    auto& last = session_last[p.session_id];
-    last = std::max(last, p.added_at);
   }
   report.places = static_cast<std::int64_t>(places_seen.size());
   if (!options.enabled()) return report;
-  const double retention_s = options.session_retention_h * 3600.0;
-  std::unordered_set<std::int64_t> open;
-  for (const auto& [session, last] : session_last)
-    if (now_s - last < retention_s) open.insert(session);
+  const auto open = openSessions(places, options, now_s);
   report.open_sessions = static_cast<std::int64_t>(open.size());
   std::unordered_set<std::int64_t> retired;
   std::vector<std::int64_t> ids;

@@ -295,6 +295,22 @@ TEST_P(Compaction, PlacesOverTheirVersionsKeepTheOldestWhenThePolicyComesOn) {
   for (int k = 0; k < 10; ++k) EXPECT_TRUE(store->scanInfo(s.a[k])) << k;
 }
 
+TEST_P(Compaction, ScansOfSessionsStillBeingDrivenAreLeftToTheirIngest) {
+  auto store = db().open();
+  const auto s = build(*store);
+  store->setPlaces("m", {{s.b[0], s.b[0], true}});  // b's ingest placed its first scan a moment ago
+  auto keep = policy(1);
+  keep.session_retention_h = 1;
+  const auto now = std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  const auto open = compact(*store, "m", keep, OdometryNoise{}, now + 60);
+  EXPECT_EQ(open.placed, 10);  // a's scans (a session with no place yet is not known to be driven); none of b's
+  EXPECT_EQ(open.open_sessions, 2);
+  EXPECT_FALSE(store->placeOf(s.b[5]));
+  const auto later = compact(*store, "m", policy(1), OdometryNoise{}, kFuture);
+  EXPECT_EQ(later.placed, 9);
+  EXPECT_EQ(later.retired, 6);
+}
+
 TEST_P(Compaction, SetPlacesRefusesAScanOfAnotherMapAndRecordsNothing) {
   auto store = db().open();
   const auto s = build(*store);
