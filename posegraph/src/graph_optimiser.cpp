@@ -132,7 +132,9 @@ void GraphOptimiser::run() {
     auto next =
         std::min_element(due_.begin(), due_.end(), [](const auto& a, const auto& b) { return a.second < b.second; });
     if (next->second > Clock::now()) {
-      wake_.wait_until(lock, shared_ ? std::min(next->second, next_poll) : next->second);
+      // A copy: wait_until reads its deadline after waking, and mapDeleted may have erased the entry by then.
+      const Clock::time_point deadline = shared_ ? std::min(next->second, next_poll) : next->second;
+      wake_.wait_until(lock, deadline);
       continue;
     }
     const std::string map = next->first;

@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <mutex>
 #include <random>
+#include <string>
+#include <thread>
 
 #include "../storage/storage_test_util.hpp"
 #include "drive.hpp"
@@ -236,6 +238,26 @@ TEST(GraphOptimiser, ADeletedMapIsForgottenAndItsNameStartsAfresh) {
   EXPECT_EQ(events.load(), 1);
   EXPECT_EQ(deleted.load(), 1);
   graph.unsubscribe(id);
+}
+
+// The worker sleeps until a map's solve is due; a delete meanwhile drops the map's schedule. The worker must not
+// read the dropped entry when it wakes (it did: a use after free that AddressSanitizer caught in sglc_eval_cli).
+// Each round gives the worker time to be asleep on the map's deadline, so the ASan build sees the read if it returns.
+TEST(GraphOptimiser, AMapDeletedWhileItsSolveIsScheduledLeavesTheWorkerSound) {
+  TempDir dir;
+  auto store = storage::MapStore::open(options(dir.file("map.db")));
+  GraphOptimiser graph(*store, {.debounce = std::chrono::hours(1)});
+  for (int i = 0; i < 5; ++i) {
+    const std::string map = "gone" + std::to_string(i);
+    graph.loopsAdded(map);
+    std::this_thread::sleep_for(std::chrono::milliseconds(30));
+    graph.mapDeleted(map, 0);
+    EXPECT_FALSE(graph.latest(map).has_value());
+  }
+  drive(*store);  // and it still solves
+  const auto solved = graph.optimiseNow("m");
+  ASSERT_FALSE(solved.failed) << solved.error;
+  EXPECT_EQ(solved.nodes, 240);
 }
 
 // A delete and a new map of the same name can both happen between two solves, before the optimiser hears of the

@@ -42,11 +42,14 @@ def logged_port(server, log_path):
 
 
 def tail(path, lines=30):
+    """The log's last lines, or, when a sanitizer reported, the report's first lines (its stacks)."""
     try:
         with open(path, errors="replace") as f:
-            return "".join(f.readlines()[-lines:])
+            text = f.readlines()
     except OSError as e:
         return f"(no log: {e})"
+    report = next((i for i, line in enumerate(text) if "Sanitizer" in line and "ERROR" in line), None)
+    return "".join(text[report:report + 60] if report is not None else text[-lines:])
 
 
 def have_matplotlib():
