@@ -3,9 +3,9 @@
 // starts with --prefix) and keeps the newest message of each. Prints what it saw as JSON.
 //   node viz_client.mjs URL [--token T] [--prefix P] [--poses N] [--loops K] [--keyframe] [--timeout S]
 //   node viz_client.mjs URL --hold [--viewers N]   (stay subscribed until SIGTERM, then print counts)
-// Without --hold it ends when the trajectories under the prefix hold N poses in all, loop_list K loops, and
-// (--keyframe) a keyframe has points; on timeout it prints what it had and exits 1. A refused connection
-// (HTTP 401, 400) prints {"error": ...} and exits 2.
+// Without --hold it ends when the trajectories under the prefix hold N poses in all, loop_list K loops,
+// (--keyframe) a keyframe has points, and the map_stats topics (where advertised) count N scans in all; on timeout
+// it prints what it had and exits 1. A refused connection (HTTP 401, 400) prints {"error": ...} and exits 2.
 import wsProtocol from "@foxglove/ws-protocol";
 const { FoxgloveClient } = wsProtocol;
 import WebSocket from "ws";
@@ -92,14 +92,18 @@ const report = (s) => ({
   topics: s.topics, statuses: s.statuses, messages: s.messages, closed: s.closed });
 
 function done(s) {
-  let poses = 0, loops = 0, keyframe = false;
+  let poses = 0, loops = 0, keyframe = false, scans = 0;
   for (const [topic, t] of Object.entries(s.topics)) {
     if (!topic.startsWith(prefix)) continue;
     if (topic.includes("/trajectory/")) poses += t.last.poses;
     if (topic.endsWith("/loop_list")) loops = t.last.loops;
     if (topic.endsWith("/keyframe") && t.last.points > 0) keyframe = true;
+    if (topic.endsWith("/map_stats")) scans += t.last.scans;
   }
-  return s.serverInfo && poses >= wantPoses && loops >= wantLoops && (!wantKeyframe || keyframe);
+  // An update's map statistics follow its trajectories: when advertised, wait for those of as many scans.
+  const stats = [...s.channels.values()].some((c) => c.topic.startsWith(prefix) && c.topic.endsWith("/map_stats"));
+  return s.serverInfo && poses >= wantPoses && loops >= wantLoops && (!wantKeyframe || keyframe) &&
+         (!stats || scans >= wantPoses);
 }
 function check() {
   if (hold || !done(states[0])) return;
