@@ -7,6 +7,8 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "sglc/closing/versions.hpp"
+
 namespace sglc::closing {
 namespace {
 
@@ -191,35 +193,6 @@ std::vector<LoopRecord> fewestPerAnchor(std::vector<MovedLoop> moved, int per_an
   return out;
 }
 
-// Every place to the policy's number of versions. One that holds fewer (a kept version's session or robot was
-// deleted, or the setting was raised) takes its newest surplus scans as versions, so that no place is left to
-// retire entirely; one that holds more (places assigned with the policy off, or the setting lowered) keeps its
-// oldest versions and the newer ones become surplus. Returns (promoted, demoted).
-std::pair<std::int64_t, std::int64_t> rebalance(storage::MapStore& store, const std::string& map,
-                                                const LifelongOptions& options, std::vector<PlaceRecord>& places) {
-  const auto max = static_cast<std::int64_t>(options.max_versions_per_place);
-  std::unordered_map<std::int64_t, std::int64_t> versions, seen;
-  for (const auto& p : places) versions[p.place_id] += p.kept ? 1 : 0;
-  std::vector<PlaceRecord> changed;
-  std::int64_t promoted = 0, demoted = 0;
-  for (auto& p : places)  // oldest first (places() is in scan-id order): the first `max` versions stay
-    if (p.kept && ++seen[p.place_id] > max) {
-      p.kept = false;
-      --versions[p.place_id];
-      changed.push_back(p);
-      ++demoted;
-    }
-  for (auto it = places.rbegin(); it != places.rend(); ++it)  // newest first
-    if (!it->kept && versions[it->place_id] < max) {
-      ++versions[it->place_id];
-      it->kept = true;
-      changed.push_back(*it);
-      ++promoted;
-    }
-  if (!changed.empty()) store.setPlaces(map, changed);
-  return {promoted, demoted};
-}
-
 }  // namespace
 
 CompactionReport compact(storage::MapStore& store, const std::string& map, const LifelongOptions& options,
@@ -230,7 +203,13 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   auto places = store.places(map);
   report.placed = placeUnplaced(store, map, options, nodes, loops, places, openSessions(places, options, now_s));
   if (report.placed > 0) places = store.places(map);
-  if (options.enabled()) std::tie(report.promoted, report.demoted) = rebalance(store, map, options, places);
+  const auto open = openSessions(places, options, now_s);
+  if (options.enabled()) {
+    const auto changes = rebalanceVersions(places, loops, options.max_versions_per_place, open);
+    if (!changes.changed.empty()) store.setPlaces(map, changes.changed);
+    report.promoted = changes.promoted;
+    report.demoted = changes.demoted;
+  }
   std::unordered_set<std::int64_t> places_seen;
   for (const auto& p : places) {
     places_seen.insert(p.place_id);
@@ -238,7 +217,6 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   }
   report.places = static_cast<std::int64_t>(places_seen.size());
   if (!options.enabled()) return report;
-  const auto open = openSessions(places, options, now_s);
   report.open_sessions = static_cast<std::int64_t>(open.size());
   std::unordered_set<std::int64_t> retired;
   std::vector<std::int64_t> ids;

@@ -1,7 +1,8 @@
 // Lifelong maps (docs/LIFELONG.md): the place rule, and compaction on both back-ends: places for a map built
 // before the policy, retirement of an ended session's surplus scans with their loops moved onto the scans of
 // the session that stay (checked against the true relative poses), sessions within their retention left whole,
-// surplus promoted where a place lost its versions, and nothing retired with the policy off.
+// surplus promoted where a place lost its versions, versions that no later visit chose replaced by the visit's scans
+// (closing::rebalanceVersions on its own and through compaction), and nothing retired with the policy off.
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -12,6 +13,7 @@
 #include "backend.hpp"
 #include "sglc/closing/compaction.hpp"
 #include "sglc/closing/places.hpp"
+#include "sglc/closing/versions.hpp"
 
 namespace sglc::closing {
 namespace {
@@ -78,6 +80,87 @@ TEST(PlaceRule, ACandidateWithoutAPlaceFoundsItAndTiesBreakByDistanceThenId) {
   EXPECT_TRUE(r[0].kept);
   EXPECT_EQ(r[1].place_id, 5);
   EXPECT_FALSE(r[1].kept);  // the founder is the place's one version
+}
+
+// ---- Which scans a place keeps, on its own.
+
+PlaceRecord rec(std::int64_t scan, std::int64_t place, bool kept, std::int64_t session, double added_at) {
+  PlaceRecord r{scan, place, kept};
+  r.session_id = session;
+  r.added_at = added_at;
+  return r;
+}
+
+LoopRecord chose(std::int64_t query, std::int64_t candidate) {
+  LoopRecord l;
+  l.query_scan = query;
+  l.candidate_scan = candidate;
+  return l;
+}
+
+// Place 1 holds versions 1 (session 1) and 2 (session 2); the latest visits (sessions 3 and 4, from t = 20) left
+// surplus scans 3 and 4 there. Scan 5 (session 4, place 2) chose scan 3 later than scan 4 was stored.
+std::vector<PlaceRecord> visited() {
+  return {rec(1, 1, true, 1, 0), rec(2, 1, true, 2, 10), rec(3, 1, false, 3, 20), rec(4, 1, false, 4, 21),
+          rec(5, 5, true, 4, 22)};
+}
+
+TEST(Versions, AVersionNoVisitChoseGivesItsSlotToTheVisitThatServedLast) {
+  auto places = visited();
+  const auto c = rebalanceVersions(places, {chose(3, 1), chose(5, 3)}, 2, {});
+  EXPECT_EQ(c.promoted, 1);
+  EXPECT_EQ(c.demoted, 1);
+  ASSERT_EQ(c.changed.size(), 2u);
+  EXPECT_EQ(c.changed[0].scan_id, 2);  // scan 3 chose version 1; nothing chose version 2 since it was stored
+  EXPECT_FALSE(c.changed[0].kept);
+  EXPECT_EQ(c.changed[1].scan_id, 3);  // chosen at t = 22: served later than scan 4 (stored at 21)
+  EXPECT_TRUE(c.changed[1].kept);
+  EXPECT_TRUE(places[0].kept && !places[1].kept && places[2].kept && !places[3].kept);
+  // Without scan 5's choice the two visits served last when stored: the newer takes the slot.
+  auto again = visited();
+  const auto newer = rebalanceVersions(again, {chose(3, 1)}, 2, {});
+  ASSERT_EQ(newer.changed.size(), 2u);
+  EXPECT_EQ(newer.changed[1].scan_id, 4);
+  // The same inputs, the same changes.
+  auto twice = visited();
+  const auto same = rebalanceVersions(twice, {chose(3, 1), chose(5, 3)}, 2, {});
+  ASSERT_EQ(same.changed.size(), c.changed.size());
+  for (std::size_t i = 0; i < same.changed.size(); ++i) EXPECT_EQ(same.changed[i].scan_id, c.changed[i].scan_id);
+}
+
+// A scan serves at the time the scan that chose it was stored: version 2 chose version 1 when it was stored (t = 10),
+// and scan 5's later choice of version 2 (t = 22) is not passed on to version 1 (the loops in an order that would
+// pass it on if serving were read from the chooser's own last service).
+TEST(Versions, ServingIsDatedByTheChoosersStorageAndNotPassedOn) {
+  auto places = visited();
+  const auto c = rebalanceVersions(places, {chose(5, 2), chose(2, 1)}, 2, {});
+  ASSERT_EQ(c.changed.size(), 2u);
+  EXPECT_EQ(c.changed[0].scan_id, 1);  // last served at t = 10, before the visits began (t = 20)
+  EXPECT_FALSE(c.changed[0].kept);
+  EXPECT_EQ(c.changed[1].scan_id, 4);  // neither visit was chosen: the newer takes the slot
+  EXPECT_TRUE(c.changed[1].kept);
+}
+
+TEST(Versions, VersionsTheVisitsChoseStayAndOpenSessionsTakeNoPart) {
+  auto places = visited();
+  EXPECT_TRUE(rebalanceVersions(places, {chose(3, 1), chose(4, 2)}, 2, {}).changed.empty());
+  // Sessions 3 and 4 still driven: no visit has ended, nothing is replaced.
+  auto open = visited();
+  EXPECT_TRUE(rebalanceVersions(open, {}, 2, {3, 4}).changed.empty());
+  // Only session 4 ended: its visits began at t = 21, after versions 1 and 2 last served; both are unused, and
+  // its one surplus scan in place 1 (scan 4) takes the slot of the one that served least (version 1, t = 0).
+  auto one = visited();
+  const auto c = rebalanceVersions(one, {}, 2, {3});
+  ASSERT_EQ(c.changed.size(), 2u);
+  EXPECT_EQ(c.changed[0].scan_id, 1);
+  EXPECT_EQ(c.changed[1].scan_id, 4);
+  // The policy's number first: three versions of one session for two slots keep the oldest two (and no
+  // replacement: the visit, session 1, began with version 1).
+  std::vector<PlaceRecord> over{rec(1, 1, true, 1, 0), rec(2, 1, true, 1, 1), rec(3, 1, true, 1, 5)};
+  const auto d = rebalanceVersions(over, {}, 2, {});
+  EXPECT_EQ(d.demoted, 1);
+  EXPECT_EQ(d.promoted, 0);
+  EXPECT_FALSE(over[2].kept);
 }
 
 // ---- Compaction on a store.
@@ -185,7 +268,7 @@ TEST_P(Compaction, AMovedCandidateEndTurnsTheLoopsInformationWithIt) {
       {.map = "m", .robot = "b", .session = "d", .seq = 0, .odometry_pose = at(0, 0), .fingerprint = &fp});
   const auto b1 =
       store->addScan({.map = "m", .robot = "b", .session = "d", .seq = 1, .odometry_pose = turned, .fingerprint = &fp});
-  store->setPlaces("m", {{a0, a0, true}, {b0, b0, true}, {b1, a0, false}});
+  store->setPlaces("m", {{a0, a0, true}, {b0, b0, true}, {b1, b0, false}});  // b1: surplus in the place of b0
   Mat6d info = Mat6d::Identity() * 1e4;
   info(0, 0) = 1.0;  // weak along the candidate's x
   LoopRecord l{0, a0, b1, at(1, -4), 0.8, 0.9, 0.05, 40};
@@ -293,6 +376,46 @@ TEST_P(Compaction, PlacesOverTheirVersionsKeepTheOldestWhenThePolicyComesOn) {
   EXPECT_EQ(on.retired, 6);
   EXPECT_EQ(on.versions, 14);
   for (int k = 0; k < 10; ++k) EXPECT_TRUE(store->scanInfo(s.a[k])) << k;
+}
+
+// Two versions per place: a's and b's scans of x = 2..7 share places. A later robot c drives there, and its loops
+// choose b's scans: a's versions of those places, which no visit chose, give their slots to c's scans and retire.
+TEST_P(Compaction, AVersionNoLaterVisitChoseIsReplacedByTheVisitsScan) {
+  auto store = db().open();
+  const auto s = build(*store);
+  const auto first = compact(*store, "m", policy(2), OdometryNoise{}, kFuture);
+  EXPECT_EQ(first.versions, 20);
+  EXPECT_EQ(first.retired, 0);
+  std::vector<std::int64_t> c;
+  for (int k = 0; k < 10; ++k) {
+    const auto fp = randomFingerprint(static_cast<std::uint64_t>(k + 100));
+    c.push_back(store->addScan(
+        {.map = "m", .robot = "c", .session = "day", .seq = k, .odometry_pose = at(k, -0.1), .fingerprint = &fp}));
+  }
+  for (int k = 2; k < 8; ++k) {
+    LoopRecord l{0, c[k], s.b[k], at(k, -0.1).inverse() * Street::truthB(k), 0.8, 0.9, 0.05, 40};
+    l.probability = 0.97;
+    l.information = Mat6d::Identity() * 1e4;
+    store->addLoop("m", l);
+  }
+  const auto r = compact(*store, "m", policy(2), OdometryNoise{}, kFuture);
+  EXPECT_EQ(r.placed, 10);
+  EXPECT_EQ(r.demoted, 6);   // a_2..a_7
+  EXPECT_EQ(r.promoted, 6);  // c_2..c_7
+  EXPECT_EQ(r.retired, 6);
+  EXPECT_EQ(r.versions, 24);
+  for (int k = 2; k < 8; ++k) {
+    EXPECT_FALSE(store->scanInfo(s.a[k])) << k;
+    const auto p = store->placeOf(c[k]);
+    ASSERT_TRUE(p) << k;
+    EXPECT_TRUE(p->kept);
+    EXPECT_EQ(p->place_id, store->placeOf(s.b[k])->place_id);
+  }
+  // b's loops to the retired a_k now end at a_1 or a_8, each of which takes at most 4.
+  for (const auto& l : store->loops("m"))
+    EXPECT_TRUE(store->scanInfo(l.query_scan) && store->scanInfo(l.candidate_scan));
+  const auto again = compact(*store, "m", policy(2), OdometryNoise{}, kFuture);
+  EXPECT_EQ(again.retired + again.promoted + again.demoted, 0);
 }
 
 TEST_P(Compaction, ScansOfSessionsStillBeingDrivenAreLeftToTheirIngest) {

@@ -260,6 +260,7 @@ def summarise_epoch(rec, dim):
         "compact_retired": rec["compaction"]["retired"], "compact_loops_moved": rec["compaction"]["loops_moved"],
         "compact_loops_dropped": rec["compaction"]["loops_dropped"],
         "compact_open_sessions": rec["compaction"]["open_sessions"],
+        "compact_promoted": rec["compaction"]["promoted"], "compact_demoted": rec["compaction"]["demoted"],
         "total_ms_p50": pct(rec["total_ms"], 50), "total_ms_p99": pct(rec["total_ms"], 99),
         "wall_ms_p50": pct(rec["wall_ms"], 50), "wall_ms_p99": pct(rec["wall_ms"], 99),
         "solves": len(ms), "solve_ms_p50": pct(ms, 50), "solve_ms_p99": pct(ms, 99),
@@ -364,6 +365,7 @@ def summary_table(results, report_epochs):
         row("pose-graph ms/solve p50/p99", lambda r: f"{f1(r['solve_ms_p50'])} / {f1(r['solve_ms_p99'])}")
         row("compact retired / moved / dropped",
             lambda r: f"{r['compact_retired']} / {r['compact_loops_moved']} / {r['compact_loops_dropped']}")
+        row("compact promoted / demoted", lambda r: f"{r['compact_promoted']} / {r['compact_demoted']}")
     out.append("\n== relocalization (visitor, HDL-64; Query, not stored) ==")
     out.append(f"{'query set':<34}" + "".join(f"{a:>26}" for a in arms))
     keys = []

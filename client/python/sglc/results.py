@@ -227,8 +227,8 @@ class Compaction:
     open_sessions: int
     places: int
     versions: int
-    promoted: int = 0  # surplus scans made versions of places left with too few
-    demoted: int = 0   # versions made surplus in places that held too many
+    promoted: int = 0  # surplus scans made versions (places left with too few, or replacing an unused version)
+    demoted: int = 0   # versions made surplus (places that held too many, or replaced)
 
     @classmethod
     def from_proto(cls, m) -> "Compaction":

@@ -1,7 +1,7 @@
 // Compaction of a lifelong map (docs/LIFELONG.md): places for the scans that have none (maps built before the
-// policy, or scans stored without a query), surplus scans promoted to versions of places that hold too few, then
-// the retirement of the scans of ended sessions that are not
-// versions of their places, with their loops moved to the scans of their sessions that stay.
+// policy, or scans stored without a query), each place's versions chosen (closing/versions.hpp), then the
+// retirement of the scans of ended sessions that are not versions of their places, with their loops moved to the
+// scans of their sessions that stay.
 #pragma once
 
 #include <cstdint>
@@ -20,8 +20,8 @@ struct OdometryNoise {
 
 struct CompactionReport {
   std::int64_t placed = 0;                // scans given a place
-  std::int64_t promoted = 0;              // surplus scans made versions of places that held too few
-  std::int64_t demoted = 0;               // versions made surplus in places that held too many
+  std::int64_t promoted = 0;              // surplus scans made versions (too few, or replacing an unused one)
+  std::int64_t demoted = 0;               // versions made surplus (too many, or replaced)
   std::int64_t retired = 0;               // scans retired
   std::int64_t retired_bytes = 0;         // their fingerprint bytes
   std::int64_t loops_moved = 0;           // loops recorded between scans that stay in place of retired scans' loops

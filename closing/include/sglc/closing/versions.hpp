@@ -1,0 +1,35 @@
+// Which scans of each place of a lifelong map are its versions (docs/LIFELONG.md, "Which scans a place keeps"):
+// the policy's number per place, and a version that no visit has chosen since the last visits began gives its
+// slot to the visit's scan that serves best. Plain data in, plain data out: compaction applies the result.
+#pragma once
+
+#include <cstdint>
+#include <unordered_set>
+#include <vector>
+
+#include "sglc/storage/map_store.hpp"
+
+namespace sglc::closing {
+
+struct VersionChanges {
+  std::vector<storage::PlaceRecord> changed;  // the records whose `kept` changed, as they are now
+  std::int64_t promoted = 0;                  // surplus scans made versions
+  std::int64_t demoted = 0;                   // versions made surplus
+};
+
+// Rebalances `places` (the map's records in scan-id order, updated in place) to `max_versions` per place:
+// 1. a place holding more keeps its oldest versions (places assigned with the policy off, or the setting lowered);
+// 2. a place holding fewer takes its newest surplus scans (a version's session was deleted, or the setting raised);
+// 3. replacement: a scan *serves* when it is stored and whenever a later scan's verified loop chooses it as
+//    candidate (`loops`: the query chose the candidate, at the query's storage time). The latest visits are the
+//    ended sessions that still have surplus scans (those since the last compaction). In a place with such surplus
+//    scans, a version of an ended session that last served before the first scan of the latest visits was stored
+//    (none of them chose it) gives its slot to the place's surplus scan that served last (ties: the newer); the
+//    versions that served least go first, one per surplus scan. A place thus keeps the versions the fleet keeps
+//    relocalizing into and takes the current look of the place in place of one that no visit chose.
+// Scans of `open_sessions` take no part in step 3. Deterministic in its inputs.
+VersionChanges rebalanceVersions(std::vector<storage::PlaceRecord>& places,
+                                 const std::vector<storage::LoopRecord>& loops, int max_versions,
+                                 const std::unordered_set<std::int64_t>& open_sessions);
+
+}  // namespace sglc::closing
