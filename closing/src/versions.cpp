@@ -32,16 +32,24 @@ std::unordered_map<std::int64_t, double> lastServed(const std::vector<PlaceRecor
 }
 
 // Step 3 for one place: `versions` and `visits` (its surplus scans of ended sessions) as indexes into `places`;
-// `visits_began`: when the first scan of the sessions that left those surplus scans was stored.
+// `visits_began`: when the first scan of the sessions that left those surplus scans was stored. A session that
+// holds a version of the place (or has just taken one) takes no slot: the versions stay from different drives.
 void replaceUnused(std::vector<PlaceRecord>& places, std::vector<std::size_t> versions, std::vector<std::size_t> visits,
                    double visits_began, const std::unordered_map<std::int64_t, double>& served, VersionChanges& out) {
   const auto key = [&](std::size_t i) { return std::make_tuple(served.at(places[i].scan_id), places[i].scan_id); };
-  std::erase_if(versions, [&](std::size_t i) { return served.at(places[i].scan_id) >= visits_began; });
+  const auto unused = [&](std::size_t i) { return served.at(places[i].scan_id) < visits_began; };
+  std::unordered_set<std::int64_t> holding;
+  for (const auto i : versions)
+    if (!unused(i)) holding.insert(places[i].session_id);
+  std::erase_if(versions, [&](std::size_t i) { return !unused(i); });
   std::sort(versions.begin(), versions.end(), [&](std::size_t a, std::size_t b) { return key(a) < key(b); });
   std::sort(visits.begin(), visits.end(), [&](std::size_t a, std::size_t b) { return key(a) > key(b); });
-  for (std::size_t k = 0; k < std::min(versions.size(), visits.size()); ++k) {
-    setKept(places[versions[k]], false, out);
-    setKept(places[visits[k]], true, out);
+  std::size_t next = 0;
+  for (const auto v : visits) {
+    if (next == versions.size()) break;
+    if (!holding.insert(places[v].session_id).second) continue;
+    setKept(places[versions[next++]], false, out);
+    setKept(places[v], true, out);
   }
 }
 
@@ -63,25 +71,31 @@ std::optional<double> visitsBegan(const std::vector<PlaceRecord>& places,
 VersionChanges rebalanceVersions(std::vector<PlaceRecord>& places, const std::vector<storage::LoopRecord>& loops,
                                  int max_versions, const std::unordered_set<std::int64_t>& open_sessions) {
   VersionChanges out;
+  // The latest visits as the map stands, before steps 1 and 2 (whose changes then take no part in step 3).
+  const auto began = visitsBegan(places, open_sessions);
+  std::unordered_set<std::int64_t> settled;
+  const auto settle = [&](PlaceRecord& p, bool kept) {
+    setKept(p, kept, out);
+    settled.insert(p.scan_id);
+  };
   const auto max = static_cast<std::int64_t>(max_versions);
   std::unordered_map<std::int64_t, std::int64_t> count, seen;
   for (const auto& p : places) count[p.place_id] += p.kept ? 1 : 0;
   for (auto& p : places)  // 1. oldest first (scan-id order): the first `max` versions stay
     if (p.kept && ++seen[p.place_id] > max) {
       --count[p.place_id];
-      setKept(p, false, out);
+      settle(p, false);
     }
   for (auto it = places.rbegin(); it != places.rend(); ++it)  // 2. newest first
     if (!it->kept && count[it->place_id] < max) {
       ++count[it->place_id];
-      setKept(*it, true, out);
+      settle(*it, true);
     }
-  const auto began = visitsBegan(places, open_sessions);
   if (!began) return out;
   // 3. By place (ordered, for a deterministic order of changes): its versions and its latest visits.
   std::map<std::int64_t, std::pair<std::vector<std::size_t>, std::vector<std::size_t>>> by_place;
   for (std::size_t i = 0; i < places.size(); ++i)
-    if (!open_sessions.count(places[i].session_id))
+    if (!open_sessions.count(places[i].session_id) && !settled.count(places[i].scan_id))
       (places[i].kept ? by_place[places[i].place_id].first : by_place[places[i].place_id].second).push_back(i);
   const auto served = lastServed(places, loops);
   for (auto& [place, scans] : by_place)

@@ -163,6 +163,35 @@ TEST(Versions, VersionsTheVisitsChoseStayAndOpenSessionsTakeNoPart) {
   EXPECT_FALSE(over[2].kept);
 }
 
+// The reviewer's case: the setting lowered to 2 over three versions of three sessions. Step 1 keeps the oldest two;
+// the demoted scan is not a visit that could then replace one of them (no scan recorded twice).
+TEST(Versions, ASettingLoweredKeepsTheOldestAndItsDemotionsReplaceNothing) {
+  std::vector<PlaceRecord> places{rec(1, 1, true, 1, 0), rec(2, 1, true, 2, 10), rec(3, 1, true, 3, 20)};
+  const auto c = rebalanceVersions(places, {}, 2, {});
+  EXPECT_EQ(c.demoted, 1);
+  EXPECT_EQ(c.promoted, 0);
+  ASSERT_EQ(c.changed.size(), 1u);
+  EXPECT_EQ(c.changed[0].scan_id, 3);
+  EXPECT_TRUE(places[0].kept && places[1].kept && !places[2].kept);
+}
+
+// One visit (session 3) left two scans in a place whose two versions no visit chose: it takes one slot, not both,
+// so that the place keeps scans of two drives. Ties: versions of equal service go lower id first, visits of equal
+// service newer first. A version of a session still being driven (9) is never replaced.
+TEST(Versions, AVisitTakesOneSlotOfAPlaceAndTiesAreBrokenByAge) {
+  std::vector<PlaceRecord> places{rec(1, 1, true, 1, 5),   rec(2, 1, true, 2, 5), rec(3, 1, false, 3, 20),
+                                  rec(4, 1, false, 3, 20), rec(5, 7, true, 9, 0), rec(6, 7, false, 4, 30),
+                                  rec(7, 7, true, 9, 1)};
+  const auto c = rebalanceVersions(places, {}, 2, {9});
+  ASSERT_EQ(c.changed.size(), 2u);
+  EXPECT_EQ(c.changed[0].scan_id, 1);  // served at 5 like version 2: the lower id goes
+  EXPECT_FALSE(c.changed[0].kept);
+  EXPECT_EQ(c.changed[1].scan_id, 4);  // stored at 20 like scan 3: the newer takes the slot
+  EXPECT_TRUE(c.changed[1].kept);
+  EXPECT_TRUE(places[1].kept && !places[2].kept);  // version 2 stays: session 3 already took a slot
+  EXPECT_TRUE(places[4].kept && places[6].kept);   // place 7's versions, of the open session 9, stay
+}
+
 // ---- Compaction on a store.
 
 Mat4d at(double x, double y) {

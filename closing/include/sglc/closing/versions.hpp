@@ -1,6 +1,6 @@
 // Which scans of each place of a lifelong map are its versions (docs/LIFELONG.md, "Which scans a place keeps"):
-// the policy's number per place, and a version that no visit has chosen since the last visits began gives its
-// slot to the visit's scan that serves best. Plain data in, plain data out: compaction applies the result.
+// the policy's number per place, and a version that none of the latest visits chose gives its slot to the visit's
+// scan that served last. Plain data in, plain data out: compaction applies the result.
 #pragma once
 
 #include <cstdint>
@@ -22,12 +22,14 @@ struct VersionChanges {
 // 2. a place holding fewer takes its newest surplus scans (a version's session was deleted, or the setting raised);
 // 3. replacement: a scan *serves* when it is stored and whenever a later scan's verified loop chooses it as
 //    candidate (`loops`: the query chose the candidate, at the query's storage time). The latest visits are the
-//    ended sessions that still have surplus scans (those since the last compaction). In a place with such surplus
-//    scans, a version of an ended session that last served before the first scan of the latest visits was stored
-//    (none of them chose it) gives its slot to the place's surplus scan that served last (ties: the newer); the
-//    versions that served least go first, one per surplus scan. A place thus keeps the versions the fleet keeps
-//    relocalizing into and takes the current look of the place in place of one that no visit chose.
-// Scans of `open_sessions` take no part in step 3. Deterministic in its inputs.
+//    ended sessions that have surplus scans as the map stands (those since the last compaction). In a place with
+//    such surplus scans, a version of an ended session that last served before the first scan of the latest
+//    visits was stored (none of them chose it) gives its slot to the place's surplus scan that served last (ties:
+//    the newer); the versions that served least go first, one per surplus scan, and a session that holds a
+//    version of the place takes no slot (so the versions stay from different drives). A place thus keeps the
+//    versions the fleet keeps relocalizing into and takes the current look of the place in place of one that no
+//    visit chose. Only stored scans' loops count: a Query that is not stored chooses nothing.
+// Scans of `open_sessions`, and scans steps 1 and 2 changed, take no part in step 3. Deterministic in its inputs.
 VersionChanges rebalanceVersions(std::vector<storage::PlaceRecord>& places,
                                  const std::vector<storage::LoopRecord>& loops, int max_versions,
                                  const std::unordered_set<std::int64_t>& open_sessions);
