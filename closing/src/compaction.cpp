@@ -205,7 +205,7 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   if (report.placed > 0) places = store.places(map);
   const auto open = openSessions(places, options, now_s);
   if (options.enabled()) {
-    const auto changes = rebalanceVersions(places, loops, options.max_versions_per_place, open);
+    const auto changes = rebalanceVersions(places, loops, options, open);
     if (!changes.changed.empty()) store.setPlaces(map, changes.changed);
     report.promoted = changes.promoted;
     report.demoted = changes.demoted;

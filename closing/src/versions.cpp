@@ -32,12 +32,13 @@ std::unordered_map<std::int64_t, double> lastServed(const std::vector<PlaceRecor
 }
 
 // Step 3 for one place: `versions` and `visits` (its surplus scans of ended sessions) as indexes into `places`;
-// `visits_began`: when the first scan of the sessions that left those surplus scans was stored. A session that
+// a version that last served before `in_use_since` is unused (the first scan of the sessions that left those
+// surplus scans, less a retention: a drive whose session is that recent is still in use). A session that
 // holds a version of the place (or has just taken one) takes no slot: the versions stay from different drives.
 void replaceUnused(std::vector<PlaceRecord>& places, std::vector<std::size_t> versions, std::vector<std::size_t> visits,
-                   double visits_began, const std::unordered_map<std::int64_t, double>& served, VersionChanges& out) {
+                   double in_use_since, const std::unordered_map<std::int64_t, double>& served, VersionChanges& out) {
   const auto key = [&](std::size_t i) { return std::make_tuple(served.at(places[i].scan_id), places[i].scan_id); };
-  const auto unused = [&](std::size_t i) { return served.at(places[i].scan_id) < visits_began; };
+  const auto unused = [&](std::size_t i) { return served.at(places[i].scan_id) < in_use_since; };
   std::unordered_set<std::int64_t> holding;
   for (const auto i : versions)
     if (!unused(i)) holding.insert(places[i].session_id);
@@ -69,7 +70,8 @@ std::optional<double> visitsBegan(const std::vector<PlaceRecord>& places,
 }  // namespace
 
 VersionChanges rebalanceVersions(std::vector<PlaceRecord>& places, const std::vector<storage::LoopRecord>& loops,
-                                 int max_versions, const std::unordered_set<std::int64_t>& open_sessions) {
+                                 const LifelongOptions& options,
+                                 const std::unordered_set<std::int64_t>& open_sessions) {
   VersionChanges out;
   // The latest visits as the map stands, before steps 1 and 2 (whose changes then take no part in step 3).
   const auto began = visitsBegan(places, open_sessions);
@@ -78,7 +80,7 @@ VersionChanges rebalanceVersions(std::vector<PlaceRecord>& places, const std::ve
     setKept(p, kept, out);
     settled.insert(p.scan_id);
   };
-  const auto max = static_cast<std::int64_t>(max_versions);
+  const auto max = static_cast<std::int64_t>(options.max_versions_per_place);
   std::unordered_map<std::int64_t, std::int64_t> count, seen;
   for (const auto& p : places) count[p.place_id] += p.kept ? 1 : 0;
   for (auto& p : places)  // 1. oldest first (scan-id order): the first `max` versions stay
@@ -100,7 +102,8 @@ VersionChanges rebalanceVersions(std::vector<PlaceRecord>& places, const std::ve
   const auto served = lastServed(places, loops);
   for (auto& [place, scans] : by_place)
     if (!scans.first.empty() && !scans.second.empty())
-      replaceUnused(places, std::move(scans.first), std::move(scans.second), *began, served, out);
+      replaceUnused(places, std::move(scans.first), std::move(scans.second),
+                    *began - options.session_retention_h * 3600.0, served, out);
   return out;
 }
 

@@ -107,7 +107,7 @@ std::vector<PlaceRecord> visited() {
 
 TEST(Versions, AVersionNoVisitChoseGivesItsSlotToTheVisitThatServedLast) {
   auto places = visited();
-  const auto c = rebalanceVersions(places, {chose(3, 1), chose(5, 3)}, 2, {});
+  const auto c = rebalanceVersions(places, {chose(3, 1), chose(5, 3)}, policy(2), {});
   EXPECT_EQ(c.promoted, 1);
   EXPECT_EQ(c.demoted, 1);
   ASSERT_EQ(c.changed.size(), 2u);
@@ -118,12 +118,12 @@ TEST(Versions, AVersionNoVisitChoseGivesItsSlotToTheVisitThatServedLast) {
   EXPECT_TRUE(places[0].kept && !places[1].kept && places[2].kept && !places[3].kept);
   // Without scan 5's choice the two visits served last when stored: the newer takes the slot.
   auto again = visited();
-  const auto newer = rebalanceVersions(again, {chose(3, 1)}, 2, {});
+  const auto newer = rebalanceVersions(again, {chose(3, 1)}, policy(2), {});
   ASSERT_EQ(newer.changed.size(), 2u);
   EXPECT_EQ(newer.changed[1].scan_id, 4);
   // The same inputs, the same changes.
   auto twice = visited();
-  const auto same = rebalanceVersions(twice, {chose(3, 1), chose(5, 3)}, 2, {});
+  const auto same = rebalanceVersions(twice, {chose(3, 1), chose(5, 3)}, policy(2), {});
   ASSERT_EQ(same.changed.size(), c.changed.size());
   for (std::size_t i = 0; i < same.changed.size(); ++i) EXPECT_EQ(same.changed[i].scan_id, c.changed[i].scan_id);
 }
@@ -133,7 +133,7 @@ TEST(Versions, AVersionNoVisitChoseGivesItsSlotToTheVisitThatServedLast) {
 // pass it on if serving were read from the chooser's own last service).
 TEST(Versions, ServingIsDatedByTheChoosersStorageAndNotPassedOn) {
   auto places = visited();
-  const auto c = rebalanceVersions(places, {chose(5, 2), chose(2, 1)}, 2, {});
+  const auto c = rebalanceVersions(places, {chose(5, 2), chose(2, 1)}, policy(2), {});
   ASSERT_EQ(c.changed.size(), 2u);
   EXPECT_EQ(c.changed[0].scan_id, 1);  // last served at t = 10, before the visits began (t = 20)
   EXPECT_FALSE(c.changed[0].kept);
@@ -143,31 +143,42 @@ TEST(Versions, ServingIsDatedByTheChoosersStorageAndNotPassedOn) {
 
 TEST(Versions, VersionsTheVisitsChoseStayAndOpenSessionsTakeNoPart) {
   auto places = visited();
-  EXPECT_TRUE(rebalanceVersions(places, {chose(3, 1), chose(4, 2)}, 2, {}).changed.empty());
+  EXPECT_TRUE(rebalanceVersions(places, {chose(3, 1), chose(4, 2)}, policy(2), {}).changed.empty());
   // Sessions 3 and 4 still driven: no visit has ended, nothing is replaced.
   auto open = visited();
-  EXPECT_TRUE(rebalanceVersions(open, {}, 2, {3, 4}).changed.empty());
+  EXPECT_TRUE(rebalanceVersions(open, {}, policy(2), {3, 4}).changed.empty());
   // Only session 4 ended: its visits began at t = 21, after versions 1 and 2 last served; both are unused, and
   // its one surplus scan in place 1 (scan 4) takes the slot of the one that served least (version 1, t = 0).
   auto one = visited();
-  const auto c = rebalanceVersions(one, {}, 2, {3});
+  const auto c = rebalanceVersions(one, {}, policy(2), {3});
   ASSERT_EQ(c.changed.size(), 2u);
   EXPECT_EQ(c.changed[0].scan_id, 1);
   EXPECT_EQ(c.changed[1].scan_id, 4);
   // The policy's number first: three versions of one session for two slots keep the oldest two (and no
   // replacement: the visit, session 1, began with version 1).
   std::vector<PlaceRecord> over{rec(1, 1, true, 1, 0), rec(2, 1, true, 1, 1), rec(3, 1, true, 1, 5)};
-  const auto d = rebalanceVersions(over, {}, 2, {});
+  const auto d = rebalanceVersions(over, {}, policy(2), {});
   EXPECT_EQ(d.demoted, 1);
   EXPECT_EQ(d.promoted, 0);
   EXPECT_FALSE(over[2].kept);
+}
+
+// A version chosen within a retention before the latest visits began is in use: a robot that drove by in the
+// morning and chose it counts when the afternoon's visit ends, though that visit chose another version.
+TEST(Versions, AVersionChosenWithinARetentionBeforeTheVisitsIsInUse) {
+  auto in_use = policy(2);
+  in_use.session_retention_h = 15.0 / 3600;  // the visits began at t = 20: anything that served since t = 5
+  auto places = visited();
+  EXPECT_TRUE(rebalanceVersions(places, {chose(3, 1)}, in_use, {}).changed.empty());  // version 2: stored at 10
+  in_use.session_retention_h = 5.0 / 3600;  // since t = 15: version 2 is unused
+  EXPECT_EQ(rebalanceVersions(places, {chose(3, 1)}, in_use, {}).changed.size(), 2u);
 }
 
 // The reviewer's case: the setting lowered to 2 over three versions of three sessions. Step 1 keeps the oldest two;
 // the demoted scan is not a visit that could then replace one of them (no scan recorded twice).
 TEST(Versions, ASettingLoweredKeepsTheOldestAndItsDemotionsReplaceNothing) {
   std::vector<PlaceRecord> places{rec(1, 1, true, 1, 0), rec(2, 1, true, 2, 10), rec(3, 1, true, 3, 20)};
-  const auto c = rebalanceVersions(places, {}, 2, {});
+  const auto c = rebalanceVersions(places, {}, policy(2), {});
   EXPECT_EQ(c.demoted, 1);
   EXPECT_EQ(c.promoted, 0);
   ASSERT_EQ(c.changed.size(), 1u);
@@ -182,7 +193,7 @@ TEST(Versions, AVisitTakesOneSlotOfAPlaceAndTiesAreBrokenByAge) {
   std::vector<PlaceRecord> places{rec(1, 1, true, 1, 5),   rec(2, 1, true, 2, 5), rec(3, 1, false, 3, 20),
                                   rec(4, 1, false, 3, 20), rec(5, 7, true, 9, 0), rec(6, 7, false, 4, 30),
                                   rec(7, 7, true, 9, 1)};
-  const auto c = rebalanceVersions(places, {}, 2, {9});
+  const auto c = rebalanceVersions(places, {}, policy(2), {9});
   ASSERT_EQ(c.changed.size(), 2u);
   EXPECT_EQ(c.changed[0].scan_id, 1);  // served at 5 like version 2: the lower id goes
   EXPECT_FALSE(c.changed[0].kept);
