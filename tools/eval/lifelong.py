@@ -5,7 +5,8 @@ For each arm (off: map.max_versions_per_place=0, on: =2; both map.session_retent
 database; every epoch renders two sessions through one world with sglc-sim (robot "car": HDL-64, robot "bot":
 VLP-16, drifting odometry), ingests every frame with query on into map "district", compacts, and records stats,
 server RSS, ingest latencies and pose-graph solve times. After the last epoch a "visitor" (HDL-64) relocalizes
-(Query, not stored) at later epochs. Renders are made once per epoch and shared by the arms.
+(Query, not stored) at later epochs. Renders are made once per epoch and shared by the arms. The district
+follows a KITTI path (--path: 00 by default; a fitting or validation path only).
 
     PYTHONPATH=build/python /usr/bin/python3 tools/eval/lifelong.py --epochs 3 --out /tmp/ll
 
@@ -34,10 +35,22 @@ BIN = os.path.join(REPO, "build", "bin")
 sys.path.insert(0, os.path.join(REPO, "build", "python"))
 import sglc  # noqa: E402
 
-# The fitting path (KITTI 00) and its calibration, from the shared data beside the repository.
+# The KITTI path (ground-truth poses from the shared data beside the repository) and its calibration: 00's own
+# calib.txt, KITTI's 04-10 Tr for the others (as tools/eval does). Only the fitting paths (00, 05, 08) and the
+# validation paths (07, 09, 10) may be run; every other path is kept for checks this project does not see.
 DATA = os.environ.get("SGLC_DATA", os.path.join(REPO, "..", "shared", "data"))
+PATHS = ("00", "05", "08", "07", "09", "10")
 POSES = os.path.join(DATA, "kitti_odometry_gt_poses", "poses", "00.txt")
 CALIB = os.path.join(DATA, "semantickitti_scans", "sequences", "00", "calib.txt")
+
+
+def use_path(path):
+    global POSES, CALIB
+    if path not in PATHS:
+        sys.exit(f"lifelong.py: --path {path!r}: only {', '.join(PATHS)} (fitting and validation paths)")
+    POSES = os.path.join(DATA, "kitti_odometry_gt_poses", "poses", f"{path}.txt")
+    if path != "00":
+        CALIB = os.path.join(REPO, "tools", "sim", "calib", "kitti-04-10-calib.txt")
 SEED = 11
 MAP = "district"
 ROBOTS = (("car", "hdl64"), ("bot", "vlp16"))
@@ -412,6 +425,7 @@ def summary_table(results, report_epochs):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--epochs", type=int, default=100)
+    ap.add_argument("--path", default="00", help="KITTI path the district follows (00, 05, 08; 07, 09, 10)")
     ap.add_argument("--frames", default="0:1200:15", help="district keyframes (sglc-sim --frames)")
     ap.add_argument("--query-frames", action="append", default=None,
                     help="visitor frames (repeatable; default 7:1200:30)")
@@ -431,6 +445,7 @@ def main():
     ap.add_argument("--stop-epochs", default="50", help="comma-separated epoch counts where --stop-file is checked")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
+    use_path(a.path)
     qsets = a.query_frames or ["7:1200:30"]
     arms = [x for x in a.arms.split(",") if x]
     versions = {"off": 0, "on": a.versions_on}
