@@ -171,23 +171,24 @@ class LoopMover {
   std::unordered_map<std::int64_t, std::map<std::int64_t, const storage::GraphNodeRecord*>> sessions_;
 };
 
-// The loops to keep of those moved: at most `per_anchor` onto each scan that stays, those moved the least (their
-// poses carry the least odometry; ties: the surer, then the lower ids). Without a bound, every ended session
-// whose few kept scans (new places) took all its retired scans' loops would add dozens of long, weak loops to
-// the graph, which would grow with the days driven, not with the map. In the order the store should keep them:
-// of two loops moved onto one pair, it keeps the first.
-std::vector<LoopRecord> fewestPerAnchor(std::vector<MovedLoop> moved, int per_anchor) {
+// The loops to keep of those moved: onto each scan that stays, while it has fewer than `per_anchor` loops in all
+// (`degree`: the loops it keeps; so the bound holds over every compaction, not each), those moved the least
+// (their poses carry the least odometry; ties: the surer, then the lower ids). Without a bound, every ended
+// session whose few kept scans took all its retired scans' loops would add dozens of long, weak loops to the
+// graph, which would grow with the days driven, not with the map. In the order the store should keep them: of
+// two loops moved onto one pair, it keeps the first.
+std::vector<LoopRecord> fewestPerAnchor(std::vector<MovedLoop> moved, int per_anchor,
+                                        std::unordered_map<std::int64_t, int> degree) {
   std::sort(moved.begin(), moved.end(), [](const MovedLoop& a, const MovedLoop& b) {
     return std::make_tuple(a.moved_m, -a.loop.probability.value_or(0), a.loop.query_scan, a.loop.candidate_scan) <
            std::make_tuple(b.moved_m, -b.loop.probability.value_or(0), b.loop.query_scan, b.loop.candidate_scan);
   });
-  std::unordered_map<std::int64_t, int> taken;
   std::vector<LoopRecord> out;
   for (auto& m : moved) {
     bool room = true;
-    for (const auto a : m.anchors) room = room && taken[a] < per_anchor;
+    for (const auto a : m.anchors) room = room && degree[a] < per_anchor;
     if (!room) continue;
-    for (const auto a : m.anchors) ++taken[a];
+    for (const auto a : m.anchors) ++degree[a];
     out.push_back(std::move(m.loop));
   }
   return out;
@@ -228,15 +229,20 @@ CompactionReport compact(storage::MapStore& store, const std::string& map, const
   if (ids.empty()) return report;
   const LoopMover mover(nodes, retired, noise);
   std::vector<MovedLoop> candidates;
+  std::unordered_map<std::int64_t, int> degree;  // of the scans that stay: the loops they keep
   for (const auto& l : loops) {
-    if (!retired.count(l.query_scan) && !retired.count(l.candidate_scan)) continue;
+    if (!retired.count(l.query_scan) && !retired.count(l.candidate_scan)) {
+      ++degree[l.query_scan];
+      ++degree[l.candidate_scan];
+      continue;
+    }
     if (auto m = mover.move(l))
       candidates.push_back(std::move(*m));
     else
       ++report.loops_dropped;
   }
   const auto movable = static_cast<std::int64_t>(candidates.size());
-  const auto moved = fewestPerAnchor(std::move(candidates), options.max_moved_loops_per_scan);
+  const auto moved = fewestPerAnchor(std::move(candidates), options.max_moved_loops_per_scan, std::move(degree));
   report.loops_dropped += movable - static_cast<std::int64_t>(moved.size());
   const auto done = store.retireScans(map, ids, moved);
   report.retired = done.scans;

@@ -26,7 +26,8 @@ Table<LifelongOptions> makeTable() {
                                "this long after its last scan (h; it must exceed the longest pause within a drive)"));
   t.add(field<LifelongOptions>(SGLC_KEY(max_moved_loops_per_scan), closed(0, 1000),
                                "lifelong maps: a retired scan's loops move to the nearest scans of its session that "
-                               "stay; each of those takes at most this many, the ones moved the least"));
+                               "stay; each of those takes them while it has fewer loops than this, the ones moved "
+                               "the least first"));
   t.add(field<LifelongOptions>(SGLC_KEY(compact_interval_s), closed(0, 604800),
                                "lifelong maps: the server compacts every map this often (s; 0: only sglc compact "
                                "does; nothing runs with the policy off)"));

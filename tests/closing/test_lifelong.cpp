@@ -361,6 +361,28 @@ TEST_P(Compaction, EachScanThatStaysTakesAtMostItsShareOfMovedLoopsTheNearestFir
   EXPECT_EQ(pairs, expected);
 }
 
+// The bound counts the loops a scan already has (from earlier compactions or its own): b_1, which keeps a loop to
+// a_1 (too unsure to tie it to a_1's place), takes one moved loop under a bound of 2, b_8 two.
+TEST_P(Compaction, TheMovedLoopBoundCountsTheLoopsAScanAlreadyHas) {
+  auto store = db().open();
+  const auto s = build(*store);
+  LoopRecord own{0, s.b[1], s.a[1], Street::truthB(1).inverse() * Street::truthA(1), 0.8, 0.9, 0.05, 40};
+  own.probability = 0.5;
+  own.information = Mat6d::Identity() * 1e4;
+  store->addLoop("m", own);
+  auto two = policy(1);
+  two.max_moved_loops_per_scan = 2;
+  const auto r = compact(*store, "m", two, OdometryNoise{}, kFuture);
+  EXPECT_EQ(r.retired, 6);
+  EXPECT_EQ(r.loops_moved, 3);
+  EXPECT_EQ(r.loops_dropped, 3);
+  std::set<std::pair<std::int64_t, std::int64_t>> pairs;
+  for (const auto& l : store->loops("m")) pairs.insert({l.query_scan, l.candidate_scan});
+  const std::set<std::pair<std::int64_t, std::int64_t>> expected = {
+      {s.b[1], s.a[1]}, {s.b[1], s.a[2]}, {s.b[8], s.a[6]}, {s.b[8], s.a[7]}};
+  EXPECT_EQ(pairs, expected);
+}
+
 TEST_P(Compaction, SessionsWithinTheirRetentionAndMapsWithThePolicyOffKeepEverything) {
   auto store = db().open();
   build(*store);

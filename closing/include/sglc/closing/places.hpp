@@ -21,8 +21,8 @@ struct LifelongOptions {
   double min_probability = 0.9;
   // A session's scans that are not versions of their places are retired this long after its last scan (h).
   double session_retention_h = 24.0;
-  // A retired scan's loops move to the nearest scans of its session that stay; each of those takes at most this
-  // many of them, the ones moved the least.
+  // A retired scan's loops move to the nearest scans of its session that stay; each of those takes them while it
+  // has fewer loops in all than this (its own and those moved before), the ones moved the least first.
   int max_moved_loops_per_scan = 4;
   // The server compacts every map this often (s; 0: only `sglc compact` does).
   double compact_interval_s = 600.0;
