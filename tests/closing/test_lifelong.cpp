@@ -212,6 +212,21 @@ Mat4d at(double x, double y) {
   return T;
 }
 
+// A verified loop from `query` to `candidate` with pose T, probability p and information 1e4 in every direction.
+LoopRecord verified(std::int64_t query, std::int64_t candidate, const Mat4d& T, double p) {
+  LoopRecord l{0, query, candidate, T, 0.8, 0.9, 0.05, 40};
+  l.probability = p;
+  l.information = Mat6d::Identity() * 1e4;
+  return l;
+}
+
+// The (query, candidate) pairs of the map's loops.
+std::set<std::pair<std::int64_t, std::int64_t>> loopPairs(MapStore& store) {
+  std::set<std::pair<std::int64_t, std::int64_t>> pairs;
+  for (const auto& l : store.loops("m")) pairs.insert({l.query_scan, l.candidate_scan});
+  return pairs;
+}
+
 // Robot "a" drives x = 0..9 m; robot "b" drives the same street 0.2 m to the side, with its odometry in a frame
 // of its own (offset 100 m). b's scans 2..7 have verified loops to a's scans at the same x; b_0, b_1, b_8, b_9 none.
 struct Street {
@@ -232,10 +247,7 @@ Street build(MapStore& store) {
       (robot[0] == 'a' ? s.a : s.b).push_back(id);
     }
   for (int k = 2; k < 8; ++k) {
-    LoopRecord l{0, s.b[k], s.a[k], Street::truthB(k).inverse() * Street::truthA(k), 0.8, 0.9, 0.05, 40};
-    l.probability = 0.95;
-    l.information = Mat6d::Identity() * 1e4;
-    store.addLoop("m", l);
+    store.addLoop("m", verified(s.b[k], s.a[k], Street::truthB(k).inverse() * Street::truthA(k), 0.95));
   }
   return s;
 }
@@ -344,43 +356,26 @@ TEST_P(Compaction, AMovedCandidateEndTurnsTheLoopsInformationWithIt) {
   }
 }
 
-TEST_P(Compaction, EachScanThatStaysTakesAtMostItsShareOfMovedLoopsTheNearestFirst) {
-  auto store = db().open();
-  const auto s = build(*store);
-  auto two = policy(1);
-  two.max_moved_loops_per_scan = 2;
-  const auto r = compact(*store, "m", two, OdometryNoise{}, kFuture);
-  EXPECT_EQ(r.retired, 6);
-  EXPECT_EQ(r.loops_moved, 4);
-  EXPECT_EQ(r.loops_dropped, 2);
-  // b_1 keeps the loops of b_2 and b_3 (moved 1 and 2 m), not b_4's (3 m); b_8 those of b_7 and b_6.
-  std::set<std::pair<std::int64_t, std::int64_t>> pairs;
-  for (const auto& l : store->loops("m")) pairs.insert({l.query_scan, l.candidate_scan});
-  const std::set<std::pair<std::int64_t, std::int64_t>> expected = {
-      {s.b[1], s.a[2]}, {s.b[1], s.a[3]}, {s.b[8], s.a[6]}, {s.b[8], s.a[7]}};
-  EXPECT_EQ(pairs, expected);
-}
-
-// The bound counts the loops a scan already has (from earlier compactions or its own): b_1, which keeps a loop to
-// a_1 (too unsure to tie it to a_1's place), takes one moved loop under a bound of 2, b_8 two.
-TEST_P(Compaction, TheMovedLoopBoundCountsTheLoopsAScanAlreadyHas) {
-  auto store = db().open();
-  const auto s = build(*store);
-  LoopRecord own{0, s.b[1], s.a[1], Street::truthB(1).inverse() * Street::truthA(1), 0.8, 0.9, 0.05, 40};
-  own.probability = 0.5;
-  own.information = Mat6d::Identity() * 1e4;
-  store->addLoop("m", own);
-  auto two = policy(1);
-  two.max_moved_loops_per_scan = 2;
-  const auto r = compact(*store, "m", two, OdometryNoise{}, kFuture);
-  EXPECT_EQ(r.retired, 6);
-  EXPECT_EQ(r.loops_moved, 3);
-  EXPECT_EQ(r.loops_dropped, 3);
-  std::set<std::pair<std::int64_t, std::int64_t>> pairs;
-  for (const auto& l : store->loops("m")) pairs.insert({l.query_scan, l.candidate_scan});
-  const std::set<std::pair<std::int64_t, std::int64_t>> expected = {
-      {s.b[1], s.a[1]}, {s.b[1], s.a[2]}, {s.b[8], s.a[6]}, {s.b[8], s.a[7]}};
-  EXPECT_EQ(pairs, expected);
+// Under a bound of 2, b_1 keeps the loops of b_2 and b_3 (moved 1 and 2 m), not b_4's (3 m); b_8 those of b_7 and
+// b_6. The bound counts the loops a scan already has (its own, or moved by earlier compactions): with a loop of
+// its own to a_1 (too unsure to tie b_1 to a_1's place), b_1 takes only b_2's.
+TEST_P(Compaction, EachScanThatStaysTakesMovedLoopsNearestFirstUpToItsBound) {
+  for (const bool own_loop : {false, true}) {
+    SCOPED_TRACE(own_loop ? "b_1 has a loop of its own" : "b_1 has no loop");
+    auto store = db().open();
+    const auto s = build(*store);
+    if (own_loop) store->addLoop("m", verified(s.b[1], s.a[1], Street::truthB(1).inverse() * Street::truthA(1), 0.5));
+    auto two = policy(1);
+    two.max_moved_loops_per_scan = 2;
+    const auto r = compact(*store, "m", two, OdometryNoise{}, kFuture);
+    EXPECT_EQ(r.retired, 6);
+    EXPECT_EQ(r.loops_moved, own_loop ? 3 : 4);
+    EXPECT_EQ(r.loops_dropped, own_loop ? 3 : 2);
+    std::set<std::pair<std::int64_t, std::int64_t>> expected = {{s.b[1], s.a[2]}, {s.b[8], s.a[6]}, {s.b[8], s.a[7]}};
+    expected.insert(own_loop ? std::pair{s.b[1], s.a[1]} : std::pair{s.b[1], s.a[3]});
+    EXPECT_EQ(loopPairs(*store), expected);
+    store->deleteMap("m");
+  }
 }
 
 TEST_P(Compaction, SessionsWithinTheirRetentionAndMapsWithThePolicyOffKeepEverything) {
@@ -455,10 +450,7 @@ TEST_P(Compaction, AVersionNoLaterVisitChoseIsReplacedByTheVisitsScan) {
         {.map = "m", .robot = "c", .session = "day", .seq = k, .odometry_pose = at(k, -0.1), .fingerprint = &fp}));
   }
   for (int k = 2; k < 8; ++k) {
-    LoopRecord l{0, c[k], s.b[k], at(k, -0.1).inverse() * Street::truthB(k), 0.8, 0.9, 0.05, 40};
-    l.probability = 0.97;
-    l.information = Mat6d::Identity() * 1e4;
-    store->addLoop("m", l);
+    store->addLoop("m", verified(c[k], s.b[k], at(k, -0.1).inverse() * Street::truthB(k), 0.97));
   }
   const auto r = compact(*store, "m", policy(2), OdometryNoise{}, kFuture);
   EXPECT_EQ(r.placed, 10);
